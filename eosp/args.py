@@ -1,0 +1,88 @@
+"""Command-line flags generated from the config dataclasses.
+
+``add_config_args(parser, InstanceConfig)`` adds one flag per field, nested
+configs with dotted names (``--satellite.roll-max-deg 40``), with the field's
+docstring-comment as help; ``config_from_args`` builds the dataclass back.  The
+same dataclass is thus the CLI's ``--help``, the job's parameters and Tune's
+search space keys.
+"""
+
+from __future__ import annotations
+
+import argparse
+import ast
+import inspect
+import typing
+from dataclasses import MISSING, fields, is_dataclass
+from typing import Any
+
+
+def _field_docs(cls: type) -> dict[str, str]:
+    """The string literal that follows each field in the class body (its doc)."""
+    try:
+        tree = ast.parse(inspect.getsource(cls))
+    except (OSError, TypeError):
+        return {}
+    body = tree.body[0].body if tree.body and isinstance(tree.body[0], ast.ClassDef) else []
+    docs: dict[str, str] = {}
+    for prev, node in zip(body, body[1:]):
+        if (isinstance(prev, ast.AnnAssign) and isinstance(prev.target, ast.Name) and isinstance(node, ast.Expr)
+                and isinstance(node.value, ast.Constant) and isinstance(node.value.value, str)):
+            docs[prev.target.id] = " ".join(node.value.value.split())
+    return docs
+
+
+def _parse_bool(text: str) -> bool:
+    t = text.lower()
+    if t in ("1", "true", "yes", "on"):
+        return True
+    if t in ("0", "false", "no", "off"):
+        return False
+    raise argparse.ArgumentTypeError(f"expected true/false, got {text!r}")
+
+
+def add_config_args(parser: argparse.ArgumentParser, cls: type, prefix: str = "",
+                    defaults: Any | None = None) -> None:
+    hints = typing.get_type_hints(cls)
+    docs = _field_docs(cls)
+    inst = defaults if defaults is not None else cls()
+    for f in fields(cls):
+        value = getattr(inst, f.name)
+        name = f"{prefix}{f.name}"
+        if is_dataclass(value):
+            add_config_args(parser, type(value), prefix=name + ".", defaults=value)
+            continue
+        hint = hints[f.name]
+        flag = "--" + name.replace("_", "-")
+        help_text = (docs.get(f.name, "") + f" (default: {value!r})").strip()
+        origin = typing.get_origin(hint)
+        if hint is bool:
+            parser.add_argument(flag, dest=name, type=_parse_bool, default=argparse.SUPPRESS, metavar="BOOL",
+                                help=help_text)
+        elif origin is tuple:
+            elem = typing.get_args(hint)[0]
+            parser.add_argument(flag, dest=name, type=elem, nargs="+", default=argparse.SUPPRESS, help=help_text)
+        elif hint in (int, float, str):
+            parser.add_argument(flag, dest=name, type=hint, default=argparse.SUPPRESS, help=help_text)
+        else:
+            parser.add_argument(flag, dest=name, type=str, default=argparse.SUPPRESS, help=help_text)
+
+
+def config_from_args(cls: type, ns: argparse.Namespace, base: Any | None = None) -> Any:
+    """The dataclass `cls` (or `base`) with every flag given on the command line applied."""
+    from eosp.config import apply_overrides
+
+    cfg = base if base is not None else cls()
+    given = {k: tuple(v) if isinstance(v, list) else v for k, v in vars(ns).items() if _belongs(cls, k)}
+    return apply_overrides(cfg, given)
+
+
+def _belongs(cls: type, dotted: str) -> bool:
+    head, _, rest = dotted.partition(".")
+    for f in fields(cls):
+        if f.name == head:
+            if not rest:
+                return True
+            sub = f.default_factory() if f.default_factory is not MISSING else f.default  # type: ignore[misc]
+            return is_dataclass(sub) and _belongs(type(sub), rest)
+    return False

@@ -1,0 +1,213 @@
+"""The ``eosp`` command: generate, import, export, inspect, solve, validate, plot.
+
+Every command reads user files through the checked readers and prints one clear
+line (exit code 2) on bad input instead of a traceback.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+
+from eosp.args import add_config_args, config_from_args
+from eosp.config import FAMILIES, InstanceConfig, family_config
+from eosp.errors import InputError
+
+
+def _load_instance(path: str):
+    """An instance from an interchange directory, or `SHARD.parquet#INDEX` from a shard."""
+    from instances.interchange import read_instance
+
+    if "#" in path:
+        from shards.io import ShardReader
+
+        file, _, idx = path.rpartition("#")
+        return ShardReader(file).read(int(idx))
+    return read_instance(path)
+
+
+def cmd_generate(ns: argparse.Namespace) -> int:
+    from instances.generator import generate
+    from instances.interchange import write_instance
+
+    base = family_config(ns.family, 100, 0)
+    cfg = config_from_args(InstanceConfig, ns, base=base)
+    t0 = time.perf_counter()
+    inst = generate(cfg)
+    write_instance(inst, ns.out, overwrite=ns.overwrite)
+    print(f"{ns.out}: {inst.n_acq} acquisitions, {inst.graph.n_nodes} nodes, {inst.graph.n_arcs} arcs "
+          f"({time.perf_counter() - t0:.2f} s)")
+    return 0
+
+
+def cmd_import(ns: argparse.Namespace) -> int:
+    from instances.interchange import read_instance
+    from shards.io import write_shard
+
+    insts = [read_instance(d) for d in ns.instance_dirs]
+    write_shard(ns.out, insts, include_unpruned=not ns.pruned_only)
+    print(f"{ns.out}: {len(insts)} instance(s)")
+    return 0
+
+
+def cmd_export(ns: argparse.Namespace) -> int:
+    from instances.interchange import write_instance
+    from shards.io import ShardReader
+
+    reader = ShardReader(ns.shard)
+    inst = reader.read(ns.index)
+    if not inst.meta.get("unpruned_arcs", True):
+        raise InputError(ns.shard, "this shard holds only pruned arcs; the interchange format needs the unpruned "
+                                   "graph", row=ns.index)
+    inst.meta.pop("unpruned_arcs", None)
+    write_instance(inst, ns.out, overwrite=ns.overwrite)
+    print(f"{ns.out}: exported {inst.name}")
+    return 0
+
+
+def cmd_info(ns: argparse.Namespace) -> int:
+    from graphs.continuous import continuous_graph
+
+    inst = _load_instance(ns.instance)
+    pg = inst.pruned()
+    cs, _ = continuous_graph(pg)
+    out = {"name": inst.name, "acquisitions": inst.n_acq, "nodes": inst.graph.n_nodes,
+           "arcs_unpruned": inst.graph.n_arcs, "arcs_pruned": pg.n_arcs, "continuous_arcs_pruned": int(cs.size),
+           "family": inst.meta.get("family")}
+    print(json.dumps(out, indent=1))
+    return 0
+
+
+def cmd_validate(ns: argparse.Namespace) -> int:
+    from instances.interchange import read_instance
+    from instances.schedule import check, read_schedule
+
+    inst = read_instance(ns.instance_dir)
+    verdict = check(inst, read_schedule(ns.schedule))
+    if verdict.feasible:
+        print(f"feasible: {verdict.n} acquisitions, value {verdict.value:.6f}")
+        return 0
+    print(f"infeasible: {verdict.reason}")
+    return 1
+
+
+def cmd_solve(ns: argparse.Namespace) -> int:
+    from instances.schedule import check, from_internal_nodes, write_schedule
+    from solvers.base import get_solver
+
+    inst = _load_instance(ns.instance_dir)
+    solver = get_solver(ns.solver)
+    kwargs = {"mode": ns.mode, "time_limit": ns.time_limit, "seed": ns.seed}
+    if ns.checkpoint:
+        kwargs["checkpoint"] = ns.checkpoint
+    if ns.budget is not None:
+        kwargs["budget"] = ns.budget
+    if ns.sample:
+        kwargs["sample"] = True
+    t0 = time.perf_counter()
+    sol = solver(inst, **kwargs)
+    elapsed = time.perf_counter() - t0
+    sched = from_internal_nodes(inst, sol.nodes)
+    verdict = check(inst, sched)
+    if not verdict.feasible:  # never write a schedule that the checker refuses
+        print(f"solver {ns.solver} produced an infeasible schedule: {verdict.reason}", file=sys.stderr)
+        return 3
+    write_schedule(sched, ns.out)
+    extra = "".join(f", {k} {v}" for k, v in sol.info.items() if k in ("bound", "gap", "status"))
+    print(f"{ns.out}: {ns.solver}, {len(sched)} acquisitions, value {verdict.value:.6f}{extra} ({elapsed:.2f} s)")
+    return 0
+
+
+def cmd_build_shards(ns: argparse.Namespace, rest: list[str]) -> int:
+    from jobs.build_shards import main as build_main
+
+    return build_main(rest)
+
+
+def cmd_plot(ns: argparse.Namespace) -> int:
+    from evaluation.plots import plot_trajectories
+    from instances.schedule import read_schedule
+
+    inst = _load_instance(ns.instance_dir)
+    schedules = {Path(s).stem: read_schedule(s) for s in ns.schedules}
+    written = plot_trajectories(inst, schedules, ns.out)
+    print("wrote " + ", ".join(str(p) for p in written))
+    return 0
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="eosp", description=__doc__.splitlines()[0])
+    sub = p.add_subparsers(dest="command", required=True)
+
+    g = sub.add_parser("generate", help="generate an instance directory (interchange format)")
+    g.add_argument("out", help="instance directory to create")
+    g.add_argument("--overwrite", action="store_true")
+    g.add_argument("--family", default="uniform", choices=sorted(FAMILIES),
+                   help="generator family: its settings apply before the flags below")
+    add_config_args(g, InstanceConfig)
+    g.set_defaults(func=cmd_generate)
+
+    i = sub.add_parser("import", help="import instance directories into a Parquet shard")
+    i.add_argument("instance_dirs", nargs="+")
+    i.add_argument("--out", required=True, help="shard file to write")
+    i.add_argument("--pruned-only", action="store_true", help="do not store the unpruned arcs")
+    i.set_defaults(func=cmd_import)
+
+    e = sub.add_parser("export", help="export one instance of a shard as an interchange directory")
+    e.add_argument("shard")
+    e.add_argument("--index", type=int, default=0)
+    e.add_argument("--out", required=True)
+    e.add_argument("--overwrite", action="store_true")
+    e.set_defaults(func=cmd_export)
+
+    n = sub.add_parser("info", help="sizes of an instance (directory, or SHARD#INDEX)")
+    n.add_argument("instance")
+    n.set_defaults(func=cmd_info)
+
+    v = sub.add_parser("validate", help="check a schedule against an instance; exit 0 when feasible")
+    v.add_argument("instance_dir")
+    v.add_argument("schedule")
+    v.set_defaults(func=cmd_validate)
+
+    s = sub.add_parser("solve", help="solve an instance and write a schedule file")
+    s.add_argument("instance_dir", help="instance directory (or SHARD#INDEX)")
+    s.add_argument("--solver", required=True)
+    s.add_argument("--out", required=True, help="schedule file (.parquet, or .jsonl)")
+    s.add_argument("--mode", default="utility", choices=["utility", "unitary"])
+    s.add_argument("--time-limit", type=float, default=None, help="seconds, for the searching solvers")
+    s.add_argument("--seed", type=int, default=0)
+    s.add_argument("--checkpoint", default="", help="trained agent (policy, mcts solvers)")
+    s.add_argument("--budget", type=int, default=None, help="MCTS simulations per decision")
+    s.add_argument("--sample", action="store_true", help="policy: sample actions (seeded) instead of argmax")
+    s.set_defaults(func=cmd_solve)
+
+    b = sub.add_parser("build-shards", help="generate a data set of Parquet shards with Ray (jobs/build_shards.py)",
+                       add_help=False)
+    b.set_defaults(func=None, passthrough=cmd_build_shards)
+
+    pl = sub.add_parser("plot", help="trajectory plot (roll against time) of schedules of one instance")
+    pl.add_argument("instance_dir")
+    pl.add_argument("schedules", nargs="+")
+    pl.add_argument("--out", required=True, help="output path without extension (PNG and SVG are written)")
+    pl.set_defaults(func=cmd_plot)
+    return p
+
+
+def main(argv: list[str] | None = None) -> int:
+    argv = sys.argv[1:] if argv is None else argv
+    parser = build_parser()
+    if argv and argv[0] == "build-shards":
+        return cmd_build_shards(argparse.Namespace(), argv[1:])
+    ns = parser.parse_args(argv)
+    try:
+        return ns.func(ns)
+    except (InputError, FileExistsError, ValueError, IndexError) as exc:
+        print(f"eosp {ns.command}: error: {exc}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,195 @@
+"""Typed configuration shared by the CLI, the Ray jobs and Tune.
+
+Every knob of the project is a field of one of these dataclasses.  The CLI
+(`eosp ...`) and the jobs (`jobs/*.py`) build their ``--help`` from them with
+:mod:`eosp.args`, and every run records the dataclasses it used (``asdict``), so
+a parameter such as ``hidden_dim`` goes from the command line
+(``--model.hidden-dim``) to :class:`ModelConfig` to the layer that uses it.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, fields, is_dataclass
+from typing import Any
+
+# The seven priority classes of the paper, highest first (priority 0 = highest,
+# as in the interchange format).
+CLASS_UTILITIES: tuple[float, ...] = (1e8, 1e6, 1e4, 6600.0, 3300.0, 120.0, 1.0)
+N_CLASSES = len(CLASS_UTILITIES)
+
+
+@dataclass
+class OrbitConfig:
+    """Where the satellite flies.  Circular sun-synchronous by default; a TLE overrides it."""
+
+    altitude_km: float = 650.0
+    """Altitude of the circular orbit; the inclination follows from sun-synchronism."""
+    ltan_hours: float = 10.5
+    """Local time of the ascending node (sets the orbit plane with respect to the Sun)."""
+    day_of_year: int = 0
+    """Day of the year (1..365) fixing the Sun direction; 0 draws one per instance."""
+    tle: str = ""
+    """Path of a two-line element file; when given the orbit is propagated with SGP4."""
+    min_sun_elevation_deg: float = 10.0
+    """Optical daylight constraint: Sun elevation at the target during its window."""
+
+
+@dataclass
+class SatelliteConfig:
+    """Agility of the satellite: pointing limits and the slew-time model."""
+
+    roll_max_deg: float = 45.0
+    pitch_max_deg: float = 30.0
+    slew_model: str = "piecewise"
+    """'piecewise' (time as a piecewise-linear function of the rotation angle) or
+    'bang_coast_bang' (maximum rate, acceleration and settling time)."""
+    piecewise_angles_deg: tuple[float, ...] = (0.0, 5.0, 20.0, 45.0, 90.0, 180.0)
+    piecewise_times_s: tuple[float, ...] = (12.0, 16.0, 25.0, 38.0, 60.0, 100.0)
+    max_rate_deg_s: float = 1.5
+    max_accel_deg_s2: float = 0.5
+    settle_s: float = 8.0
+
+
+@dataclass
+class TargetConfig:
+    """Where the candidate targets lie and what they are worth."""
+
+    distribution: str = "uniform"
+    """'uniform' (worldwide), 'clusters' (dense regional clusters) or 'csv' (user points)."""
+    csv_path: str = ""
+    """CSV with columns lat, lon (degrees) for distribution='csv'."""
+    n_clusters: int = 4
+    cluster_radius_km: float = 250.0
+    duration_min_s: float = 10.0
+    duration_max_s: float = 30.0
+    class_probs: tuple[float, ...] = (0.03, 0.05, 0.08, 0.10, 0.14, 0.25, 0.35)
+    """Mean share of each priority class, highest first; each instance draws its own mix."""
+    class_mix_concentration: float = 20.0
+    """Dirichlet concentration of the per-instance class mix (lower = more varied)."""
+    drop_top_classes_prob: float = 0.3
+    """Probability that an instance has no acquisition of the 1 or 2 highest classes."""
+    high_priority_clustered: bool = False
+    """Place the high classes (priority 0..2) close together so that they conflict."""
+    cloud_weight: float = 1e-3
+    """Utility = class value * (1 + cloud_weight * (1 - cloud cover)): never changes the class order."""
+
+
+@dataclass
+class GraphConfig:
+    """How the discrete graph is built from the geometry."""
+
+    step_s: float = 1.0
+    """Discretization step of every window W_i = [e_i, l_i - d_i]."""
+    prune: bool = True
+    """Apply the paper's optimality pruning."""
+
+
+@dataclass
+class InstanceConfig:
+    """One generated instance: everything needed to reproduce it bit for bit."""
+
+    n_acquisitions: int = 100
+    seed: int = 0
+    family: str = "uniform"
+    """Label stored with the instance (data sets say which family they come from)."""
+    orbit: OrbitConfig = field(default_factory=OrbitConfig)
+    satellite: SatelliteConfig = field(default_factory=SatelliteConfig)
+    targets: TargetConfig = field(default_factory=TargetConfig)
+    graph: GraphConfig = field(default_factory=GraphConfig)
+
+
+# Named generator families; a data set says which one it comes from.
+FAMILIES: dict[str, dict[str, Any]] = {
+    # Worldwide uniform targets, classes drawn independently (top classes rare).
+    "uniform": {"targets": {"distribution": "uniform"}},
+    # Dense regional clusters: many conflicts, short slews.
+    "clusters": {"targets": {"distribution": "clusters"}},
+    # Clusters where the high classes sit close together and conflict with each other.
+    "conflict": {"targets": {"distribution": "clusters", "high_priority_clustered": True,
+                             "drop_top_classes_prob": 0.0}},
+}
+
+
+def family_config(family: str, n_acquisitions: int, seed: int, **overrides: Any) -> InstanceConfig:
+    """The InstanceConfig of a named family, with `overrides` (dotted keys allowed) on top."""
+    if family not in FAMILIES:
+        raise ValueError(f"unknown instance family {family!r}; known: {', '.join(FAMILIES)}")
+    cfg = InstanceConfig(n_acquisitions=n_acquisitions, seed=seed, family=family)
+    apply_overrides(cfg, FAMILIES[family])
+    apply_overrides(cfg, overrides)
+    return cfg
+
+
+def apply_overrides(cfg: Any, overrides: dict[str, Any]) -> Any:
+    """Set fields of a (nested) dataclass from a dict; nested dicts or dotted keys reach sub-configs."""
+    for key, value in overrides.items():
+        head, _, rest = key.partition(".")
+        if not any(f.name == head for f in fields(cfg)):
+            raise ValueError(f"{type(cfg).__name__} has no field {head!r}")
+        current = getattr(cfg, head)
+        if rest:
+            apply_overrides(current, {rest: value})
+        elif is_dataclass(current) and isinstance(value, dict):
+            apply_overrides(current, value)
+        else:
+            if isinstance(current, tuple) and isinstance(value, list):
+                value = tuple(value)
+            setattr(cfg, head, value)
+    return cfg
+
+
+def to_dict(cfg: Any) -> dict[str, Any]:
+    """A JSON-friendly dict of a dataclass (tuples become lists)."""
+    out: dict[str, Any] = {}
+    for f in fields(cfg):
+        v = getattr(cfg, f.name)
+        if is_dataclass(v):
+            out[f.name] = to_dict(v)
+        elif isinstance(v, tuple):
+            out[f.name] = list(v)
+        else:
+            out[f.name] = v
+    return out
+
+
+def from_dict(cls: type, data: dict[str, Any]) -> Any:
+    """Inverse of :func:`to_dict`; unknown keys are an error."""
+    return apply_overrides(cls(), data)
+
+
+def flatten(cfg: Any, prefix: str = "") -> dict[str, Any]:
+    """Dotted-key view of a nested config, for MLflow parameters."""
+    out: dict[str, Any] = {}
+    for f in fields(cfg):
+        v = getattr(cfg, f.name)
+        key = f"{prefix}{f.name}"
+        if is_dataclass(v):
+            out.update(flatten(v, key + "."))
+        else:
+            out[key] = v
+    return out
+
+
+@dataclass
+class DatasetConfig:
+    """A generated data set: `n_instances` instances in shards of `per_shard`."""
+
+    out: str = "data/train"
+    """Directory of the data set (shards and manifest.json)."""
+    family: str = "uniform"
+    """Generator family (see eosp.config.FAMILIES)."""
+    n_acquisitions: int = 100
+    n_instances: int = 16
+    per_shard: int = 8
+    seed: int = 0
+    """Instance k of the data set uses seed + k: data sets with distant seeds do not overlap."""
+    include_unpruned: bool = True
+    """Also store the unpruned arcs (needed by greedy, exact, and schedule checks)."""
+
+
+@dataclass
+class RayConfig:
+    address: str = ""
+    """Ray cluster address; empty: the RAY_ADDRESS variable if set (submitted job), else a local Ray."""
+    num_cpus: int = 2
+    """CPUs of the local Ray (ignored on a cluster)."""

@@ -1,0 +1,23 @@
+"""Errors meant for users: each names the file, the column and the row at fault."""
+
+from __future__ import annotations
+
+
+class InputError(ValueError):
+    """Bad input data.  ``str()`` is one line: ``file: column 'c', row r: what is wrong``.
+
+    Rows are 0-based positions in the file as written (the first data row is row 0).
+    """
+
+    def __init__(self, file: object, message: str, column: str | None = None, row: int | None = None):
+        self.file = str(file)
+        self.column = column
+        self.row = row
+        self.message = message
+        where = [self.file]
+        if column is not None:
+            where.append(f"column '{column}'")
+        if row is not None:
+            where.append(f"row {row}")
+        super().__init__(": ".join([where[0], ", ".join(where[1:])]) + f": {message}" if len(where) > 1
+                         else f"{self.file}: {message}")

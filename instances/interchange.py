@@ -1,0 +1,251 @@
+"""Import and export of the instance interchange format (docs/formats.md).
+
+An instance directory holds ``acquisitions.parquet``, ``nodes.parquet``,
+``arcs.parquet`` (the UNPRUNED discrete graph) and optionally ``meta.json``.
+Import checks every rule of the contract and stops at the first violation with
+an :class:`~eosp.errors.InputError` naming the file, the column and the row.
+Export writes the same files into a temporary directory renamed into place, so
+export -> import gives back identical arrays.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pyarrow as pa
+import pyarrow.parquet as pq
+
+from eosp.atomic import atomic_dir
+from eosp.errors import InputError
+from graphs.discrete import DiscreteGraph, acq_ptr_from_node_acq
+from instances.instance import ATTITUDE_COLUMNS, Acquisitions, Instance
+
+TIME_TOL = 1e-6
+
+ACQ_REQUIRED = {"acq": "int", "duration": "float", "vtw_start": "float", "vtw_end": "float", "utility": "float"}
+ACQ_OPTIONAL = {"priority": "int", "lat": "float", "lon": "float", **{c: "float" for c in ATTITUDE_COLUMNS}}
+NODE_COLUMNS = {"node": "int", "acq": "int", "time": "float"}
+ARC_COLUMNS = {"src": "int", "dst": "int"}
+
+
+# --------------------------------------------------------------------------- reading helpers
+
+def read_parquet(path: Path) -> pa.Table:
+    if not path.exists():
+        raise InputError(path, "file not found")
+    try:
+        return pq.read_table(path)
+    except (pa.ArrowException, OSError) as exc:
+        raise InputError(path, f"not a readable Parquet file (truncated or not Parquet?): {exc}") from None
+
+
+def check_columns(path: Path, table: pa.Table, required: dict[str, str], optional: dict[str, str]) -> None:
+    names = table.column_names
+    for name in required:
+        if name not in names:
+            raise InputError(path, f"missing required column (found: {', '.join(names) or 'none'})", column=name)
+    allowed = set(required) | set(optional)
+    for name in names:
+        if name not in allowed:
+            raise InputError(path, f"unexpected column (allowed: {', '.join(sorted(allowed))})", column=name)
+    if len(set(names)) != len(names):
+        raise InputError(path, "duplicate column names")
+
+
+def column(path: Path, table: pa.Table, name: str, kind: str) -> np.ndarray:
+    """A column as numpy: 'int' must be an integer type, 'float' a float or integer type; no nulls."""
+    col = table.column(name)
+    t = col.type
+    if kind == "int" and not pa.types.is_integer(t):
+        raise InputError(path, f"wrong type {t}, expected an integer type", column=name)
+    if kind == "float" and not (pa.types.is_floating(t) or pa.types.is_integer(t)):
+        raise InputError(path, f"wrong type {t}, expected a floating-point type", column=name)
+    if col.null_count:
+        row = int(np.flatnonzero(col.is_null().to_numpy(zero_copy_only=False))[0])
+        raise InputError(path, "null value", column=name, row=row)
+    arr = col.to_numpy()
+    return arr.astype(np.int64) if kind == "int" else arr.astype(np.float64)
+
+
+def _fail_rows(path: Path, bad: np.ndarray, column_name: str, message: str, rows: np.ndarray | None = None) -> None:
+    if np.any(bad):
+        r = int(np.flatnonzero(bad)[0])
+        raise InputError(path, message, column=column_name, row=int(rows[r]) if rows is not None else r)
+
+
+# --------------------------------------------------------------------------- import
+
+def read_acquisitions(path: Path) -> tuple[Acquisitions, np.ndarray]:
+    """Acquisitions sorted by id, and the file row of each id."""
+    table = read_parquet(path)
+    check_columns(path, table, ACQ_REQUIRED, ACQ_OPTIONAL)
+    cols = {name: column(path, table, name, kind) for name, kind in {**ACQ_REQUIRED, **ACQ_OPTIONAL}.items()
+            if name in table.column_names}
+    acq = cols["acq"]
+    n = acq.shape[0]
+    if n == 0:
+        raise InputError(path, "no acquisition")
+    _fail_rows(path, (acq < 0) | (acq >= n), "acq", f"id out of range: ids must be dense 0..{n - 1}")
+    seen = np.zeros(n, dtype=np.int64)
+    np.add.at(seen, acq, 1)
+    if np.any(seen != 1):
+        dup = int(np.flatnonzero(seen > 1)[0])
+        rows = np.flatnonzero(acq == dup)
+        raise InputError(path, f"duplicate acquisition id {dup}", column="acq", row=int(rows[1]))
+    for name in ("duration", "vtw_start", "vtw_end", "utility", "lat", "lon", *ATTITUDE_COLUMNS):
+        if name in cols:
+            _fail_rows(path, ~np.isfinite(cols[name]), name, "NaN or infinite value")
+    _fail_rows(path, cols["duration"] <= 0, "duration", "duration must be > 0")
+    _fail_rows(path, cols["utility"] <= 0, "utility", "utility must be > 0")
+    _fail_rows(path, cols["vtw_end"] < cols["vtw_start"], "vtw_end", "window ends before it starts")
+    _fail_rows(path, cols["vtw_end"] - cols["duration"] < cols["vtw_start"] - TIME_TOL, "duration",
+               "window [vtw_start, vtw_end] is shorter than the duration")
+    if "priority" in cols:
+        _fail_rows(path, (cols["priority"] < 0) | (cols["priority"] > 127), "priority",
+                   "priority must be in 0..127 (0 = highest)")
+    order = np.argsort(acq, kind="stable")
+
+    def get(name: str) -> np.ndarray | None:
+        return cols[name][order] if name in cols else None
+
+    att = None
+    if all(c in cols for c in ATTITUDE_COLUMNS):
+        att = np.stack([cols[c][order] for c in ATTITUDE_COLUMNS], axis=1)
+    elif any(c in cols for c in ATTITUDE_COLUMNS):
+        missing = [c for c in ATTITUDE_COLUMNS if c not in cols]
+        raise InputError(path, "attitude statistics must come all six together", column=missing[0])
+    prio = get("priority")
+    acqs = Acquisitions(duration=get("duration"), vtw_start=get("vtw_start"), vtw_end=get("vtw_end"),
+                        utility=get("utility"), priority=None if prio is None else prio.astype(np.int8),
+                        lat=get("lat"), lon=get("lon"), attitude=att)
+    return acqs, order
+
+
+def read_instance(directory: str | Path, name: str | None = None) -> Instance:
+    """Read and check an instance directory; nodes are brought to canonical order."""
+    d = Path(directory)
+    if not d.is_dir():
+        raise InputError(d, "not an instance directory")
+    acqs, _ = read_acquisitions(d / "acquisitions.parquet")
+    n = len(acqs)
+
+    npath = d / "nodes.parquet"
+    table = read_parquet(npath)
+    check_columns(npath, table, NODE_COLUMNS, {})
+    node = column(npath, table, "node", "int")
+    nacq = column(npath, table, "acq", "int")
+    ntime = column(npath, table, "time", "float")
+    big_n = node.shape[0]
+    if big_n == 0:
+        raise InputError(npath, "no node (node 0, the source, is required)")
+    _fail_rows(npath, (node < 0) | (node >= big_n), "node", f"node id out of range: ids must be dense 0..{big_n - 1}")
+    pos = np.full(big_n, -1, dtype=np.int64)  # file row of each node id
+    seen = np.zeros(big_n, dtype=np.int64)
+    np.add.at(seen, node, 1)
+    if np.any(seen != 1):
+        dup = int(np.flatnonzero(seen > 1)[0])
+        raise InputError(npath, f"duplicate node id {dup}", column="node", row=int(np.flatnonzero(node == dup)[1]))
+    pos[node] = np.arange(big_n)
+    _fail_rows(npath, ~np.isfinite(ntime), "time", "NaN or infinite time")
+    src_row = int(pos[0])
+    if nacq[src_row] != -1:
+        raise InputError(npath, "node 0 is the source and must have acq = -1", column="acq", row=src_row)
+    bad_acq = ((nacq < 0) | (nacq >= n)) & (node != 0)
+    _fail_rows(npath, bad_acq, "acq", f"unknown acquisition id (dangling): must be in 0..{n - 1}")
+    real = node != 0
+    a = np.where(real, nacq, 0)
+    lo = acqs.vtw_start[a]
+    hi = acqs.vtw_end[a] - acqs.duration[a]
+    _fail_rows(npath, real & ((ntime < lo - TIME_TOL) | (ntime > hi + TIME_TOL)), "time",
+               "node time outside its window [vtw_start, vtw_end - duration]")
+
+    apath = d / "arcs.parquet"
+    table = read_parquet(apath)
+    check_columns(apath, table, ARC_COLUMNS, {})
+    src = column(apath, table, "src", "int")
+    dst = column(apath, table, "dst", "int")
+    _fail_rows(apath, (src < 0) | (src >= big_n), "src", "dangling node id (not in nodes.parquet)")
+    _fail_rows(apath, (dst < 0) | (dst >= big_n), "dst", "dangling node id (not in nodes.parquet)")
+    _fail_rows(apath, dst == 0, "dst", "arc into the source node 0")
+    srow, drow = pos[src], pos[dst]
+    s_acq, d_acq = nacq[srow], nacq[drow]
+    _fail_rows(apath, s_acq == d_acq, "dst", "arc between two nodes of the same acquisition")
+    s_fin = ntime[srow] + np.where(s_acq >= 0, acqs.duration[np.maximum(s_acq, 0)], 0.0)
+    _fail_rows(apath, ntime[drow] < ntime[srow], "dst", "arc goes back in time (dst time < src time)")
+    _fail_rows(apath, ntime[drow] < s_fin - TIME_TOL, "dst",
+               "arc starts its destination before the source acquisition ends (time < src time + duration)")
+
+    # canonical order: source, then by (acq, time)
+    key_acq = np.where(node == 0, -1, nacq)
+    perm = np.lexsort((ntime, key_acq))  # file rows in canonical order
+    if perm[0] != src_row:
+        perm = np.concatenate([[src_row], perm[perm != src_row]])
+    new_of_row = np.empty(big_n, dtype=np.int64)
+    new_of_row[perm] = np.arange(big_n)
+    node_acq = nacq[perm].astype(np.int32)
+    node_time = ntime[perm]
+    node_ids = node[perm].astype(np.int32)
+    s_new, d_new = new_of_row[srow], new_of_row[drow]
+    # two arcs from one node to the same acquisition are invalid
+    key = s_new * (n + 1) + d_acq
+    order = np.argsort(key, kind="stable")
+    dupl = np.zeros(key.shape[0], dtype=bool)
+    dupl[order[1:]] = key[order[1:]] == key[order[:-1]]
+    _fail_rows(apath, dupl, "dst", "second arc from the same node to the same acquisition")
+    order = np.lexsort((d_new, s_new))
+    indptr = np.zeros(big_n + 1, dtype=np.int64)
+    np.cumsum(np.bincount(s_new, minlength=big_n), out=indptr[1:])
+    graph = DiscreteGraph(node_acq=node_acq, node_time=node_time, indptr=indptr,
+                          dst=d_new[order].astype(np.int32), acq_ptr=acq_ptr_from_node_acq(node_acq, n))
+
+    meta: dict = {}
+    mpath = d / "meta.json"
+    if mpath.exists():
+        try:
+            meta = json.loads(mpath.read_text())
+        except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+            raise InputError(mpath, f"not valid JSON: {exc}") from None
+        if not isinstance(meta, dict):
+            raise InputError(mpath, "must hold a JSON object")
+    return Instance(name=name or str(meta.get("name", d.name)), acqs=acqs, graph=graph, node_ids=node_ids,
+                    meta=meta)
+
+
+# --------------------------------------------------------------------------- export
+
+def acquisitions_table(acqs: Acquisitions) -> pa.Table:
+    n = len(acqs)
+    cols = {
+        "acq": pa.array(np.arange(n, dtype=np.int32)),
+        "duration": pa.array(acqs.duration, pa.float64()),
+        "vtw_start": pa.array(acqs.vtw_start, pa.float64()),
+        "vtw_end": pa.array(acqs.vtw_end, pa.float64()),
+        "utility": pa.array(acqs.utility, pa.float64()),
+    }
+    if acqs.priority is not None:
+        cols["priority"] = pa.array(acqs.priority.astype(np.int8))
+    if acqs.lat is not None:
+        cols["lat"] = pa.array(acqs.lat, pa.float64())
+    if acqs.lon is not None:
+        cols["lon"] = pa.array(acqs.lon, pa.float64())
+    if acqs.attitude is not None:
+        for k, c in enumerate(ATTITUDE_COLUMNS):
+            cols[c] = pa.array(acqs.attitude[:, k], pa.float64())
+    return pa.table(cols)
+
+
+def write_instance(inst: Instance, directory: str | Path, overwrite: bool = False) -> Path:
+    """Write `inst` as an interchange directory (atomically)."""
+    g = inst.graph
+    ids = inst.node_ids
+    with atomic_dir(directory, overwrite=overwrite) as tmp:
+        pq.write_table(acquisitions_table(inst.acqs), tmp / "acquisitions.parquet")
+        pq.write_table(pa.table({"node": pa.array(ids, pa.int32()), "acq": pa.array(g.node_acq, pa.int32()),
+                                 "time": pa.array(g.node_time, pa.float64())}), tmp / "nodes.parquet")
+        pq.write_table(pa.table({"src": pa.array(ids[g.src()], pa.int32()), "dst": pa.array(ids[g.dst], pa.int32())}),
+                       tmp / "arcs.parquet")
+        meta = {"name": inst.name, **inst.meta}
+        (tmp / "meta.json").write_text(json.dumps(meta, indent=1, sort_keys=True))
+    return Path(directory)

@@ -1,0 +1,156 @@
+"""Schedules: the interchange schedule file and the independent feasibility check.
+
+A schedule is a list of rows (acq, node, start) in execution order, with node
+ids as written in the instance's own ``nodes.parquet``.  :func:`check` applies
+the contract's rules directly on the unpruned arcs with plain numpy; it shares
+no code with the environment or the solvers, so it can judge them.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pyarrow as pa
+import pyarrow.parquet as pq
+
+from eosp.atomic import atomic_path
+from eosp.errors import InputError
+from instances.instance import Instance
+from instances.interchange import TIME_TOL, check_columns, column, read_parquet
+
+SCHEDULE_COLUMNS = {"acq": "int", "node": "int", "start": "float"}
+
+
+@dataclass
+class Schedule:
+    acq: np.ndarray  # int32 [k]
+    node: np.ndarray  # int32 [k], ids of the instance's nodes.parquet
+    start: np.ndarray  # float64 [k]
+
+    def __len__(self) -> int:
+        return int(self.acq.shape[0])
+
+
+def from_internal_nodes(inst: Instance, nodes: np.ndarray | list[int]) -> Schedule:
+    """Schedule of a path given as canonical node indices (source excluded)."""
+    nodes = np.asarray(nodes, dtype=np.int64)
+    g = inst.graph
+    return Schedule(acq=g.node_acq[nodes].astype(np.int32), node=inst.node_ids[nodes].astype(np.int32),
+                    start=g.node_time[nodes].astype(np.float64))
+
+
+def to_internal_nodes(inst: Instance, schedule: Schedule) -> np.ndarray:
+    inv = np.empty(inst.graph.n_nodes, dtype=np.int64)
+    inv[inst.node_ids] = np.arange(inst.graph.n_nodes)
+    return inv[schedule.node]
+
+
+def value(inst: Instance, schedule: Schedule) -> float:
+    return math.fsum(inst.acqs.utility[schedule.acq].tolist())
+
+
+def write_schedule(schedule: Schedule, path: str | Path) -> Path:
+    """Write a schedule as Parquet, or as JSON lines when the name ends in .jsonl/.json (atomically)."""
+    path = Path(path)
+    with atomic_path(path) as tmp:
+        if path.suffix in (".jsonl", ".json"):
+            with open(tmp, "w") as fh:
+                for a, n, s in zip(schedule.acq.tolist(), schedule.node.tolist(), schedule.start.tolist()):
+                    fh.write(json.dumps({"acq": a, "node": n, "start": s}) + "\n")
+        else:
+            pq.write_table(pa.table({"acq": pa.array(schedule.acq, pa.int32()),
+                                     "node": pa.array(schedule.node, pa.int32()),
+                                     "start": pa.array(schedule.start, pa.float64())}), tmp)
+    return path
+
+
+def read_schedule(path: str | Path) -> Schedule:
+    path = Path(path)
+    if path.suffix in (".jsonl", ".json"):
+        if not path.exists():
+            raise InputError(path, "file not found")
+        rows = []
+        for k, line in enumerate(path.read_text().splitlines()):
+            if not line.strip():
+                continue
+            try:
+                row = json.loads(line)
+            except json.JSONDecodeError as exc:
+                raise InputError(path, f"not valid JSON: {exc}", row=k) from None
+            if not isinstance(row, dict) or set(row) != set(SCHEDULE_COLUMNS):
+                raise InputError(path, f"each line must be an object with keys {sorted(SCHEDULE_COLUMNS)}", row=k)
+            for key in ("acq", "node"):
+                if not isinstance(row[key], int) or isinstance(row[key], bool):
+                    raise InputError(path, "must be an integer", column=key, row=k)
+            if not isinstance(row["start"], (int, float)) or isinstance(row["start"], bool):
+                raise InputError(path, "must be a number", column="start", row=k)
+            rows.append(row)
+        return Schedule(acq=np.array([r["acq"] for r in rows], dtype=np.int64).astype(np.int32),
+                        node=np.array([r["node"] for r in rows], dtype=np.int64).astype(np.int32),
+                        start=np.array([r["start"] for r in rows], dtype=np.float64))
+    table = read_parquet(path)
+    check_columns(path, table, SCHEDULE_COLUMNS, {})
+    return Schedule(acq=column(path, table, "acq", "int").astype(np.int32),
+                    node=column(path, table, "node", "int").astype(np.int32),
+                    start=column(path, table, "start", "float"))
+
+
+@dataclass
+class Verdict:
+    feasible: bool
+    value: float
+    n: int
+    reason: str = ""
+
+
+def check(inst: Instance, schedule: Schedule) -> Verdict:
+    """Apply the contract's feasibility rules; the value is the float64 sum of the utilities."""
+    g = inst.graph
+    acqs = inst.acqs
+    n_acq = len(acqs)
+    n_nodes = g.n_nodes
+    inv = np.full(int(max(n_nodes, int(inst.node_ids.max()) + 1)), -1, dtype=np.int64)
+    inv[inst.node_ids] = np.arange(n_nodes)
+    used = set()
+    prev = 0  # canonical index of the source
+    k = len(schedule)
+
+    def bad(row: int, why: str) -> Verdict:
+        return Verdict(False, value(inst, schedule) if k and _ids_ok(schedule, n_acq) else float("nan"), k,
+                       f"row {row}: {why}")
+
+    for r in range(k):
+        a, node_id, start = int(schedule.acq[r]), int(schedule.node[r]), float(schedule.start[r])
+        if not 0 <= a < n_acq:
+            return bad(r, f"unknown acquisition {a}")
+        if a in used:
+            return bad(r, f"acquisition {a} appears twice")
+        used.add(a)
+        if not 0 <= node_id < inv.shape[0] or inv[node_id] < 0:
+            return bad(r, f"unknown node {node_id}")
+        u = int(inv[node_id])
+        if int(g.node_acq[u]) != a:
+            return bad(r, f"node {node_id} belongs to acquisition {int(g.node_acq[u])}, not {a}")
+        if not math.isfinite(start) or abs(start - float(g.node_time[u])) > TIME_TOL:
+            return bad(r, f"start {start} differs from the node's time {float(g.node_time[u])}")
+        if start < acqs.vtw_start[a] - TIME_TOL or start > acqs.vtw_end[a] - acqs.duration[a] + TIME_TOL:
+            return bad(r, f"start {start} outside the window [{acqs.vtw_start[a]}, "
+                          f"{acqs.vtw_end[a] - acqs.duration[a]}] of acquisition {a}")
+        row = g.dst[g.indptr[prev]:g.indptr[prev + 1]]
+        hit = row[g.node_acq[row] == a]
+        what = "the source" if prev == 0 else f"node {int(inst.node_ids[prev])}"
+        if hit.size == 0:
+            return bad(r, f"no arc from {what} to acquisition {a}: the maneuver cannot reach it")
+        if float(g.node_time[hit[0]]) > start + TIME_TOL:
+            return bad(r, f"the arc from {what} reaches acquisition {a} at {float(g.node_time[hit[0]])}, "
+                          f"after the scheduled start {start}")
+        prev = u
+    return Verdict(True, value(inst, schedule), k)
+
+
+def _ids_ok(schedule: Schedule, n_acq: int) -> bool:
+    return bool(np.all((schedule.acq >= 0) & (schedule.acq < n_acq)))

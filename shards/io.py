@@ -1,0 +1,256 @@
+"""Parquet shards: many instances with their graphs, one row (and one row group) each.
+
+Layout of a shard (schema version :data:`SCHEMA_VERSION`, stored in the file's
+key-value metadata under ``eosp.schema_version``):
+
+* scalars: ``name``, ``meta_json``, ``n_acq``, ``n_nodes``;
+* per acquisition (lists of length n): ``duration``, ``vtw_start``, ``vtw_end``,
+  ``utility``, ``priority`` (int8), ``lat``, ``lon``, ``attitude`` (6n, row-major
+  in the order of :data:`instances.instance.ATTITUDE_COLUMNS`); optional ones null;
+* per node (lists of length N, canonical order): ``node_acq`` (int32),
+  ``node_time`` (float64), ``node_ids`` (int32), ``node_attitude`` (float32, 4N, optional);
+* CSR arcs: ``pruned_indptr``/``pruned_dst`` (the graph the environment uses) and,
+  optionally, ``arc_indptr``/``arc_dst`` (the unpruned graph, needed by the
+  solvers that insert acquisitions and by the schedule check).
+
+Reading a row group gives numpy arrays by zero-copy views of Arrow buffers; no
+per-node Python object is created.  Every read checks the schema version, the
+columns and the structural invariants, and reports a violation with the file,
+the column and the instance row.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pyarrow as pa
+import pyarrow.parquet as pq
+
+from eosp.atomic import atomic_path
+from eosp.errors import InputError
+from graphs.discrete import DiscreteGraph, first_backward_arc
+from instances.instance import Acquisitions, Instance
+
+SCHEMA_VERSION = 1
+KIND = "eosp-instance-shard"
+
+_F64, _F32, _I32, _I64, _I8 = pa.float64(), pa.float32(), pa.int32(), pa.int64(), pa.int8()
+SCHEMA = pa.schema([
+    ("name", pa.string()), ("meta_json", pa.string()), ("n_acq", _I32), ("n_nodes", _I32),
+    ("duration", pa.list_(_F64)), ("vtw_start", pa.list_(_F64)), ("vtw_end", pa.list_(_F64)),
+    ("utility", pa.list_(_F64)), ("priority", pa.list_(_I8)), ("lat", pa.list_(_F64)), ("lon", pa.list_(_F64)),
+    ("attitude", pa.list_(_F64)),
+    ("node_acq", pa.list_(_I32)), ("node_time", pa.list_(_F64)), ("node_ids", pa.list_(_I32)),
+    ("node_attitude", pa.list_(_F32)),
+    ("pruned_indptr", pa.list_(_I64)), ("pruned_dst", pa.list_(_I32)),
+    ("arc_indptr", pa.list_(_I64)), ("arc_dst", pa.list_(_I32)),
+])
+_REQUIRED = ("duration", "vtw_start", "vtw_end", "utility", "node_acq", "node_time", "node_ids",
+             "pruned_indptr", "pruned_dst")
+
+
+def _row(inst: Instance, include_unpruned: bool) -> dict:
+    a = inst.acqs
+    pg = inst.pruned()
+    g = inst.graph
+
+    def opt(x):
+        return None if x is None else np.ascontiguousarray(x).reshape(-1)
+
+    return {
+        "name": inst.name, "meta_json": json.dumps(inst.meta, sort_keys=True), "n_acq": inst.n_acq,
+        "n_nodes": g.n_nodes, "duration": a.duration, "vtw_start": a.vtw_start, "vtw_end": a.vtw_end,
+        "utility": a.utility, "priority": opt(a.priority), "lat": opt(a.lat), "lon": opt(a.lon),
+        "attitude": opt(a.attitude), "node_acq": g.node_acq, "node_time": g.node_time,
+        "node_ids": inst.node_ids, "node_attitude": opt(inst.node_attitude),
+        "pruned_indptr": pg.indptr, "pruned_dst": pg.dst,
+        "arc_indptr": g.indptr if include_unpruned else None, "arc_dst": g.dst if include_unpruned else None,
+    }
+
+
+def _to_table(rows: list[dict]) -> pa.Table:
+    arrays = []
+    for f in SCHEMA:
+        vals = [r[f.name] for r in rows]
+        if pa.types.is_list(f.type):
+            arrays.append(_list_array(vals, f.type))
+        else:
+            arrays.append(pa.array(vals, f.type))
+    return pa.Table.from_arrays(arrays, schema=SCHEMA)
+
+
+def _list_array(vals: list, typ: pa.ListType) -> pa.Array:
+    """A list array built from numpy buffers in one go (no Python-level element loop)."""
+    vt = typ.value_type
+    np_t = vt.to_pandas_dtype()
+    lengths = np.array([0 if v is None else len(v) for v in vals], dtype=np.int32)
+    offsets = np.zeros(len(vals) + 1, dtype=np.int32)
+    np.cumsum(lengths, out=offsets[1:])
+    flat = np.concatenate([np.asarray(v, dtype=np_t) for v in vals if v is not None]) if offsets[-1] else \
+        np.zeros(0, dtype=np_t)
+    mask = np.array([v is None for v in vals])
+    return pa.ListArray.from_arrays(pa.array(offsets), pa.array(flat, vt), mask=pa.array(mask) if mask.any() else None)
+
+
+def write_shard(path: str | Path, instances: list[Instance], include_unpruned: bool = True,
+                extra_meta: dict | None = None) -> Path:
+    """Write instances (with their pruned graphs) to one Parquet shard, atomically."""
+    path = Path(path)
+    meta = {b"eosp.kind": KIND.encode(), b"eosp.schema_version": str(SCHEMA_VERSION).encode(),
+            b"eosp.n_instances": str(len(instances)).encode(),
+            b"eosp.extra": json.dumps(extra_meta or {}, sort_keys=True).encode()}
+    with atomic_path(path, suffix=".parquet") as tmp:
+        writer = pq.ParquetWriter(tmp, SCHEMA.with_metadata(meta), compression="zstd",
+                                  use_dictionary=["name", "meta_json"], write_statistics=False)
+        try:
+            for inst in instances:
+                writer.write_table(_to_table([_row(inst, include_unpruned)]))
+        finally:
+            writer.close()
+    return path
+
+
+class ShardReader:
+    """Random access to the instances of one shard (one row group per instance)."""
+
+    def __init__(self, path: str | Path):
+        self.path = Path(path)
+        if not self.path.exists():
+            raise InputError(self.path, "shard not found")
+        try:
+            self._file = pq.ParquetFile(self.path)
+        except (pa.ArrowException, OSError) as exc:
+            raise InputError(self.path, f"not a readable Parquet file (truncated or not a shard?): {exc}") from None
+        md = self._file.schema_arrow.metadata or {}
+        if md.get(b"eosp.kind") != KIND.encode():
+            raise InputError(self.path, "not an EOSP shard (no 'eosp.kind' metadata): a foreign Parquet file?")
+        version = md.get(b"eosp.schema_version", b"?").decode()
+        if version != str(SCHEMA_VERSION):
+            raise InputError(self.path, f"unknown shard schema version {version!r} "
+                                        f"(this version of eosp reads version {SCHEMA_VERSION})")
+        names = set(self._file.schema_arrow.names)
+        for col in SCHEMA.names:
+            if col not in names:
+                raise InputError(self.path, "missing column", column=col)
+        for f in SCHEMA:
+            got = self._file.schema_arrow.field(f.name).type
+            if got != f.type:
+                raise InputError(self.path, f"wrong type {got}, expected {f.type}", column=f.name)
+        self.extra = json.loads(md.get(b"eosp.extra", b"{}").decode())
+
+    def __len__(self) -> int:
+        return self._file.num_row_groups
+
+    def names(self) -> list[str]:
+        return self._file.read(columns=["name"]).column("name").to_pylist()
+
+    def read(self, index: int, unpruned: bool = True) -> Instance:
+        if not 0 <= index < len(self):
+            raise IndexError(f"{self.path}: instance {index} out of range (shard holds {len(self)})")
+        try:
+            t = self._file.read_row_group(index)
+        except (pa.ArrowException, OSError) as exc:
+            raise InputError(self.path, f"cannot read instance row group {index} (truncated file?): {exc}",
+                             row=index) from None
+        return _instance_from_row(self.path, index, t, unpruned)
+
+    def __iter__(self):
+        for i in range(len(self)):
+            yield self.read(i)
+
+
+def _values(path: Path, row: int, t: pa.Table, name: str, np_type, required: bool = True) -> np.ndarray | None:
+    col = t.column(name)
+    chunk = col.chunk(0) if col.num_chunks == 1 else pa.concat_arrays(col.chunks)
+    if chunk.null_count:
+        if required:
+            raise InputError(path, "null where a list is required", column=name, row=row)
+        return None
+    vals = chunk.values
+    if vals.null_count:
+        raise InputError(path, "null element", column=name, row=row)
+    return vals.to_numpy(zero_copy_only=False).astype(np_type, copy=False)
+
+
+def _instance_from_row(path: Path, row: int, t: pa.Table, unpruned: bool) -> Instance:
+    def need(name, typ):
+        return _values(path, row, t, name, typ)
+
+    def maybe(name, typ):
+        return _values(path, row, t, name, typ, required=False)
+
+    n = t.column("n_acq")[0].as_py()
+    big_n = t.column("n_nodes")[0].as_py()
+    for name in ("duration", "vtw_start", "vtw_end", "utility"):
+        if len(need(name, np.float64)) != n:
+            raise InputError(path, f"length differs from n_acq={n}", column=name, row=row)
+    node_acq, node_time = need("node_acq", np.int32), need("node_time", np.float64)
+    node_ids = need("node_ids", np.int32)
+    for name, arr in (("node_acq", node_acq), ("node_time", node_time), ("node_ids", node_ids)):
+        if len(arr) != big_n:
+            raise InputError(path, f"length differs from n_nodes={big_n}", column=name, row=row)
+    dur = need("duration", np.float64)
+    acqs = Acquisitions(duration=dur, vtw_start=need("vtw_start", np.float64), vtw_end=need("vtw_end", np.float64),
+                        utility=need("utility", np.float64), priority=maybe("priority", np.int8),
+                        lat=maybe("lat", np.float64), lon=maybe("lon", np.float64),
+                        attitude=None)
+    att = maybe("attitude", np.float64)
+    if att is not None:
+        if len(att) != 6 * n:
+            raise InputError(path, f"length differs from 6 * n_acq = {6 * n}", column="attitude", row=row)
+        acqs.attitude = att.reshape(n, 6)
+    if big_n < 1 or node_acq[0] != -1 or np.any(node_acq[1:] < 0) or np.any(node_acq[1:] >= n) \
+            or np.any(np.diff(node_acq[1:]) < 0):
+        raise InputError(path, "nodes not in canonical order (source, then by acquisition)", column="node_acq",
+                         row=row)
+    from graphs.discrete import acq_ptr_from_node_acq
+
+    acq_ptr = acq_ptr_from_node_acq(node_acq, n)
+    pindptr, pdst = need("pruned_indptr", np.int64), need("pruned_dst", np.int32)
+    _check_csr(path, row, "pruned", pindptr, pdst, node_acq, node_time, dur)
+    if unpruned and t.column("arc_indptr").null_count == 0:
+        aindptr, adst = need("arc_indptr", np.int64), need("arc_dst", np.int32)
+        _check_csr(path, row, "arc", aindptr, adst, node_acq, node_time, dur)
+    else:
+        aindptr, adst = pindptr, pdst  # unpruned arcs not stored: keep the pruned ones in their place
+        unpruned = False
+    node_att = maybe("node_attitude", np.float32)
+    meta = json.loads(t.column("meta_json")[0].as_py() or "{}")
+    meta["unpruned_arcs"] = bool(unpruned)
+    inst = Instance(name=t.column("name")[0].as_py(), acqs=acqs,
+                    graph=DiscreteGraph(node_acq, node_time, aindptr, adst, acq_ptr), node_ids=node_ids, meta=meta,
+                    node_attitude=None if node_att is None else node_att.reshape(big_n, 4))
+    inst.set_pruned(DiscreteGraph(node_acq, node_time, pindptr, pdst, acq_ptr))
+    return inst
+
+
+def _check_csr(path: Path, row: int, prefix: str, indptr: np.ndarray, dst: np.ndarray, node_acq: np.ndarray,
+               node_time: np.ndarray, dur: np.ndarray) -> None:
+    big_n = node_acq.shape[0]
+    if indptr.shape[0] != big_n + 1 or indptr[0] != 0 or indptr[-1] != dst.shape[0] or np.any(np.diff(indptr) < 0):
+        raise InputError(path, "CSR offsets inconsistent with the arcs", column=f"{prefix}_indptr", row=row)
+    if dst.size and (dst.min() < 1 or dst.max() >= big_n):
+        raise InputError(path, "dangling node id in arcs", column=f"{prefix}_dst", row=row)
+    if first_backward_arc(node_acq, node_time, indptr, dst, dur) >= 0:
+        raise InputError(path, "arc goes back in time", column=f"{prefix}_dst", row=row)
+
+
+def read_instances(paths: list[str | Path], unpruned: bool = True) -> list[Instance]:
+    out = []
+    for p in paths:
+        reader = ShardReader(p)
+        out.extend(reader.read(i, unpruned) for i in range(len(reader)))
+    return out
+
+
+def dataset_shards(path: str | Path) -> list[Path]:
+    """The shard files of a data set directory (sorted), or the file itself."""
+    p = Path(path)
+    if p.is_file():
+        return [p]
+    files = sorted(p.glob("*.parquet"))
+    if not files:
+        raise InputError(p, "no shard (*.parquet) in this directory")
+    return files

@@ -1,0 +1,32 @@
+"""A random feasible schedule: a random walk in the pruned discrete graph.
+
+From the last node, pick uniformly one of its arcs to an acquisition not used
+yet; stop when there is none.  A baseline for sanity checks, nothing more.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from instances.instance import Instance
+from solvers.base import Solution, objective_weights
+
+
+def solve(inst: Instance, *, mode: str = "utility", time_limit: float | None = None, seed: int = 0,
+          **_: object) -> Solution:
+    g = inst.pruned()
+    rng = np.random.default_rng(seed)
+    used = np.zeros(inst.n_acq, dtype=bool)
+    node = 0
+    path = []
+    while True:
+        row = g.dst[g.indptr[node]:g.indptr[node + 1]]
+        row = row[~used[g.node_acq[row]]]
+        if row.size == 0:
+            break
+        node = int(row[rng.integers(row.size)])
+        used[g.node_acq[node]] = True
+        path.append(node)
+    nodes = np.asarray(path, dtype=np.int64)
+    w = objective_weights(inst, mode)
+    return Solution(nodes, float(np.sum(w[g.node_acq[nodes]])) if nodes.size else 0.0, {"solver": "random"})
