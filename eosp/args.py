@@ -61,9 +61,11 @@ def add_config_args(parser: argparse.ArgumentParser, cls: type, prefix: str = ""
                                 help=help_text)
         elif origin is tuple:
             elem = typing.get_args(hint)[0]
-            parser.add_argument(flag, dest=name, type=elem, nargs="+", default=argparse.SUPPRESS, help=help_text)
+            parser.add_argument(flag, dest=name, type=elem, nargs="+", default=argparse.SUPPRESS, help=help_text,
+                                metavar=elem.__name__.upper())
         elif hint in (int, float, str):
-            parser.add_argument(flag, dest=name, type=hint, default=argparse.SUPPRESS, help=help_text)
+            parser.add_argument(flag, dest=name, type=hint, default=argparse.SUPPRESS, help=help_text,
+                                metavar=hint.__name__.upper())
         else:
             parser.add_argument(flag, dest=name, type=str, default=argparse.SUPPRESS, help=help_text)
 

@@ -13,7 +13,7 @@ import time
 from pathlib import Path
 
 from eosp.args import add_config_args, config_from_args
-from eosp.config import FAMILIES, InstanceConfig, family_config
+from eosp.config import InstanceConfig, family_config
 from eosp.errors import InputError
 
 
@@ -33,7 +33,8 @@ def cmd_generate(ns: argparse.Namespace) -> int:
     from instances.generator import generate
     from instances.interchange import write_instance
 
-    base = family_config(ns.family, 100, 0)
+    # the family's settings first, then every flag given
+    base = family_config(getattr(ns, "family", "uniform"), 100, 0)
     cfg = config_from_args(InstanceConfig, ns, base=base)
     t0 = time.perf_counter()
     inst = generate(cfg)
@@ -145,8 +146,6 @@ def build_parser() -> argparse.ArgumentParser:
     g = sub.add_parser("generate", help="generate an instance directory (interchange format)")
     g.add_argument("out", help="instance directory to create")
     g.add_argument("--overwrite", action="store_true")
-    g.add_argument("--family", default="uniform", choices=sorted(FAMILIES),
-                   help="generator family: its settings apply before the flags below")
     add_config_args(g, InstanceConfig)
     g.set_defaults(func=cmd_generate)
 

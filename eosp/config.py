@@ -91,7 +91,7 @@ class InstanceConfig:
     n_acquisitions: int = 100
     seed: int = 0
     family: str = "uniform"
-    """Label stored with the instance (data sets say which family they come from)."""
+    """Generator family (uniform, clusters, conflict): its settings apply before other flags."""
     orbit: OrbitConfig = field(default_factory=OrbitConfig)
     satellite: SatelliteConfig = field(default_factory=SatelliteConfig)
     targets: TargetConfig = field(default_factory=TargetConfig)
