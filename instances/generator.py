@@ -145,7 +145,8 @@ def _windows(scn: Scenario, lat: np.ndarray, lon: np.ndarray) -> tuple[np.ndarra
             if b + 1 < ok.shape[1]:
                 m0, m1 = margin[r, b], margin[r, b + 1]
                 te = t[r, b] + (t[r, b + 1] - t[r, b]) * m0 / (m0 - m1)
-            start[lo + r], end[lo + r] = ts, te
+            # a hair inside the interpolated crossings, so every attitude is within the limits
+            start[lo + r], end[lo + r] = ts + 0.02, te - 0.02
     return start, end
 
 
@@ -181,8 +182,9 @@ def _sample_visible(scn: Scenario, rng: np.random.Generator, want: int) -> tuple
 def _cluster_points(scn: Scenario, rng: np.random.Generator, want: int, n_clusters: int,
                     radius_km: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Targets around `n_clusters` visible centers; returns lat, lon and the cluster of each."""
-    clat, clon = _sample_visible(scn, rng, 4 * n_clusters)
-    ws, _ = _windows(scn, clat[: 8 * n_clusters], clon[: 8 * n_clusters])
+    clat, clon = _sample_visible(scn, rng, 20 * n_clusters)
+    clat, clon = clat[: 60 * n_clusters], clon[: 60 * n_clusters]
+    ws, _ = _windows(scn, clat, clon)
     good = np.flatnonzero(np.isfinite(ws))
     if good.size < n_clusters:
         raise ValueError("could not place the requested number of visible clusters")

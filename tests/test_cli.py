@@ -1,0 +1,58 @@
+"""The eosp command as users run it (subprocesses)."""
+
+import subprocess
+import sys
+
+import pyarrow as pa
+import pyarrow.parquet as pq
+
+
+def eosp(*args, check=True):
+    r = subprocess.run([sys.executable, "-m", "eosp.cli", *map(str, args)], capture_output=True, text=True,
+                       timeout=300)
+    if check and r.returncode != 0:
+        raise AssertionError(f"eosp {args} -> {r.returncode}\n{r.stdout}\n{r.stderr}")
+    return r
+
+
+def test_generate_solve_validate(tmp_path):
+    inst = tmp_path / "inst"
+    eosp("generate", inst, "--n-acquisitions", 15, "--seed", 4, "--graph.step-s", 2)
+    eosp("solve", inst, "--solver", "random", "--out", tmp_path / "s.parquet", "--seed", 1)
+    r = eosp("validate", inst, tmp_path / "s.parquet")
+    assert r.stdout.startswith("feasible:") and "value" in r.stdout
+    # a broken schedule: exit 1 and the reason
+    t = pq.read_table(tmp_path / "s.parquet")
+    start = t.column("start").to_numpy().copy()
+    start[0] += 0.5
+    pq.write_table(t.set_column(2, "start", pa.array(start)), tmp_path / "bad.parquet")
+    r = eosp("validate", inst, tmp_path / "bad.parquet", check=False)
+    assert r.returncode == 1 and "infeasible: row 0" in r.stdout
+
+
+def test_bad_input_is_one_line_exit_2(tmp_path):
+    inst = tmp_path / "inst"
+    eosp("generate", inst, "--n-acquisitions", 8, "--seed", 1, "--graph.step-s", 4)
+    (inst / "nodes.parquet").write_bytes(b"garbage")
+    r = eosp("solve", inst, "--solver", "random", "--out", tmp_path / "s.parquet", check=False)
+    assert r.returncode == 2
+    assert "nodes.parquet" in r.stderr and "Traceback" not in r.stderr
+    assert not (tmp_path / "s.parquet").exists()
+
+
+def test_import_export_info(tmp_path):
+    inst = tmp_path / "inst"
+    eosp("generate", inst, "--n-acquisitions", 10, "--seed", 2, "--graph.step-s", 4, "--family", "clusters")
+    eosp("import", inst, "--out", tmp_path / "shard.parquet")
+    eosp("export", tmp_path / "shard.parquet", "--index", 0, "--out", tmp_path / "again")
+    for f in ("acquisitions.parquet", "nodes.parquet", "arcs.parquet"):
+        assert pq.read_table(inst / f).equals(pq.read_table(tmp_path / "again" / f))
+    r = eosp("info", f"{tmp_path / 'shard.parquet'}#0")
+    assert '"acquisitions": 10' in r.stdout
+
+
+def test_unknown_solver(tmp_path):
+    inst = tmp_path / "inst"
+    eosp("generate", inst, "--n-acquisitions", 5, "--seed", 2, "--graph.step-s", 4)
+    r = eosp("solve", inst, "--solver", "nope", "--out", tmp_path / "x.parquet", check=False)
+    assert r.returncode == 2 and "unknown solver" in r.stderr

@@ -1,0 +1,76 @@
+"""Parquet shards: round trip, schema checks, truncated and foreign files."""
+
+import numpy as np
+import pyarrow as pa
+import pyarrow.parquet as pq
+import pytest
+
+from eosp.errors import InputError
+from shards.io import SCHEMA_VERSION, ShardReader, read_instances, write_shard
+from tests.conftest import generated
+from tests.test_interchange import assert_same_instance
+
+
+@pytest.fixture
+def shard(tmp_path):
+    insts = [generated("uniform", 12, s) for s in range(3)]
+    return write_shard(tmp_path / "s.parquet", insts), insts
+
+
+def test_round_trip(shard):
+    path, insts = shard
+    reader = ShardReader(path)
+    assert len(reader) == 3 and reader.names() == [i.name for i in insts]
+    for a, b in zip(insts, read_instances([path])):
+        assert_same_instance(a, b)
+        np.testing.assert_array_equal(a.pruned().dst, b.pruned().dst)
+        np.testing.assert_array_equal(a.pruned().indptr, b.pruned().indptr)
+        np.testing.assert_array_equal(a.node_attitude, b.node_attitude)
+        assert b.meta["family"] == "uniform"
+
+
+def test_pruned_only_shard(tmp_path):
+    inst = generated("uniform", 12, 0)
+    path = write_shard(tmp_path / "p.parquet", [inst], include_unpruned=False)
+    back = ShardReader(path).read(0)
+    assert back.meta["unpruned_arcs"] is False
+    np.testing.assert_array_equal(back.pruned().dst, inst.pruned().dst)
+
+
+def test_truncated_shard(shard, tmp_path):
+    path, _ = shard
+    bad = tmp_path / "cut.parquet"
+    bad.write_bytes(path.read_bytes()[:-100])
+    with pytest.raises(InputError, match="truncated"):
+        ShardReader(bad)
+
+
+def test_foreign_parquet(tmp_path):
+    p = tmp_path / "f.parquet"
+    pq.write_table(pa.table({"x": [1, 2]}), p)
+    with pytest.raises(InputError, match="not an EOSP shard"):
+        ShardReader(p)
+
+
+def test_unknown_schema_version(shard, tmp_path):
+    path, _ = shard
+    t = pq.read_table(path)
+    md = dict(t.schema.metadata)
+    md[b"eosp.schema_version"] = str(SCHEMA_VERSION + 1).encode()
+    p = tmp_path / "v.parquet"
+    pq.write_table(t.replace_schema_metadata(md), p)
+    with pytest.raises(InputError, match="unknown shard schema version"):
+        ShardReader(p)
+
+
+def test_corrupted_arcs_name_column_and_row(shard, tmp_path):
+    path, _ = shard
+    t = pq.read_table(path)
+    col = t.column("pruned_dst").to_pylist()
+    col[1] = [v if k else 10 ** 7 for k, v in enumerate(col[1])]
+    t = t.set_column(t.schema.get_field_index("pruned_dst"), "pruned_dst", pa.array(col, pa.list_(pa.int32())))
+    p = tmp_path / "c.parquet"
+    pq.write_table(t, p, row_group_size=1)
+    with pytest.raises(InputError) as info:
+        ShardReader(p).read(1)
+    assert info.value.column == "pruned_dst" and info.value.row == 1 and "dangling" in info.value.message
