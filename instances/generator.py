@@ -28,7 +28,7 @@ from instances.slew import pack_slew_model, slew_times
 
 GENERATOR_NAME = "eosp-open-sim"
 GENERATOR_VERSION = 1
-_FINE_STEP = 0.5  # s, grid on which windows are located before their edges are interpolated
+_FINE_STEP = 1.0  # s, grid on which windows are located before their edges are interpolated
 _HALF_SPAN = 150.0  # s searched on each side of the closest approach
 
 
@@ -242,9 +242,18 @@ def generate(cfg: InstanceConfig, name: str | None = None) -> Instance:
     else:
         raise ValueError(f"unknown target distribution {tc.distribution!r} (uniform, clusters, csv)")
 
-    ws, we = _windows(scn, lat, lon)
     dur_all = np.round(rng.uniform(tc.duration_min_s, tc.duration_max_s, lat.size), 1)
     step = cfg.graph.step_s
+    # windows chunk by chunk until enough candidates fit (all of them for a user's list)
+    ws = np.full(lat.size, np.nan)
+    we = np.full(lat.size, np.nan)
+    found = 0
+    for lo in range(0, lat.size, 256):
+        hi = min(lat.size, lo + 256)
+        ws[lo:hi], we[lo:hi] = _windows(scn, lat[lo:hi], lon[lo:hi])
+        found += int(np.sum(we[lo:hi] - ws[lo:hi] - dur_all[lo:hi] >= step))
+        if found >= n and tc.distribution != "csv":
+            break
     fits = np.isfinite(ws) & (we - ws - dur_all >= step)
     idx = np.flatnonzero(fits)
     if tc.distribution == "csv":

@@ -1,0 +1,366 @@
+"""RAMP: label-setting search for the best path of the discrete graph.
+
+The paper's reference "RAMP" is a Dijkstra search in the discrete graph that is
+not exact because of the exclusion between the nodes of one acquisition.  The
+graph is a DAG whose arcs go forward in time, so Dijkstra's settling order is
+simply the nodes by increasing time: a node is settled once all its
+predecessors have been.  This module sweeps the nodes in that order and keeps at
+every node a set of *labels* (partial schedules from the source ending there).
+
+Each acquisition at most once
+-----------------------------
+A label carries the acquisitions it used whose window is still *open*, i.e.
+whose last node is later than the label's node: only those can be repeated by
+an extension, since every later node is later in time.  Windows last at most a
+couple of minutes, so this set is small (its size is bounded by the window
+length over the shortest arc, ``max_open``), and it is the whole state: two
+labels at one node with the same open set have the same futures.  An extension
+to an acquisition in the open set is refused.  Label A dominates label B at the
+same node when value(A) >= value(B) and open(A) is a subset of open(B); B is
+then dropped.
+
+With no limit on the number of labels per node this is an exact dynamic
+program (:mod:`solvers.exact` runs it so, with Lagrangian bounds to cut labels).
+RAMP keeps only the ``beam`` best labels per node (by value, then by the smaller
+open set), so it is a heuristic: a label dropped for lack of room may have been
+the prefix of the optimum, and the default graph is the pruned one, which can
+lose optima because its pruning ignores the exclusion.  With ``beam=1`` it is
+the classic "best path per node, skip repeats".
+
+When the time limit is reached the rest of the sweep keeps one label per node,
+so the result is always a complete schedule.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+
+import numba
+import numpy as np
+
+from graphs.discrete import DiscreteGraph
+from instances.instance import Instance
+from solvers.base import Solution, objective_weights
+from solvers.bound import acq_last_time, topological_order
+
+STOP_DONE, STOP_GROW, STOP_CHECK = 0, 1, 2
+
+
+def max_open(graph: DiscreteGraph) -> int:
+    """Largest possible open set: acquisitions visited less than the longest window ago.
+
+    An acquisition j in the open set at node w was visited at some t_j with
+    first(j) <= t_j <= t_w < last(j), so within the last W = max(last - first)
+    seconds; consecutive visits are at least the shortest arc apart.
+    """
+    first = graph.node_time[graph.acq_ptr[:-1]]
+    last = graph.node_time[graph.acq_ptr[1:] - 1]
+    span = float(np.max(last - first)) if last.size else 0.0
+    src = graph.src()
+    inner = src > 0
+    if not np.any(inner):
+        return 1
+    gap = float(np.min(graph.node_time[graph.dst[inner]] - graph.node_time[src[inner]]))
+    return int(math.floor(span / max(gap, 1e-9))) + 2
+
+
+@numba.njit(cache=True, inline="always")
+def _is_subset(sets, a, na, b_buf, nb):
+    """Is sorted set a (row of `sets`) included in sorted b_buf[:nb]?"""
+    j = 0
+    for i in range(na):
+        x = sets[a, i]
+        while j < nb and b_buf[j] < x:
+            j += 1
+        if j == nb or b_buf[j] != x:
+            return False
+        j += 1
+    return True
+
+
+@numba.njit(cache=True)
+def _sweep(pos, order, indptr, dst, node_acq, node_time, weight, last_time, lam, cbound, gain_abs, gain_rel,
+           beam, max_work,
+           val, par, lnode, lnext, sets, ssize, head, cnt, n_labels, inc, counters):
+    """Extend the labels of the nodes order[pos:], in order, until done or told to stop.
+
+    Returns (pos, n_labels, inc_label_or_-1, stop reason).  `inc` is a 1-array
+    holding the incumbent value; counters = [created, pruned, dominated, extensions].
+    """
+    cap = val.shape[0]
+    m = sets.shape[1]
+    buf = np.empty(m + 1, dtype=np.int32)
+    inc_label = -1
+    work0 = counters[3]
+    n_nodes = order.shape[0]
+    while pos < n_nodes:
+        v = order[pos]
+        deg = indptr[v + 1] - indptr[v]
+        if n_labels + cnt[v] * deg > cap:
+            return pos, n_labels, inc_label, 1
+        if counters[3] - work0 > max_work:
+            return pos, n_labels, inc_label, 2
+        l = head[v]
+        while l >= 0:
+            nl = ssize[l]
+            for a in range(indptr[v], indptr[v + 1]):
+                w = dst[a]
+                k = node_acq[w]
+                used = False
+                for i in range(nl):
+                    if sets[l, i] == k:
+                        used = True
+                        break
+                if used:
+                    continue
+                counters[3] += 1
+                tw = node_time[w]
+                newval = val[l] + weight[k]
+                # open set at w: the still-open acquisitions of l plus k, sorted
+                nb = 0
+                lam_sum = 0.0
+                placed = last_time[k] <= tw  # k closed at w: nothing to add
+                for i in range(nl):
+                    x = sets[l, i]
+                    if not placed and k < x:
+                        buf[nb] = k
+                        nb += 1
+                        lam_sum += lam[k]
+                        placed = True
+                    if last_time[x] > tw:
+                        buf[nb] = x
+                        nb += 1
+                        lam_sum += lam[x]
+                if not placed:
+                    buf[nb] = k
+                    nb += 1
+                    lam_sum += lam[k]
+                ub = newval + cbound[w] - lam_sum
+                gain = gain_abs + gain_rel * abs(inc[0])
+                if ub < inc[0] + gain:
+                    counters[1] += 1
+                    continue
+                # dominance against the labels already at w; track the worst for the beam
+                dominated = False
+                worst = -1
+                prev = -1
+                e = head[w]
+                while e >= 0:
+                    ne = lnext[e]
+                    if val[e] >= newval and _is_subset(sets, e, ssize[e], buf, nb):
+                        dominated = True
+                        break
+                    if newval >= val[e] and _is_subset_rev(buf, nb, sets, e, ssize[e]):
+                        # unlink e: it is dominated by the new label
+                        if prev < 0:
+                            head[w] = ne
+                        else:
+                            lnext[prev] = ne
+                        cnt[w] -= 1
+                        counters[2] += 1
+                        e = ne
+                        continue
+                    if worst < 0 or val[e] < val[worst] or (val[e] == val[worst] and ssize[e] > ssize[worst]):
+                        worst = e
+                    prev = e
+                    e = ne
+                if dominated:
+                    counters[2] += 1
+                    continue
+                if beam > 0 and cnt[w] >= beam:
+                    if newval < val[worst] or (newval == val[worst] and nb >= ssize[worst]):
+                        continue
+                    _unlink(head, lnext, w, worst)
+                    cnt[w] -= 1
+                # store the new label
+                q = n_labels
+                n_labels += 1
+                val[q] = newval
+                par[q] = l
+                lnode[q] = w
+                ssize[q] = nb
+                for i in range(nb):
+                    sets[q, i] = buf[i]
+                lnext[q] = head[w]
+                head[w] = q
+                cnt[w] += 1
+                counters[0] += 1
+                if newval > inc[0]:
+                    inc[0] = newval
+                    inc_label = q
+            l = lnext[l]
+        pos += 1
+    return pos, n_labels, inc_label, 0
+
+
+@numba.njit(cache=True, inline="always")
+def _is_subset_rev(buf, nb, sets, b, n_b):
+    """Is sorted buf[:nb] included in sorted set b (row of `sets`)?"""
+    j = 0
+    for i in range(nb):
+        x = buf[i]
+        while j < n_b and sets[b, j] < x:
+            j += 1
+        if j == n_b or sets[b, j] != x:
+            return False
+        j += 1
+    return True
+
+
+@numba.njit(cache=True)
+def _unlink(head, lnext, w, target):
+    prev = -1
+    e = head[w]
+    while e >= 0:
+        if e == target:
+            if prev < 0:
+                head[w] = lnext[e]
+            else:
+                lnext[prev] = lnext[e]
+            return
+        prev = e
+        e = lnext[e]
+
+
+@numba.njit(cache=True)
+def _max_frontier_bound(pos, order, head, lnext, val, cbound, lam, sets, ssize):
+    """Largest bound of a label at a node not yet swept (for a time-limited exact search)."""
+    best = -np.inf
+    for i in range(pos, order.shape[0]):
+        l = head[order[i]]
+        while l >= 0:
+            s = 0.0
+            for t in range(ssize[l]):
+                s += lam[sets[l, t]]
+            b = val[l] + cbound[order[i]] - s
+            if b > best:
+                best = b
+            l = lnext[l]
+    return best
+
+
+@dataclass
+class SearchResult:
+    nodes: np.ndarray  # canonical nodes of the best label's path, source excluded
+    value: float
+    complete: bool  # the sweep ran to the end with the requested beam
+    frontier_bound: float  # max bound over the labels left unswept (-inf when complete)
+    labels: int
+    pruned: int
+    dominated: int
+    extensions: int
+    seconds: float
+
+
+def label_search(graph: DiscreteGraph, weights: np.ndarray, *, beam: int = 0, incumbent: float = 0.0,
+                 lam: np.ndarray | None = None, cbound: np.ndarray | None = None, unitary: bool = False,
+                 time_limit: float | None = None, max_labels: int = 20_000_000,
+                 on_limit: str = "beam1") -> SearchResult:
+    """Sweep the graph with labels; see the module docstring.
+
+    `beam` = 0: unlimited labels per node (exact DP).  `cbound`/`lam`: a completion
+    bound per node and the multipliers to subtract for the open set (see
+    :func:`solvers.bound.completion_bound`); labels that cannot beat `incumbent`
+    by a meaningful amount (1 in unitary mode, a relative 1e-12 otherwise) are cut.
+    `on_limit`: at the time or label limit, "beam1" finishes the sweep with one
+    label per node, "stop" returns at once (the result is then the best label seen).
+    """
+    t0 = time.perf_counter()
+    n_nodes = graph.n_nodes
+    w = np.asarray(weights, dtype=np.float64)
+    last = acq_last_time(graph)
+    lam = np.zeros(w.shape[0]) if lam is None else np.asarray(lam, dtype=np.float64)
+    cbound = np.full(n_nodes, np.inf) if cbound is None else np.asarray(cbound, dtype=np.float64)
+    gain_abs, gain_rel = (1.0 - 1e-6, 0.0) if unitary else (0.0, 1e-12)
+    order = topological_order(graph)
+    m = max_open(graph)
+    cap = min(max_labels, max(1 << 16, 4 * n_nodes))
+    val = np.empty(cap, np.float64)
+    par = np.empty(cap, np.int32)
+    lnode = np.empty(cap, np.int32)
+    lnext = np.empty(cap, np.int32)
+    sets = np.empty((cap, m), np.int32)
+    ssize = np.empty(cap, np.int32)
+    head = np.full(n_nodes, -1, np.int32)
+    cnt = np.zeros(n_nodes, np.int32)
+    # root label at the source
+    val[0], par[0], lnode[0], lnext[0], ssize[0] = 0.0, -1, 0, -1, 0
+    head[0], cnt[0] = 0, 1
+    n_labels = 1
+    inc = np.array([max(incumbent, 0.0)])
+    best_label = 0 if incumbent <= 0.0 else -1
+    counters = np.zeros(4, np.int64)
+    pos = 0
+    complete = True
+    deadline = None if time_limit is None else t0 + time_limit
+    while True:
+        pos, n_labels, lab, why = _sweep(pos, order, graph.indptr, graph.dst, graph.node_acq, graph.node_time, w,
+                                         last, lam, cbound, gain_abs, gain_rel, beam, 2_000_000,
+                                         val, par, lnode, lnext, sets, ssize, head, cnt, n_labels, inc, counters)
+        if lab >= 0:
+            best_label = lab
+        if why == STOP_DONE:
+            break
+        limit_hit = deadline is not None and time.perf_counter() > deadline
+        if why == STOP_GROW:
+            need = n_labels + int(cnt[order[pos]]) * int(graph.indptr[order[pos] + 1] - graph.indptr[order[pos]])
+            if need <= max_labels:
+                new_cap = min(max_labels, max(need, 2 * cap))
+                val, par, lnode, lnext, ssize = (np.resize(a, new_cap) for a in (val, par, lnode, lnext, ssize))
+                grown = np.empty((new_cap, m), np.int32)
+                grown[:cap] = sets
+                sets, cap = grown, new_cap
+            elif not complete:
+                break  # even one label per node does not fit
+            else:
+                limit_hit = True  # out of label memory: treated like the time limit
+        if limit_hit and complete:
+            complete = False
+            frontier = _max_frontier_bound(pos, order, head, lnext, val, cbound, lam, sets, ssize)
+            if on_limit == "stop":
+                break
+            _trim_to_one(pos, order, head, lnext, cnt, val)
+            beam = 1
+    frontier = -np.inf if complete else frontier
+    nodes = _path(best_label, par, lnode) if best_label >= 0 else np.zeros(0, np.int64)
+    value = float(np.sum(w[graph.node_acq[nodes]])) if nodes.size else 0.0
+    return SearchResult(nodes, value, complete, float(frontier), n_labels, int(counters[1]), int(counters[2]),
+                        int(counters[3]), time.perf_counter() - t0)
+
+
+@numba.njit(cache=True)
+def _trim_to_one(pos, order, head, lnext, cnt, val):
+    """Keep only the best label at every node not yet swept."""
+    for i in range(pos, order.shape[0]):
+        v = order[i]
+        best = head[v]
+        e = head[v]
+        while e >= 0:
+            if val[e] > val[best]:
+                best = e
+            e = lnext[e]
+        if best >= 0:
+            lnext[best] = -1
+            head[v] = best
+            cnt[v] = 1
+
+
+def _path(label: int, par: np.ndarray, lnode: np.ndarray) -> np.ndarray:
+    out = []
+    while label > 0:  # label 0 is the root at the source
+        out.append(int(lnode[label]))
+        label = int(par[label])
+    return np.asarray(out[::-1], dtype=np.int64)
+
+
+def solve(inst: Instance, *, mode: str = "utility", time_limit: float | None = None, seed: int = 0,
+          beam: int = 16, pruned: bool = True, **_: object) -> Solution:
+    """RAMP with `beam` labels per node on the pruned (default) or unpruned graph."""
+    g = inst.pruned() if pruned else inst.graph
+    w = objective_weights(inst, mode)
+    res = label_search(g, w, beam=beam, time_limit=time_limit)
+    return Solution(res.nodes, res.value, {"solver": "ramp", "beam": beam, "pruned": pruned,
+                                           "complete": res.complete, "labels": res.labels,
+                                           "seconds": res.seconds})
