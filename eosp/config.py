@@ -193,3 +193,27 @@ class RayConfig:
     """Ray cluster address; empty: the RAY_ADDRESS variable if set (submitted job), else a local Ray."""
     num_cpus: int = 2
     """CPUs of the local Ray (ignored on a cluster)."""
+
+
+@dataclass
+class EnvConfig:
+    """The EOSP environment (envs/eosp_env.py)."""
+
+    reward: str = "normalized"
+    """'normalized' (utility / mean utility of the instance's candidates), 'unitary' (1 per
+    acquisition), 'lexicographic' (per-class vector in info['reward_vector']) or 'utility' (raw)."""
+    max_acquisitions: int = 128
+    """Padding of the observation (nodes = actions); 0 sizes it to the instance (inference only)."""
+    max_out_degree: int = 8
+    """Edges kept per acquisition in the 'earliest' observation graph."""
+    prune: bool = True
+    """Play in the pruned discrete graph (the paper); false: in the unpruned one."""
+    obs_edges: str = "earliest"
+    """'earliest' (sparse, for the GNN) or 'full' (the whole surviving continuous graph)."""
+    max_edges: int = 0
+    """Edge padding; 0 = max_acquisitions * (max_out_degree + 4)."""
+    shards: tuple[str, ...] = ()
+    """Shard files (or data set directories) the environment copies share out among themselves."""
+    seed: int = 0
+    """Seed of the instance draws (combined with the worker and vector index)."""
+    max_cached_instances: int = 256

@@ -126,13 +126,15 @@ def lagrangian(graph: DiscreteGraph, weights: np.ndarray, *, lower: float = 0.0,
             break
         _visits(nxt, graph.node_acq, counts)
         g = 1.0 - counts  # subgradient of L at lam
-        g[(lam <= 0.0) & (g > 0.0)] = 0.0  # projection on lam >= 0
+        # projection on 0 <= lam <= w (a multiplier above w_j only hides j: lowering it to w_j
+        # lowers sum(lam) and changes no path value, so the minimum lies in that box)
+        g[((lam <= 0.0) & (g > 0.0)) | ((lam >= w) & (g < 0.0))] = 0.0
         norm = float(g @ g)
         if norm == 0.0:  # the relaxed path is a feasible schedule: L is attained
             break
         target = max(lower, 0.0)
         step = theta * (val - target) / norm
-        lam = np.maximum(0.0, lam - step * g)
+        lam = np.clip(lam - step * g, 0.0, w)
     togo_pass(order, graph.indptr, graph.dst, graph.node_acq, w - best_lam, togo, nxt)
     return LagrangianBound(best, best_lam, togo, it, time.perf_counter() - t0)
 

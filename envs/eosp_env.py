@@ -1,0 +1,273 @@
+"""The EOSP environment: build a schedule chronologically in the pruned discrete graph.
+
+Contract
+--------
+Instance source
+    Injected: ``EOSPEnv(config, source=FixedSource(inst))``; from ``config.shards``
+    (each copy owns a subset by its RLlib worker index, see
+    :func:`envs.sources.owned_shards`); or, with neither, one small embedded
+    generated instance.  ``reset(options={"instance": inst})`` forces one.
+State
+    The pruned discrete graph restricted to the nodes still alive, plus the
+    partial schedule (a path from the source).  See :mod:`envs.core`.
+Action
+    ``Discrete(N_max)``: the next acquisition.  Allowed when the last scheduled
+    node has an arc to an alive node of it; it then starts at that node's time
+    (the earliest discrete start).  A masked or out-of-range action raises
+    :class:`InvalidAction` and leaves the state unchanged.
+    ``action_space.sample()`` draws among the currently allowed actions.
+Observation
+    ``Dict`` of fixed-size padded arrays (RLlib's new API stack batches them as is):
+
+    ==================  ====================  =======  ===========================================
+    key                 shape                 dtype    meaning
+    ==================  ====================  =======  ===========================================
+    ``x``               (N_max, F)            float32  node features (:data:`NODE_FEATURES`), 0 pad
+    ``edge_index``      (2, E_max)            int32    continuous-graph arcs (src, dst), 0 pad
+    ``edge_attr``       (E_max, 2)            float32  transition slack / 60 s, from-last flag
+    ``n_nodes``         (1,)                  int32    number of acquisitions n
+    ``n_edges``         (1,)                  int32    number of valid edges
+    ``action_mask``     (N_max,)              int8     1 = allowed
+    ==================  ====================  =======  ===========================================
+
+    N_max = ``max_acquisitions`` (or the instance's n when 0), E_max = ``max_edges``.
+Reward (float, per step, chosen by ``config.reward``)
+    ``normalized``: u_a / mean(u) over the instance's candidates (the paper);
+    ``utility``: u_a; ``unitary``: 1; ``lexicographic``: the scalar reward is the
+    normalized one and ``info["reward_vector"]`` (float32, (7,)) holds
+    u_a / V_c in the component of a's class c (0 = highest), 0 elsewhere: a
+    learner compares returns class by class, highest first (see docs/environment.md).
+Termination
+    ``terminated`` when no action is allowed; never truncated.
+    ``info["value"]`` is the utility of the schedule so far (float64);
+    :meth:`EOSPEnv.schedule` gives it in the interchange schedule format.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, fields
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+
+from envs import core
+from envs.observation import N_EDGE_FEATURES, N_NODE_FEATURES, build_observation
+from envs.sources import FixedSource, PreparedInstance, ShardSource, expand_shards, owned_shards, prepare_instance
+from eosp.config import CLASS_UTILITIES, N_CLASSES, EnvConfig, from_dict
+from instances.instance import Instance
+
+REWARDS = ("normalized", "utility", "unitary", "lexicographic")
+
+
+class InvalidAction(ValueError):
+    """An action that the mask forbids, or out of range."""
+
+
+class MaskedDiscrete(gym.spaces.Discrete):
+    """``Discrete(n)`` whose ``sample()`` without a mask draws among the actions allowed now."""
+
+    def __init__(self, n: int, seed: int | None = None):
+        super().__init__(n, seed=seed)
+        self.current_mask: np.ndarray | None = None
+
+    def sample(self, mask=None, probability=None):  # noqa: D401
+        if mask is None and probability is None and self.current_mask is not None and self.current_mask.any():
+            mask = self.current_mask
+        return super().sample(mask=mask, probability=probability)
+
+    def __deepcopy__(self, memo):
+        out = MaskedDiscrete(int(self.n))
+        out.np_random.bit_generator.state = self.np_random.bit_generator.state
+        return out
+
+
+@dataclass
+class Snapshot:
+    """Everything that changes during an episode (a few small arrays)."""
+
+    prepared: PreparedInstance
+    alive: np.ndarray
+    alive_count: np.ndarray
+    first_alive: np.ndarray
+    path: np.ndarray
+    scalars: np.ndarray
+    scheduled: np.ndarray
+    mask: np.ndarray
+    value: float
+
+
+def _embedded_default(seed: int) -> Instance:
+    from eosp.config import family_config
+    from instances.generator import generate
+
+    return generate(family_config("uniform", 30, seed, graph={"step_s": 2.0}))
+
+
+class EOSPEnv(gym.Env):
+    __doc__ = __doc__
+    metadata = {"render_modes": []}
+
+    def __init__(self, config: EnvConfig | dict | None = None, source: Any | None = None):
+        worker_index = int(getattr(config, "worker_index", 0) or 0)
+        num_workers = int(getattr(config, "num_workers", 0) or 0)
+        vector_index = int(getattr(config, "vector_index", 0) or 0)
+        if config is None:
+            cfg = EnvConfig()
+        elif isinstance(config, EnvConfig):
+            cfg = config
+        else:
+            names = {f.name for f in fields(EnvConfig)}
+            cfg = from_dict(EnvConfig, {k: v for k, v in dict(config).items() if k in names})
+        if cfg.reward not in REWARDS:
+            raise ValueError(f"unknown reward {cfg.reward!r}; one of {', '.join(REWARDS)}")
+        if cfg.obs_edges not in ("earliest", "full"):
+            raise ValueError(f"unknown obs_edges {cfg.obs_edges!r} (earliest, full)")
+        self.cfg = cfg
+        self.worker_index, self.vector_index = worker_index, vector_index
+        if source is None:
+            if cfg.shards:
+                source = ShardSource(owned_shards(expand_shards(cfg.shards), worker_index, num_workers),
+                                     max_cached=cfg.max_cached_instances, prune=cfg.prune)
+            else:
+                source = FixedSource(_embedded_default(cfg.seed), prune=cfg.prune)
+        self.source = source
+        n_max = cfg.max_acquisitions or source.max_acquisitions()
+        if cfg.max_acquisitions and source.max_acquisitions() > cfg.max_acquisitions:
+            raise ValueError(f"instances have up to {source.max_acquisitions()} acquisitions but the observation "
+                             f"is padded to max_acquisitions={cfg.max_acquisitions}")
+        self.n_max = n_max
+        self.e_max = cfg.max_edges or n_max * (cfg.max_out_degree + 4)
+        self.observation_space = gym.spaces.Dict({
+            "x": gym.spaces.Box(-np.inf, np.inf, (n_max, N_NODE_FEATURES), np.float32),
+            "edge_index": gym.spaces.Box(0, max(n_max - 1, 0), (2, self.e_max), np.int32),
+            "edge_attr": gym.spaces.Box(-np.inf, np.inf, (self.e_max, N_EDGE_FEATURES), np.float32),
+            "n_nodes": gym.spaces.Box(0, n_max, (1,), np.int32),
+            "n_edges": gym.spaces.Box(0, self.e_max, (1,), np.int32),
+            "action_mask": gym.spaces.Box(0, 1, (n_max,), np.int8),
+        })
+        self.action_space = MaskedDiscrete(n_max)
+        self._np_random = np.random.default_rng([cfg.seed, worker_index, vector_index])
+        self.state: Snapshot | None = None
+
+    # ------------------------------------------------------------------ gym API
+    def reset(self, *, seed: int | None = None, options: dict | None = None):
+        if seed is not None:
+            super().reset(seed=seed)
+            self._np_random = np.random.default_rng([seed, self.worker_index, self.vector_index])
+        options = options or {}
+        if "instance" in options:
+            inst = options["instance"]
+            prepared = inst if isinstance(inst, PreparedInstance) else prepare_instance(inst, self.cfg.prune)
+            if prepared.inst.n_acq > self.n_max:
+                raise ValueError(f"instance has {prepared.inst.n_acq} acquisitions > max_acquisitions={self.n_max}")
+        else:
+            prepared = self.source.sample(self.np_random)
+        eg = prepared.eg
+        n = prepared.inst.n_acq
+        self.state = Snapshot(prepared=prepared, alive=eg.init_alive.copy(), alive_count=eg.init_count.copy(),
+                              first_alive=eg.acq_ptr[:-1].astype(np.int32), path=np.zeros(n, dtype=np.int32),
+                              scalars=np.zeros(3, dtype=np.int64), scheduled=np.zeros(n, dtype=np.float32),
+                              mask=np.zeros(n, dtype=np.int8), value=0.0)
+        self._update_mask()
+        return self._observation(), {"instance": prepared.inst.name, "n_acquisitions": n}
+
+    def step(self, action):
+        s = self.state
+        if s is None:
+            raise RuntimeError("call reset() before step()")
+        eg = s.prepared.eg
+        a = int(action)
+        n = s.prepared.inst.n_acq
+        if not 0 <= a < n or not s.mask[a]:
+            why = "out of range" if not 0 <= a < n else "masked (no arc from the last scheduled node to it)"
+            raise InvalidAction(f"action {a} is not allowed: {why}; allowed: {np.flatnonzero(s.mask).tolist()}")
+        w = core.apply_action(eg.node_acq, eg.indptr, eg.dst, eg.acq_ptr, eg.rindptr, eg.rsrc, eg.order, eg.pos,
+                              s.alive, s.alive_count, s.path, s.scalars, a)
+        assert w >= 0
+        s.scheduled[a] = 1.0
+        u = float(s.prepared.inst.acqs.utility[a])
+        s.value += u
+        self._update_mask()
+        terminated = not s.mask.any()
+        info = {"value": s.value, "n_scheduled": int(s.scalars[0]), "start": float(eg.node_time[w])}
+        r = self._reward(a, u, info)
+        return self._observation(), r, terminated, False, info
+
+    # ------------------------------------------------------------------ search support
+    def snapshot(self) -> Snapshot:
+        """A copy of the episode state (a few arrays): cheap enough for tree search."""
+        s = self.state
+        return Snapshot(s.prepared, s.alive.copy(), s.alive_count.copy(), s.first_alive.copy(), s.path.copy(),
+                        s.scalars.copy(), s.scheduled.copy(), s.mask.copy(), s.value)
+
+    def restore(self, snap: Snapshot) -> None:
+        self.state = Snapshot(snap.prepared, snap.alive.copy(), snap.alive_count.copy(), snap.first_alive.copy(),
+                              snap.path.copy(), snap.scalars.copy(), snap.scheduled.copy(), snap.mask.copy(),
+                              snap.value)
+        self.action_space.current_mask = self._padded_mask()
+
+    def action_mask(self) -> np.ndarray:
+        return self.state.mask.copy()
+
+    def path(self) -> np.ndarray:
+        """Scheduled nodes (canonical indices of the instance) in order."""
+        return self.state.path[: self.state.scalars[0]].copy()
+
+    def schedule(self):
+        from instances.schedule import from_internal_nodes
+
+        return from_internal_nodes(self.state.prepared.inst, self.path())
+
+    @property
+    def instance(self) -> Instance:
+        return self.state.prepared.inst
+
+    # ------------------------------------------------------------------ internals
+    def _update_mask(self) -> None:
+        s = self.state
+        eg = s.prepared.eg
+        core.action_mask(eg.indptr, eg.dst, eg.node_acq, s.alive, s.scalars[1], s.mask.shape[0], s.mask)
+        self.action_space.current_mask = self._padded_mask()
+
+    def _padded_mask(self) -> np.ndarray:
+        out = np.zeros(self.n_max, dtype=np.int8)
+        out[: self.state.mask.shape[0]] = self.state.mask
+        return out
+
+    def _reward(self, a: int, u: float, info: dict) -> float:
+        mode = self.cfg.reward
+        if mode == "unitary":
+            return 1.0
+        if mode == "utility":
+            return u
+        r = u / self.state.prepared.mean_utility
+        if mode == "lexicographic":
+            vec = np.zeros(N_CLASSES, dtype=np.float32)
+            c = int(self.state.prepared.priority[a])
+            vec[min(c, N_CLASSES - 1)] = u / CLASS_UTILITIES[min(c, N_CLASSES - 1)]
+            info["reward_vector"] = vec
+        return r
+
+    def _observation(self) -> dict[str, np.ndarray]:
+        s = self.state
+        eg = s.prepared.eg
+        inst = s.prepared.inst
+        a = inst.acqs
+        core.advance_first_alive(eg.acq_ptr, s.alive, s.alive_count, s.first_alive)
+        x = np.zeros((self.n_max, N_NODE_FEATURES), dtype=np.float32)
+        ei = np.zeros((2, self.e_max), dtype=np.int32)
+        ea = np.zeros((self.e_max, N_EDGE_FEATURES), dtype=np.float32)
+        m = build_observation(eg.node_acq, eg.node_time, eg.node_finish, eg.indptr, eg.dst, eg.acq_ptr, a.vtw_start,
+                              a.vtw_end, a.duration, s.prepared.static, s.alive, s.alive_count, s.first_alive,
+                              s.scheduled, int(s.scalars[1]), s.mask, self.cfg.max_out_degree,
+                              self.cfg.obs_edges == "full", x, ei, ea)
+        return {"x": x, "edge_index": ei, "edge_attr": ea, "n_nodes": np.array([inst.n_acq], dtype=np.int32),
+                "n_edges": np.array([m], dtype=np.int32), "action_mask": self._padded_mask()}
+
+
+def episode_value_from_rewards(rewards: list[float], mode: str, mean_utility: float) -> float:
+    """Turn summed rewards back into the schedule value (normalized and utility modes)."""
+    total = math.fsum(rewards)
+    return total * mean_utility if mode in ("normalized", "lexicographic") else total

@@ -1,0 +1,202 @@
+"""The EOSP environment: the gymnasium checker, the paper's update rules, masks, rewards, snapshots."""
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from gymnasium.utils.env_checker import check_env
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+import envs  # noqa: F401  (registers EOSP-v0)
+from envs.eosp_env import EOSPEnv, InvalidAction
+from envs.sources import FixedSource
+from eosp.config import EnvConfig
+from instances.schedule import check
+from tests.conftest import generated
+from tests.synthetic import synthetic_instance
+
+
+def make_env(inst, **cfg):
+    return EOSPEnv(EnvConfig(max_acquisitions=0, **cfg), source=FixedSource(inst))
+
+
+def test_gymnasium_checker_passes():
+    """The checker's step-determinism check samples an action after a step and plays it after a reset;
+    in the unpruned graph every acquisition is allowed first, so any sampled action is valid there."""
+    env = EOSPEnv(EnvConfig(max_acquisitions=0, prune=False), source=FixedSource(generated("uniform", 12, 0),
+                                                                                  prune=False))
+    check_env(env, skip_render_check=True)
+    check_env(gym.make("EOSP-v0", config=EnvConfig(prune=False)).unwrapped, skip_render_check=True)
+
+
+class Reference:
+    """The paper's update rules on Python sets, written independently of envs.core."""
+
+    def __init__(self, inst):
+        g = inst.pruned()
+        self.g = g
+        self.succ = [set(g.dst[g.indptr[u]:g.indptr[u + 1]].tolist()) for u in range(g.n_nodes)]
+        self.last = 0
+        self.alive = self._reachable(0, set(range(1, g.n_nodes)))
+
+    def _reachable(self, root, allowed):
+        seen, stack = set(), [root]
+        while stack:
+            u = stack.pop()
+            for v in self.succ[u]:
+                if v in allowed and v not in seen:
+                    seen.add(v)
+                    stack.append(v)
+        return seen
+
+    def mask(self, n):
+        m = np.zeros(n, dtype=np.int8)
+        for v in self.succ[self.last]:
+            if v in self.alive:
+                m[self.g.node_acq[v]] = 1
+        return m
+
+    def step(self, a):
+        (w,) = [v for v in self.succ[self.last] if v in self.alive and self.g.node_acq[v] == a]
+        allowed = {v for v in self.alive if self.g.node_acq[v] != a}  # (2) other nodes of a deleted
+        self.alive = self._reachable(w, allowed)  # (1) + (3): only what w reaches stays
+        self.last = w
+        return w
+
+
+@settings(max_examples=40, deadline=None)
+@given(n=st.integers(2, 9), seed=st.integers(0, 10_000), walk=st.integers(0, 2**31 - 1))
+def test_mask_matches_the_paper_rules_and_every_insertion_is_feasible(n, seed, walk):
+    inst = synthetic_instance(n, seed)
+    env = make_env(inst, reward="utility")
+    ref = Reference(inst)
+    obs, _ = env.reset(seed=0)
+    rng = np.random.default_rng(walk)
+    total = 0.0
+    while True:
+        mask = obs["action_mask"][:n]
+        # never hides a feasible successor the graph still has, never allows one it does not have
+        np.testing.assert_array_equal(mask, ref.mask(n))
+        assert np.array_equal(env.state.alive.nonzero()[0], np.array(sorted(ref.alive), dtype=np.int64))
+        if not mask.any():
+            break
+        a = int(rng.choice(np.flatnonzero(mask)))
+        w = ref.step(a)
+        obs, r, done, trunc, info = env.step(a)
+        total += r
+        assert info["start"] == inst.graph.node_time[w]
+        # the schedule so far is feasible for the independent checker (unpruned arcs)
+        assert check(inst, env.schedule()).feasible
+        assert done == (not ref.mask(n).any()) and not trunc
+    v = check(inst, env.schedule())
+    assert v.feasible and total == pytest.approx(v.value, rel=1e-12)
+
+
+@pytest.mark.parametrize("reward", ["normalized", "unitary", "utility", "lexicographic"])
+def test_rewards_add_up_to_the_schedule_value(reward):
+    inst = generated("uniform", 30, 1)
+    env = make_env(inst, reward=reward)
+    obs, _ = env.reset(seed=3)
+    rewards, vectors, done = [], [], False
+    while not done:
+        obs, r, done, _, info = env.step(env.action_space.sample())
+        rewards.append(r)
+        vectors.append(info.get("reward_vector"))
+    v = check(inst, env.schedule())
+    assert v.feasible
+    total = sum(rewards)
+    if reward == "unitary":
+        assert total == v.n
+    elif reward == "utility":
+        assert total == pytest.approx(v.value, rel=1e-12)
+    else:
+        assert total * np.mean(inst.acqs.utility) == pytest.approx(v.value, rel=1e-9)
+    if reward == "lexicographic":
+        vec = np.sum(vectors, axis=0)
+        counts = np.bincount(inst.acqs.priority[env.schedule().acq], minlength=7)
+        np.testing.assert_allclose(vec, counts, rtol=2e-3)
+
+
+def test_invalid_action_raises_and_leaves_state_unchanged():
+    env = make_env(generated("uniform", 30, 1))
+    obs, _ = env.reset(seed=0)
+    before = env.snapshot()
+    masked = int(np.flatnonzero(obs["action_mask"] == 0)[0])
+    for bad in (masked, -1, 10_000):
+        with pytest.raises(InvalidAction, match="not allowed"):
+            env.step(bad)
+    after = env.snapshot()
+    for f in ("alive", "alive_count", "path", "scalars", "mask"):
+        np.testing.assert_array_equal(getattr(before, f), getattr(after, f))
+
+
+def test_snapshot_restore_replays_identically():
+    env = make_env(generated("clusters", 30, 2))
+    obs, _ = env.reset(seed=0)
+    for _ in range(3):
+        obs, *_ = env.step(env.action_space.sample())
+    snap = env.snapshot()
+    rng = np.random.default_rng(1)
+    runs = []
+    for _ in range(2):
+        env.restore(snap)
+        local = np.random.default_rng(7)
+        seq, done = [], False
+        while not done:
+            m = env.action_mask()
+            a = int(local.choice(np.flatnonzero(m)))
+            obs, r, done, _, _ = env.step(a)
+            seq.append((a, r, obs["x"].sum()))
+        runs.append(seq)
+    assert runs[0] == runs[1]
+    env.restore(snap)
+    assert len(env.path()) == 3 and rng is not None
+
+
+def test_observation_shapes_dtypes_and_edges():
+    inst = generated("uniform", 30, 1)
+    for mode in ("earliest", "full"):
+        env = EOSPEnv(EnvConfig(max_acquisitions=64, obs_edges=mode), source=FixedSource(inst))
+        obs, _ = env.reset(seed=0)
+        assert env.observation_space.contains(obs)
+        assert obs["x"].shape == (64, 25) and obs["edge_index"].dtype == np.int32
+        m = int(obs["n_edges"][0])
+        assert m > 0 and np.all(obs["edge_index"][:, m:] == 0)
+        src, dst = obs["edge_index"][:, :m]
+        assert np.all(src < 30) and np.all(dst < 30) and np.all(src != dst)
+        assert np.all(obs["x"][30:] == 0)
+        # every selectable acquisition is flagged
+        np.testing.assert_array_equal(obs["x"][:30, 2], obs["action_mask"][:30])
+    # the full graph at reset is the continuous graph of the alive part
+    from graphs.continuous import continuous_graph
+
+    env = EOSPEnv(EnvConfig(max_acquisitions=30, obs_edges="full", max_edges=5000), source=FixedSource(inst))
+    obs, _ = env.reset(seed=0)
+    m = int(obs["n_edges"][0])
+    s, t = continuous_graph(inst.pruned(), env.state.alive.astype(bool))
+    assert set(zip(*obs["edge_index"][:, :m].tolist())) == set(zip(s.tolist(), t.tolist()))
+
+
+def test_shard_source_splits_shards_between_workers(tmp_path):
+    from ray.rllib.env.env_context import EnvContext
+
+    from shards.io import write_shard
+
+    for k in range(4):
+        write_shard(tmp_path / f"shard-{k}.parquet", [generated("uniform", 12, 10 + k)])
+    seen = {}
+    for w in (1, 2):
+        ctx = EnvContext({"shards": [str(tmp_path)], "max_acquisitions": 16, "seed": 0}, worker_index=w,
+                         num_workers=2)
+        env = EOSPEnv(ctx)
+        names = set()
+        for ep in range(12):
+            env.reset()
+            names.add(env.instance.name)
+        seen[w] = names
+    assert seen[1] and seen[2] and not (seen[1] & seen[2])
+    assert len(seen[1] | seen[2]) == 4
+    # same seed, same draws
+    ctx = EnvContext({"shards": [str(tmp_path)], "max_acquisitions": 16, "seed": 0}, worker_index=1, num_workers=2)
+    a, b = EOSPEnv(ctx), EOSPEnv(ctx)
+    assert [a.reset()[1]["instance"] for _ in range(5)] == [b.reset()[1]["instance"] for _ in range(5)]
