@@ -217,3 +217,74 @@ class EnvConfig:
     seed: int = 0
     """Seed of the instance draws (combined with the worker and vector index)."""
     max_cached_instances: int = 256
+
+
+@dataclass
+class ModelConfig:
+    """The GNN agent (models/agent.py).  Presets: MODEL_PRESETS."""
+
+    hidden_dim: int = 64
+    """Width of node and edge embeddings and of every GNN layer's output."""
+    n_layers: int = 10
+    """Number of GATv2 layers (each: 4-head attention, an MLP back to hidden_dim, a residual)."""
+    heads: int = 4
+    n_values: int = 1
+    """Outputs of the value head: 1, or one per priority class for the lexicographic reward."""
+
+
+MODEL_PRESETS: dict[str, dict[str, Any]] = {
+    # the paper's configuration
+    "reference": {"hidden_dim": 64, "n_layers": 10, "heads": 4},
+    # what trains in minutes on 2 CPU cores
+    "cpu": {"hidden_dim": 32, "n_layers": 4, "heads": 2},
+}
+
+
+@dataclass
+class TrainConfig:
+    """PPO training (jobs/train.py)."""
+
+    train_data: str = "data/demo/train"
+    """Shard directory (or file) of the training instances."""
+    val_data: str = "data/demo/val"
+    """Held-out shards for periodic validation (greedy decoding); empty to skip."""
+    iterations: int = 10
+    preset: str = "cpu"
+    """Model preset applied before --model.* flags: 'cpu' or 'reference' (the paper's 64 x 10)."""
+    num_env_runners: int = 1
+    """Rollout workers; each owns its envs over its own subset of the shards."""
+    num_envs_per_env_runner: int = 2
+    train_batch_size: int = 512
+    """Environment steps collected per iteration."""
+    minibatch_size: int = 128
+    num_epochs: int = 4
+    lr: float = 3e-4
+    gamma: float = 1.0
+    """Undiscounted, as in the paper."""
+    gae_lambda: float = 0.95
+    clip_param: float = 0.2
+    entropy_coeff: float = 0.01
+    vf_loss_coeff: float = 0.5
+    grad_clip: float = 1.0
+    validate_every: int = 5
+    """Iterations between validations (and always after the last one)."""
+    checkpoint_every: int = 5
+    run_dir: str = "runs"
+    """Where runs keep checkpoints and plots: RUN_DIR/RUN_NAME/."""
+    run_name: str = ""
+    """Name of the run; empty: a timestamp.  --resume continues the run of this name."""
+    resume: bool = False
+    seed: int = 0
+    mlflow_uri: str = ""
+    """MLflow tracking URI; empty: sqlite database mlflow.db in the working directory (absolute path)."""
+    experiment: str = "eosp"
+
+
+@dataclass
+class RunConfig:
+    """Everything a training run uses; recorded with every run."""
+
+    env: EnvConfig = field(default_factory=EnvConfig)
+    model: ModelConfig = field(default_factory=ModelConfig)
+    train: TrainConfig = field(default_factory=TrainConfig)
+    ray: RayConfig = field(default_factory=RayConfig)

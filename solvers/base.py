@@ -32,6 +32,7 @@ def objective_weights(inst: Instance, mode: str) -> np.ndarray:
 # name -> "module:function"; each function is solve(inst, *, mode, time_limit, seed, **kw) -> Solution
 REGISTRY: dict[str, str] = {
     "random": "solvers.random_walk:solve",
+    "policy": "solvers.policy:solve",
     "greedy": "solvers.greedy:solve",
     "ramp": "solvers.ramp:solve",
     "exact": "solvers.exact:solve",

@@ -45,7 +45,7 @@ from instances.instance import Instance
 from solvers.base import Solution, objective_weights
 from solvers.bound import acq_last_time, topological_order
 
-STOP_DONE, STOP_GROW, STOP_CHECK = 0, 1, 2
+STOP_DONE, STOP_GROW, STOP_CHECK = 0, 1, 2  # why _sweep returned
 
 
 def max_open(graph: DiscreteGraph) -> int:
@@ -82,26 +82,28 @@ def _is_subset(sets, a, na, b_buf, nb):
 
 @numba.njit(cache=True)
 def _sweep(pos, order, indptr, dst, node_acq, node_time, weight, last_time, lam, cbound, gain_abs, gain_rel,
-           beam, max_work,
-           val, par, lnode, lnext, sets, ssize, head, cnt, n_labels, inc, counters):
+           beam, max_work, val, par, lnode, lnext, sets, ssize, head, cnt, wval, state, inc, counters):
     """Extend the labels of the nodes order[pos:], in order, until done or told to stop.
 
-    Returns (pos, n_labels, inc_label_or_-1, stop reason).  `inc` is a 1-array
-    holding the incumbent value; counters = [created, pruned, dominated, extensions].
+    Returns (pos, stop reason).  Label memory: slots [0, state[0]) were used, the
+    freed ones (dropped before their node was swept, so nobody's parent) are
+    chained from state[1] through `lnext`, state[3] of them.  state[2] is the
+    incumbent label (-1: none), inc[0] its value.  counters = [created, cut by
+    bound or beam, dominated, extensions].  wval[w]: value of the worst label at w
+    once w holds `beam` labels.
     """
     cap = val.shape[0]
     m = sets.shape[1]
     buf = np.empty(m + 1, dtype=np.int32)
-    inc_label = -1
     work0 = counters[3]
     n_nodes = order.shape[0]
     while pos < n_nodes:
         v = order[pos]
         deg = indptr[v + 1] - indptr[v]
-        if n_labels + cnt[v] * deg > cap:
-            return pos, n_labels, inc_label, 1
+        if cap - state[0] + state[3] < cnt[v] * deg:
+            return pos, STOP_GROW
         if counters[3] - work0 > max_work:
-            return pos, n_labels, inc_label, 2
+            return pos, STOP_CHECK
         l = head[v]
         while l >= 0:
             nl = ssize[l]
@@ -137,13 +139,16 @@ def _sweep(pos, order, indptr, dst, node_acq, node_time, weight, last_time, lam,
                     buf[nb] = k
                     nb += 1
                     lam_sum += lam[k]
-                ub = newval + cbound[w] - lam_sum
-                gain = gain_abs + gain_rel * abs(inc[0])
-                if ub < inc[0] + gain:
+                if newval + cbound[w] - lam_sum < inc[0] + gain_abs + gain_rel * abs(inc[0]):
                     counters[1] += 1
                     continue
-                # dominance against the labels already at w; track the worst for the beam
+                # a full beam whose worst label is better: the new label would be evicted at once
+                if beam > 0 and cnt[w] >= beam and newval < wval[w]:
+                    counters[1] += 1
+                    continue
+                # dominance against the labels at w; drop those it dominates, find the worst
                 dominated = False
+                replaces_inc = False
                 worst = -1
                 prev = -1
                 e = head[w]
@@ -153,13 +158,16 @@ def _sweep(pos, order, indptr, dst, node_acq, node_time, weight, last_time, lam,
                         dominated = True
                         break
                     if newval >= val[e] and _is_subset_rev(buf, nb, sets, e, ssize[e]):
-                        # unlink e: it is dominated by the new label
                         if prev < 0:
                             head[w] = ne
                         else:
                             lnext[prev] = ne
                         cnt[w] -= 1
                         counters[2] += 1
+                        replaces_inc = replaces_inc or e == state[2]
+                        lnext[e] = state[1]
+                        state[1] = e
+                        state[3] += 1
                         e = ne
                         continue
                     if worst < 0 or val[e] < val[worst] or (val[e] == val[worst] and ssize[e] > ssize[worst]):
@@ -171,12 +179,22 @@ def _sweep(pos, order, indptr, dst, node_acq, node_time, weight, last_time, lam,
                     continue
                 if beam > 0 and cnt[w] >= beam:
                     if newval < val[worst] or (newval == val[worst] and nb >= ssize[worst]):
+                        counters[1] += 1
                         continue
                     _unlink(head, lnext, w, worst)
                     cnt[w] -= 1
-                # store the new label
-                q = n_labels
-                n_labels += 1
+                    replaces_inc = replaces_inc or worst == state[2]
+                    lnext[worst] = state[1]
+                    state[1] = worst
+                    state[3] += 1
+                # store the new label in a freed slot or a fresh one
+                if state[3] > 0:
+                    q = state[1]
+                    state[1] = lnext[q]
+                    state[3] -= 1
+                else:
+                    q = state[0]
+                    state[0] += 1
                 val[q] = newval
                 par[q] = l
                 lnode[q] = w
@@ -186,13 +204,21 @@ def _sweep(pos, order, indptr, dst, node_acq, node_time, weight, last_time, lam,
                 lnext[q] = head[w]
                 head[w] = q
                 cnt[w] += 1
+                if beam > 0 and cnt[w] >= beam:
+                    wv = np.inf
+                    e = head[w]
+                    while e >= 0:
+                        if val[e] < wv:
+                            wv = val[e]
+                        e = lnext[e]
+                    wval[w] = wv
                 counters[0] += 1
-                if newval > inc[0]:
-                    inc[0] = newval
-                    inc_label = q
+                if newval > inc[0] or replaces_inc:
+                    inc[0] = max(inc[0], newval)
+                    state[2] = q
             l = lnext[l]
         pos += 1
-    return pos, n_labels, inc_label, 0
+    return pos, STOP_DONE
 
 
 @numba.njit(cache=True, inline="always")
@@ -247,7 +273,7 @@ class SearchResult:
     value: float
     complete: bool  # the sweep ran to the end with the requested beam
     frontier_bound: float  # max bound over the labels left unswept (-inf when complete)
-    labels: int
+    labels: int  # label slots used (memory high-water mark)
     pruned: int
     dominated: int
     extensions: int
@@ -285,27 +311,28 @@ def label_search(graph: DiscreteGraph, weights: np.ndarray, *, beam: int = 0, in
     ssize = np.empty(cap, np.int32)
     head = np.full(n_nodes, -1, np.int32)
     cnt = np.zeros(n_nodes, np.int32)
+    wval = np.full(n_nodes, -np.inf)  # value of the worst label of a full beam
     # root label at the source
     val[0], par[0], lnode[0], lnext[0], ssize[0] = 0.0, -1, 0, -1, 0
     head[0], cnt[0] = 0, 1
-    n_labels = 1
+    # [slots used, head of the free list, incumbent label, free slots]
+    state = np.array([1, -1, 0 if incumbent <= 0.0 else -1, 0], np.int64)
     inc = np.array([max(incumbent, 0.0)])
-    best_label = 0 if incumbent <= 0.0 else -1
     counters = np.zeros(4, np.int64)
     pos = 0
     complete = True
+    frontier = -np.inf
     deadline = None if time_limit is None else t0 + time_limit
     while True:
-        pos, n_labels, lab, why = _sweep(pos, order, graph.indptr, graph.dst, graph.node_acq, graph.node_time, w,
-                                         last, lam, cbound, gain_abs, gain_rel, beam, 2_000_000,
-                                         val, par, lnode, lnext, sets, ssize, head, cnt, n_labels, inc, counters)
-        if lab >= 0:
-            best_label = lab
+        pos, why = _sweep(pos, order, graph.indptr, graph.dst, graph.node_acq, graph.node_time, w, last, lam, cbound,
+                          gain_abs, gain_rel, beam, 2_000_000, val, par, lnode, lnext, sets, ssize, head, cnt, wval,
+                          state, inc, counters)
         if why == STOP_DONE:
             break
         limit_hit = deadline is not None and time.perf_counter() > deadline
         if why == STOP_GROW:
-            need = n_labels + int(cnt[order[pos]]) * int(graph.indptr[order[pos] + 1] - graph.indptr[order[pos]])
+            v = order[pos]
+            need = int(state[0]) + int(cnt[v]) * int(graph.indptr[v + 1] - graph.indptr[v])
             if need <= max_labels:
                 new_cap = min(max_labels, max(need, 2 * cap))
                 val, par, lnode, lnext, ssize = (np.resize(a, new_cap) for a in (val, par, lnode, lnext, ssize))
@@ -321,9 +348,10 @@ def label_search(graph: DiscreteGraph, weights: np.ndarray, *, beam: int = 0, in
             frontier = _max_frontier_bound(pos, order, head, lnext, val, cbound, lam, sets, ssize)
             if on_limit == "stop":
                 break
-            _trim_to_one(pos, order, head, lnext, cnt, val)
+            _trim_to_one(pos, order, head, lnext, cnt, val, wval)
             beam = 1
-    frontier = -np.inf if complete else frontier
+    best_label = int(state[2])
+    n_labels = int(state[0])
     nodes = _path(best_label, par, lnode) if best_label >= 0 else np.zeros(0, np.int64)
     value = float(np.sum(w[graph.node_acq[nodes]])) if nodes.size else 0.0
     return SearchResult(nodes, value, complete, float(frontier), n_labels, int(counters[1]), int(counters[2]),
@@ -331,7 +359,7 @@ def label_search(graph: DiscreteGraph, weights: np.ndarray, *, beam: int = 0, in
 
 
 @numba.njit(cache=True)
-def _trim_to_one(pos, order, head, lnext, cnt, val):
+def _trim_to_one(pos, order, head, lnext, cnt, val, wval):
     """Keep only the best label at every node not yet swept."""
     for i in range(pos, order.shape[0]):
         v = order[i]
@@ -345,6 +373,7 @@ def _trim_to_one(pos, order, head, lnext, cnt, val):
             lnext[best] = -1
             head[v] = best
             cnt[v] = 1
+            wval[v] = val[best]
 
 
 def _path(label: int, par: np.ndarray, lnode: np.ndarray) -> np.ndarray:

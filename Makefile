@@ -1,0 +1,29 @@
+# Two commands on a fresh machine:
+#   make demo   installs the project in .venv and runs the main job on small embedded defaults
+#   make test   runs the tests (what CI runs)
+PYTHON ?= python3
+VENV   ?= .venv
+PY     := $(VENV)/bin/python
+
+.PHONY: install demo test test-all bench platform-up platform-down
+
+$(VENV)/.installed: pyproject.toml
+	$(PYTHON) -m venv $(VENV)
+	$(VENV)/bin/pip install -q --upgrade pip
+	$(VENV)/bin/pip install -q -e '.[dev]'
+	touch $@
+
+install: $(VENV)/.installed
+
+demo: install
+	$(PY) jobs/train.py --demo
+
+test: install
+	$(PY) -m pytest -q
+
+test-all: install
+	$(PY) -m pytest -q -m ""
+
+bench: install
+	$(PY) benchmarks/bench_graphs.py
+	$(PY) benchmarks/bench_env.py

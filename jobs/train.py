@@ -1,0 +1,225 @@
+"""Train the GNN agent with RLlib PPO, tracked in MLflow.
+
+    python jobs/train.py --demo                       # small embedded defaults, local Ray
+    python jobs/train.py --train.train-data data/train --train.val-data data/val --train.iterations 200
+    ray job submit --working-dir . -- python jobs/train.py --train.train-data /shared/data/train ...
+    python jobs/train.py --train.run-name NAME --train.resume true    # continue a run
+
+Every flag comes from :class:`eosp.config.RunConfig` (``--help`` lists them):
+``--model.hidden-dim 64`` goes to ``ModelConfig.hidden_dim``, then to the
+RLModule's ``model_config``, then to ``EOSPAgent``'s layers.
+
+Outputs (RUN_DIR/RUN_NAME): ``checkpoints/last`` and ``checkpoints/best`` (agent
+weights + JSON config, loadable by ``eosp solve --solver policy``), ``run.json``
+(the configuration and the MLflow run id), validation results and plots.  The
+MLflow run gets the parameters, per-iteration training and validation metrics,
+the agent as an MLflow model and the plots.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+import time
+from pathlib import Path
+
+if __package__ in (None, ""):
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+os.environ.setdefault("OMP_NUM_THREADS", "1")
+
+from eosp.args import add_config_args, config_from_args  # noqa: E402
+from eosp.config import MODEL_PRESETS, DatasetConfig, ModelConfig, RunConfig, flatten, from_dict, to_dict  # noqa: E402
+
+DEMO = {
+    "train.train_data": "data/demo/train", "train.val_data": "data/demo/val", "train.iterations": 6,
+    "train.train_batch_size": 400, "train.minibatch_size": 100, "train.validate_every": 3,
+    "train.checkpoint_every": 3, "env.max_acquisitions": 64, "train.run_name": "demo",
+}
+DEMO_DATA = {"data/demo/train": (24, 1000), "data/demo/val": (8, 900_000)}
+DEMO_ACQ = 50
+
+
+def parse(argv: list[str] | None) -> tuple[RunConfig, argparse.Namespace]:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0],
+                                formatter_class=argparse.RawDescriptionHelpFormatter, epilog=__doc__)
+    p.add_argument("--demo", action="store_true",
+                   help="small embedded defaults: build a tiny data set if missing, train briefly, compare to Greedy")
+    add_config_args(p, RunConfig)
+    ns = p.parse_args(argv)
+    if ns.demo:
+        for k, v in DEMO.items():
+            if k not in vars(ns):
+                setattr(ns, k, v)
+    preset = vars(ns).get("train.preset", "cpu")
+    if preset not in MODEL_PRESETS:
+        p.error(f"unknown preset {preset!r}; one of {', '.join(MODEL_PRESETS)}")
+    base = RunConfig(model=from_dict(ModelConfig, MODEL_PRESETS[preset]))
+    cfg = config_from_args(RunConfig, ns, base=base)
+    if cfg.env.reward == "lexicographic":
+        cfg.model.n_values = max(cfg.model.n_values, 7)
+    if not cfg.train.run_name:
+        cfg.train.run_name = time.strftime("%Y%m%d-%H%M%S")
+    return cfg, ns
+
+
+def mlflow_uri(cfg: RunConfig) -> str:
+    return cfg.train.mlflow_uri or f"sqlite:///{Path('mlflow.db').resolve()}"
+
+
+def ensure_demo_data(cfg: RunConfig) -> None:
+    from jobs.build_shards import run as build
+
+    for path, (n, seed) in DEMO_DATA.items():
+        if not (Path(path) / "manifest.json").exists():
+            print(f"[train] building demo data set {path} ({n} instances of {DEMO_ACQ} acquisitions)", flush=True)
+            build(DatasetConfig(out=path, family="uniform", n_acquisitions=DEMO_ACQ, n_instances=n, per_shard=4,
+                                seed=seed), cfg.ray)
+
+
+def iteration_metrics(r: dict, prev_steps: int) -> tuple[dict[str, float], int]:
+    er = r.get("env_runners", {})
+    lr = r.get("learners", {}).get("default_policy", {})
+    steps = int(r.get("num_env_steps_sampled_lifetime", 0))
+    dt = float(r.get("time_this_iter_s", 0.0)) or 1e-9
+    out = {
+        "train/episode_return_mean": er.get("episode_return_mean"),
+        "train/episode_len_mean": er.get("episode_len_mean"),
+        "train/policy_loss": lr.get("policy_loss"), "train/vf_loss": lr.get("vf_loss"),
+        "train/entropy": lr.get("entropy"), "train/vf_explained_var": lr.get("vf_explained_var"),
+        "train/total_loss": lr.get("total_loss"),
+        "perf/iteration_s": dt, "perf/env_steps_per_s": (steps - prev_steps) / dt,
+        "perf/env_steps_lifetime": steps,
+    }
+    return {k: float(v) for k, v in out.items() if v is not None and v == v}, steps
+
+
+def main(argv: list[str] | None = None) -> int:
+    cfg, ns = parse(argv)
+    import mlflow
+    import ray
+    import torch
+
+    from eosp.ray_utils import init_ray
+    from models.checkpoint import agent_from_rllib_weights, load_agent, rllib_weights_from_agent, save_agent
+    from training.plots import learning_curve
+    from training.ppo import ppo_config
+    from training.validation import Validator
+
+    torch.set_num_threads(1)
+    init_ray(cfg.ray.address, cfg.ray.num_cpus)
+    if ns.demo:
+        ensure_demo_data(cfg)
+    t = cfg.train
+    run_dir = Path(t.run_dir) / t.run_name
+    ckpt_dir = run_dir / "checkpoints"
+    run_file = run_dir / "run.json"
+    start_iter, best = 0, float("-inf")
+    run_id = None
+    history: list[dict] = []
+    if t.resume:
+        if not run_file.exists():
+            raise SystemExit(f"--train.resume: no run {run_file} to resume")
+        prev = json.loads(run_file.read_text())
+        run_id, start_iter, best = prev["mlflow_run_id"], prev["iteration"], prev.get("best", float("-inf"))
+        history = prev.get("history", [])
+        cfg = from_dict(RunConfig, {**prev["config"], "train": {**prev["config"]["train"],
+                                                                 "iterations": t.iterations, "resume": True}})
+        t = cfg.train
+    run_dir.mkdir(parents=True, exist_ok=True)
+
+    mlflow.set_tracking_uri(mlflow_uri(cfg))
+    mlflow.set_experiment(t.experiment)
+    active = mlflow.start_run(run_id=run_id, run_name=None if run_id else t.run_name)
+    run_id = active.info.run_id
+    if not t.resume:
+        mlflow.log_params({k: (json.dumps(v) if isinstance(v, (list, tuple)) else v) for k, v in flatten(cfg).items()})
+        mlflow.log_dict(to_dict(cfg), "config.json")
+
+    def save_state(iteration: int) -> None:
+        state = {"config": to_dict(cfg), "mlflow_run_id": run_id, "iteration": iteration, "best": best,
+                 "history": history}
+        from eosp.atomic import atomic_path
+
+        with atomic_path(run_file) as tmp:
+            tmp.write_text(json.dumps(state, indent=1))
+
+    algo = ppo_config(cfg).build_algo()
+    if t.resume and (ckpt_dir / "last").exists():
+        agent, _, _ = load_agent(ckpt_dir / "last")
+        algo.learner_group.set_weights({"default_policy": rllib_weights_from_agent(agent)})
+        algo.env_runner_group.sync_weights(from_worker_or_learner_group=algo.learner_group, inference_only=True)
+        print(f"[train] resumed {t.run_name} at iteration {start_iter}", flush=True)
+    validator = Validator(t.val_data, cfg.env) if t.val_data else None
+    if validator:
+        base = {f"val/{s}_mean": float(v.mean()) for s, v in validator.baselines.items()}
+        mlflow.log_metrics(base, step=0)
+
+    steps = 0
+    t_start = time.perf_counter()
+    for it in range(start_iter, t.iterations):
+        r = algo.train()
+        metrics, steps = iteration_metrics(r, steps)  # the algorithm is new in every session: lifetime from 0
+        last = it + 1 == t.iterations
+        agent = None
+        if validator and ((it + 1) % t.validate_every == 0 or last):
+            agent = agent_from_rllib_weights(algo.learner_group.get_weights()["default_policy"], cfg.model)
+            res = validator.run(agent)
+            metrics.update(res.metrics)
+            score = res.metrics["val/policy_mean"]
+            if score > best:
+                best = score
+                save_agent(agent, ckpt_dir / "best", cfg.env, {"iteration": it + 1, "val": res.metrics})
+        mlflow.log_metrics(metrics, step=it + 1)
+        history.append({"iteration": it + 1, **metrics})
+        print(f"[train] iteration {it + 1}/{t.iterations}: return {metrics.get('train/episode_return_mean', 0):.3f}"
+              f", {metrics.get('perf/env_steps_per_s', 0):.0f} env steps/s"
+              + (f", val ratio to greedy {metrics['val/ratio_to_greedy']:.4f} to ramp {metrics['val/ratio_to_ramp']:.4f}"
+                 if "val/ratio_to_greedy" in metrics else ""), flush=True)
+        if (it + 1) % t.checkpoint_every == 0 or last:
+            agent = agent or agent_from_rllib_weights(algo.learner_group.get_weights()["default_policy"], cfg.model)
+            save_agent(agent, ckpt_dir / "last", cfg.env, {"iteration": it + 1})
+            save_state(it + 1)
+    wall = time.perf_counter() - t_start
+
+    # artifacts: learning curve, the agent as an MLflow model (loaded from code + weights, no pickle)
+    if history:
+        png = learning_curve(history, run_dir / "learning_curve")
+        mlflow.log_artifact(str(png))
+        mlflow.log_artifact(str(png.with_suffix(".svg")))
+    final = ckpt_dir / ("best" if (ckpt_dir / "best").exists() else "last")
+    if final.exists():
+        log_agent_model(final)
+    mlflow.log_metric("perf/train_wall_s", wall)
+    mlflow.end_run()
+    algo.stop()
+    summary = history[-1] if history else {}
+    print(f"[train] done: {t.run_name}, {len(history)} iterations this session in {wall:.0f} s; "
+          f"checkpoints in {ckpt_dir}")
+    if "val/ratio_to_greedy" in summary:
+        print("[train] validation (greedy decoding) vs baselines:")
+        for s in ("greedy", "ramp"):
+            print(f"  {s:7s} mean {summary[f'val/{s}_mean']:.6g}  policy/{s} {summary[f'val/ratio_to_{s}']:.4f}  "
+                  f"wins/ties/losses {summary[f'val/wins_vs_{s}']:.0f}/{summary[f'val/ties_vs_{s}']:.0f}/"
+                  f"{summary[f'val/losses_vs_{s}']:.0f}")
+    print(f"[train] MLflow: mlflow ui --backend-store-uri {mlflow_uri(cfg)}   (run {run_id}, experiment "
+          f"'{t.experiment}')")
+    ray.shutdown()
+    return 0
+
+
+def log_agent_model(checkpoint: Path) -> None:
+    """Log the agent as an MLflow pyfunc model built from code (models/mlflow_model.py) and its weights."""
+    import mlflow
+
+    code = Path(__file__).resolve().parents[1] / "models" / "mlflow_model.py"
+    try:
+        mlflow.pyfunc.log_model(name="agent", python_model=str(code), artifacts={"agent": str(checkpoint)})
+    except Exception as exc:  # logging the model must not lose the run
+        print(f"[train] warning: could not log the MLflow model: {exc}", file=sys.stderr)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

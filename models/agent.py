@@ -1,0 +1,146 @@
+"""The agent: node/edge embedders, graph rewiring, GATv2 layers, action and value heads.
+
+Following the paper ("Solution" section):
+
+* Rewiring: every precedence arc i -> j of the continuous graph gets a reverse
+  arc j -> i with its own type, so information flows from future acquisitions
+  to the present choice; one global node per graph is linked to every node in
+  both directions (two more edge types); no self-loops: the residual keeps a
+  node's own state, and every node hears at least the global node.
+* Embeddings: an MLP over node features; edge types through an embedding table
+  (plus a linear map of the edge's numeric attributes), both of size hidden_dim.
+* ``n_layers`` GATv2 convolutions with edge attributes and ``heads`` heads, an MLP
+  from heads * hidden_dim back to hidden_dim after each, residual connections.
+* Action logits from the concatenation, for each node, of every layer's output
+  (the embedding included) with the same for its graph's global node:
+  ((n_layers + 1) * hidden_dim) * 2 per node, reduced to one logit by a linear
+  layer.  Masked actions get -inf.  The value (one per priority class for the
+  lexicographic reward) comes from the global node.
+
+Nothing depends on the number of nodes: a model trained on 100 acquisitions runs
+on 1500.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import torch
+from torch import nn
+from torch_geometric.nn import GATv2Conv
+
+from eosp.config import ModelConfig
+from envs.observation import N_EDGE_FEATURES, N_NODE_FEATURES
+
+PRECEDENCE, REVERSE, TO_GLOBAL, FROM_GLOBAL = range(4)
+MASKED = -1e9  # logit of a forbidden action
+
+
+@dataclass
+class GraphBatch:
+    """Several graphs as one disjoint union (PyG convention)."""
+
+    x: torch.Tensor  # float [total_nodes, F]
+    edge_index: torch.Tensor  # long [2, total_edges], global node indices
+    edge_attr: torch.Tensor  # float [total_edges, N_EDGE_FEATURES]
+    batch: torch.Tensor  # long [total_nodes]: graph of each node
+    n_nodes: torch.Tensor  # long [B]
+    mask: torch.Tensor  # bool [total_nodes]: allowed actions
+
+    @property
+    def n_graphs(self) -> int:
+        return int(self.n_nodes.shape[0])
+
+
+def batch_from_padded(obs: dict[str, torch.Tensor]) -> tuple[GraphBatch, torch.Tensor]:
+    """Un-pad a batch of environment observations (tensors with a leading batch dim).
+
+    Only *active* acquisitions become nodes: still in the graph, or the last one
+    scheduled.  Removed and earlier scheduled acquisitions can never be chosen and
+    have no edge, so they would only cost compute (about half the nodes late in
+    an episode).  Returns the graph batch and the bool [B, N_max] map of which
+    padded slots are nodes.
+    """
+    x = obs["x"]
+    b, n_max = x.shape[0], x.shape[1]
+    n = obs["n_nodes"].reshape(b).long()
+    m = obs["n_edges"].reshape(b).long()
+    dev = x.device
+    in_range = torch.arange(n_max, device=dev)[None, :] < n[:, None]
+    active = (x[..., 1] == 0) & ((x[..., 0] == 0) | (x[..., 3] == 1))  # not removed; not scheduled unless last
+    node_valid = in_range & active
+    slot_to_node = torch.cumsum(node_valid.reshape(-1).long(), 0) - 1  # flattened slot -> node index
+    e_max = obs["edge_index"].shape[-1]
+    edge_valid = torch.arange(e_max, device=dev)[None, :] < m[:, None]
+    flat = obs["edge_index"].long() + (torch.arange(b, device=dev) * n_max)[:, None, None]
+    edge_index = slot_to_node[flat.permute(1, 0, 2)[:, edge_valid]]
+    counts = node_valid.sum(1)
+    gb = GraphBatch(
+        x=x[node_valid].float(),
+        edge_index=edge_index,
+        edge_attr=obs["edge_attr"][edge_valid].float(),
+        batch=torch.repeat_interleave(torch.arange(b, device=dev), counts),
+        n_nodes=counts,
+        mask=obs["action_mask"][node_valid] > 0,
+    )
+    return gb, node_valid
+
+
+def _mlp(d_in: int, d_hidden: int, d_out: int) -> nn.Sequential:
+    return nn.Sequential(nn.Linear(d_in, d_hidden), nn.LeakyReLU(), nn.Linear(d_hidden, d_out))
+
+
+class EOSPAgent(nn.Module):
+    def __init__(self, cfg: ModelConfig | None = None):
+        super().__init__()
+        cfg = cfg or ModelConfig()
+        self.cfg = cfg
+        h = cfg.hidden_dim
+        self.node_embed = _mlp(N_NODE_FEATURES, h, h)
+        self.global_init = nn.Parameter(torch.zeros(h))
+        self.edge_type_embed = nn.Embedding(4, h)
+        self.edge_attr_embed = nn.Linear(N_EDGE_FEATURES, h, bias=False)
+        self.convs = nn.ModuleList(
+            GATv2Conv(h, h, heads=cfg.heads, concat=True, edge_dim=h, add_self_loops=False)
+            for _ in range(cfg.n_layers))
+        self.reduce = nn.ModuleList(_mlp(cfg.heads * h, h, h) for _ in range(cfg.n_layers))
+        self.norms = nn.ModuleList(nn.LayerNorm(h) for _ in range(cfg.n_layers))
+        width = (cfg.n_layers + 1) * h
+        self.action_head = nn.Linear(2 * width, 1)
+        self.value_head = _mlp(width, h, cfg.n_values)
+
+    def rewire(self, gb: GraphBatch) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        """Edge index over nodes + one global node per graph, edge types, numeric edge attributes."""
+        total = gb.x.shape[0]
+        dev = gb.x.device
+        glob = total + gb.batch  # global node of each node's graph
+        nodes = torch.arange(total, device=dev)
+        src = torch.cat([gb.edge_index[0], gb.edge_index[1], nodes, glob])
+        dst = torch.cat([gb.edge_index[1], gb.edge_index[0], glob, nodes])
+        e = gb.edge_index.shape[1]
+        types = torch.cat([torch.full((e,), PRECEDENCE, device=dev), torch.full((e,), REVERSE, device=dev),
+                           torch.full((total,), TO_GLOBAL, device=dev), torch.full((total,), FROM_GLOBAL, device=dev)])
+        attr = torch.cat([gb.edge_attr, gb.edge_attr, gb.x.new_zeros((2 * total, gb.edge_attr.shape[1]))])
+        return torch.stack([src, dst]), types, attr
+
+    def forward(self, gb: GraphBatch) -> tuple[torch.Tensor, torch.Tensor]:
+        """Logits [total_nodes] (forbidden actions at MASKED) and values [B, n_values]."""
+        total, b = gb.x.shape[0], gb.n_graphs
+        edge_index, types, attr = self.rewire(gb)
+        edge_feat = self.edge_type_embed(types) + self.edge_attr_embed(attr)
+        h = torch.cat([self.node_embed(gb.x), self.global_init.expand(b, -1)])
+        layers = [h]
+        for conv, red, norm in zip(self.convs, self.reduce, self.norms):
+            h = norm(h + red(conv(h, edge_index, edge_feat)))
+            layers.append(h)
+        stacked = torch.cat(layers, dim=-1)  # [total + B, (n_layers + 1) * hidden]
+        node_part, global_part = stacked[:total], stacked[total:]
+        logits = self.action_head(torch.cat([node_part, global_part[gb.batch]], dim=-1)).squeeze(-1)
+        logits = torch.where(gb.mask, logits, torch.full_like(logits, MASKED))
+        return logits, self.value_head(global_part)
+
+    def padded_logits(self, logits: torch.Tensor, node_valid: torch.Tensor) -> torch.Tensor:
+        """Scatter per-node logits back to the padded [B, N_max] layout (padding = MASKED)."""
+        out = logits.new_full(node_valid.shape, MASKED)
+        out[node_valid] = logits
+        return out

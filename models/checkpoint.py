@@ -1,0 +1,74 @@
+"""Agent checkpoints: weights as a plain tensor state dict, configuration as JSON.
+
+``agent.pt`` holds only tensors and is read with ``torch.load(weights_only=True)``;
+``agent.json`` holds the model and environment configurations the weights were
+trained with.  Nothing is ever unpickled.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any
+
+import torch
+
+from eosp.atomic import atomic_path
+from eosp.config import EnvConfig, ModelConfig, from_dict, to_dict
+from eosp.errors import InputError
+from models.agent import EOSPAgent
+
+WEIGHTS, CONFIG = "agent.pt", "agent.json"
+
+
+def save_agent(agent: EOSPAgent, directory: str | Path, env_cfg: EnvConfig, extra: dict[str, Any] | None = None) -> Path:
+    d = Path(directory)
+    d.mkdir(parents=True, exist_ok=True)
+    state = {k: v.detach().cpu().clone() for k, v in agent.state_dict().items()}
+    with atomic_path(d / WEIGHTS) as tmp:
+        torch.save(state, tmp)
+    meta = {"format": "eosp-agent", "version": 1, "model": to_dict(agent.cfg), "env": to_dict(env_cfg),
+            **(extra or {})}
+    meta["env"]["shards"] = []
+    with atomic_path(d / CONFIG) as tmp:
+        tmp.write_text(json.dumps(meta, indent=1))
+    return d
+
+
+def load_agent(directory: str | Path) -> tuple[EOSPAgent, EnvConfig, dict[str, Any]]:
+    """The agent (eval mode), the env configuration it was trained with, and the metadata."""
+    d = Path(directory)
+    if d.is_file():
+        d = d.parent
+    if not (d / WEIGHTS).exists() or not (d / CONFIG).exists():
+        raise InputError(d, f"unknown checkpoint: expected {WEIGHTS} and {CONFIG} in this directory")
+    try:
+        meta = json.loads((d / CONFIG).read_text())
+    except json.JSONDecodeError as exc:
+        raise InputError(d / CONFIG, f"not valid JSON: {exc}") from None
+    if meta.get("format") != "eosp-agent":
+        raise InputError(d / CONFIG, "not an EOSP agent checkpoint (missing format 'eosp-agent')")
+    agent = EOSPAgent(from_dict(ModelConfig, meta["model"]))
+    try:
+        state = torch.load(d / WEIGHTS, map_location="cpu", weights_only=True)
+    except Exception as exc:  # truncated or foreign file
+        raise InputError(d / WEIGHTS, f"cannot read the weights: {exc}") from None
+    try:
+        agent.load_state_dict(state)
+    except RuntimeError as exc:
+        raise InputError(d / WEIGHTS, f"weights do not match the model configuration: {exc}") from None
+    agent.eval()
+    return agent, from_dict(EnvConfig, meta["env"]), meta
+
+
+def agent_from_rllib_weights(weights: dict[str, Any], model_cfg: ModelConfig) -> EOSPAgent:
+    """An agent from the learner's module state (keys 'agent.*', numpy arrays or tensors)."""
+    agent = EOSPAgent(model_cfg)
+    state = {k[len("agent."):]: torch.as_tensor(v) for k, v in weights.items() if k.startswith("agent.")}
+    agent.load_state_dict(state)
+    agent.eval()
+    return agent
+
+
+def rllib_weights_from_agent(agent: EOSPAgent) -> dict[str, Any]:
+    return {f"agent.{k}": v.detach().cpu().numpy() for k, v in agent.state_dict().items()}

@@ -1,0 +1,39 @@
+"""The trained agent as an MLflow pyfunc model, logged "from code" (no pickled Python object).
+
+MLflow loads this file and the artifact ``agent`` (a checkpoint directory:
+``agent.pt`` read with ``weights_only=True`` + ``agent.json``).  ``predict``
+takes a DataFrame with a column ``instance_dir`` (interchange instance
+directories) and returns, per instance, the number of acquisitions and the
+utility of the schedule decoded greedily, and the schedule's node ids.
+"""
+
+from __future__ import annotations
+
+import mlflow.pyfunc
+import pandas as pd
+
+
+class EOSPPolicyModel(mlflow.pyfunc.PythonModel):
+    def load_context(self, context) -> None:
+        import torch
+
+        from models.checkpoint import load_agent
+
+        torch.set_num_threads(1)
+        self.agent, self.env_cfg, self.meta = load_agent(context.artifacts["agent"])
+
+    def predict(self, context, model_input: pd.DataFrame, params=None) -> pd.DataFrame:
+        from envs.sources import prepare_instance
+        from instances.interchange import read_instance
+        from solvers.policy import rollout
+
+        rows = []
+        for d in model_input["instance_dir"]:
+            inst = read_instance(d)
+            nodes, value = rollout(self.agent, prepare_instance(inst, self.env_cfg.prune), self.env_cfg)
+            rows.append({"instance_dir": d, "n_acquisitions": len(nodes), "value": value,
+                         "nodes": inst.node_ids[nodes].tolist()})
+        return pd.DataFrame(rows)
+
+
+mlflow.models.set_model(EOSPPolicyModel())

@@ -1,0 +1,72 @@
+"""Decode a schedule with the trained agent: greedy (argmax) or sampled with a seed.
+
+    eosp solve INSTANCE_DIR --solver policy --checkpoint runs/NAME/checkpoints/best --out s.parquet
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import torch
+
+from envs.eosp_env import EOSPEnv
+from envs.sources import FixedSource, PreparedInstance, prepare_instance
+from eosp.config import EnvConfig
+from instances.instance import Instance
+from models.agent import EOSPAgent, batch_from_padded
+from solvers.base import Solution, objective_weights
+
+
+def to_batch(obs: dict[str, np.ndarray]) -> dict[str, torch.Tensor]:
+    return {k: torch.as_tensor(v)[None] for k, v in obs.items()}
+
+
+@torch.no_grad()
+def evaluate(agent: EOSPAgent, obs: dict[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+    """Per-acquisition logits (forbidden: very negative) and the value head of one observation."""
+    gb, valid = batch_from_padded(to_batch(obs))
+    logits, values = agent(gb)
+    return agent.padded_logits(logits, valid)[0].numpy(), values[0].numpy()
+
+
+def make_env_for(prepared: PreparedInstance, env_cfg: EnvConfig) -> EOSPEnv:
+    cfg = replace(env_cfg, max_acquisitions=0, shards=())
+    src = FixedSource.__new__(FixedSource)
+    src.prepared = [prepared]
+    return EOSPEnv(cfg, source=src)
+
+
+def rollout(agent: EOSPAgent, prepared: PreparedInstance, env_cfg: EnvConfig, sample: bool = False,
+            seed: int = 0) -> tuple[np.ndarray, float]:
+    """Play one episode with the agent; returns the scheduled nodes and the schedule's utility."""
+    env = make_env_for(prepared, env_cfg)
+    obs, _ = env.reset(seed=seed)
+    rng = np.random.default_rng(seed)
+    done = not obs["action_mask"].any()
+    while not done:
+        logits, _ = evaluate(agent, obs)
+        if sample:
+            allowed = np.flatnonzero(obs["action_mask"])
+            z = logits[allowed] - logits[allowed].max()
+            p = np.exp(z) / np.exp(z).sum()
+            a = int(rng.choice(allowed, p=p))
+        else:
+            a = int(np.argmax(logits))
+        obs, _, done, _, info = env.step(a)
+    return env.path(), env.state.value
+
+
+def solve(inst: Instance, *, mode: str = "utility", time_limit: float | None = None, seed: int = 0,
+          checkpoint: str = "", sample: bool = False, **_: object) -> Solution:
+    from models.checkpoint import load_agent
+
+    if not checkpoint:
+        raise ValueError("the policy solver needs --checkpoint (a directory holding agent.pt and agent.json)")
+    torch.set_num_threads(1)
+    agent, env_cfg, _ = load_agent(checkpoint)
+    prepared = prepare_instance(inst, env_cfg.prune)
+    nodes, _ = rollout(agent, prepared, env_cfg, sample=sample, seed=seed)
+    w = objective_weights(inst, mode)
+    return Solution(nodes, float(w[inst.graph.node_acq[nodes]].sum()) if len(nodes) else 0.0,
+                    {"solver": "policy", "sample": sample})

@@ -1,0 +1,51 @@
+"""RLlib new-API-stack RLModule around :class:`models.EOSPAgent`.
+
+The observation reaches the module as the env's dict of padded tensors; it is
+un-padded into one graph batch (no Python loop over nodes), the agent gives
+per-node logits (forbidden actions already at a large negative value, so
+masking holds on every forward path, the PPO loss's included) and a value from
+the global node.  ``_forward_train`` returns the value through
+``Columns.EMBEDDINGS`` so that ``compute_values`` needs no second GNN pass.
+"""
+
+from __future__ import annotations
+
+from dataclasses import fields
+from typing import Any
+
+import torch
+from ray.rllib.core.columns import Columns
+from ray.rllib.core.rl_module.apis.value_function_api import ValueFunctionAPI
+from ray.rllib.core.rl_module.torch.torch_rl_module import TorchRLModule
+
+from eosp.config import ModelConfig, from_dict
+from models.agent import EOSPAgent, batch_from_padded
+
+
+class EOSPTorchRLModule(TorchRLModule, ValueFunctionAPI):
+    """``model_config``: the fields of :class:`eosp.config.ModelConfig` as a dict."""
+
+    def setup(self) -> None:
+        # RLlib adds its own default keys to model_config: keep ours
+        names = {f.name for f in fields(ModelConfig)}
+        cfg = from_dict(ModelConfig, {k: v for k, v in dict(self.model_config or {}).items() if k in names})
+        self.agent = EOSPAgent(cfg)
+
+    def _run(self, batch: dict[str, Any]) -> tuple[torch.Tensor, torch.Tensor]:
+        gb, node_valid = batch_from_padded(batch[Columns.OBS])
+        logits, values = self.agent(gb)
+        return self.agent.padded_logits(logits, node_valid), values
+
+    def _forward(self, batch: dict[str, Any], **kwargs) -> dict[str, Any]:
+        logits, _ = self._run(batch)
+        return {Columns.ACTION_DIST_INPUTS: logits}
+
+    def _forward_train(self, batch: dict[str, Any], **kwargs) -> dict[str, Any]:
+        logits, values = self._run(batch)
+        return {Columns.ACTION_DIST_INPUTS: logits, Columns.EMBEDDINGS: values}
+
+    def compute_values(self, batch: dict[str, Any], embeddings: Any | None = None) -> torch.Tensor:
+        if embeddings is None:
+            _, embeddings = self._run(batch)
+        # scalar value for PPO: the first head (lexicographic learners read all heads)
+        return embeddings[..., 0]

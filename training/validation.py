@@ -1,0 +1,112 @@
+"""Periodic validation on held-out shards: greedy decoding vs the Greedy and RAMP baselines.
+
+Baseline values are computed once per data set, as parallel Ray tasks, and cached
+next to the shards (``baselines.json``, keyed by instance, solver and mode), so
+repeated runs do not pay for them again.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from eosp.atomic import atomic_path
+from eosp.config import EnvConfig
+
+BASELINES = ("greedy", "ramp")
+
+
+def objective_mode(env_cfg: EnvConfig) -> str:
+    return "unitary" if env_cfg.reward == "unitary" else "utility"
+
+
+def _solve_task(shard: str, index: int, solver: str, mode: str, time_limit: float) -> tuple[str, float, float]:
+    from shards.io import ShardReader
+    from solvers.base import get_solver
+
+    inst = ShardReader(shard).read(index)
+    t0 = time.perf_counter()
+    sol = get_solver(solver)(inst, mode=mode, time_limit=time_limit)
+    return inst.name, float(sol.value), time.perf_counter() - t0
+
+
+def baseline_values(val_path: str | Path, mode: str, solvers=BASELINES, time_limit: float = 60.0) -> dict:
+    """{solver: {instance name: value}} for every instance of the data set, cached in baselines.json."""
+    import ray
+
+    from envs.sources import expand_shards
+    from shards.io import ShardReader
+
+    shards = expand_shards([str(val_path)])
+    cache_file = (Path(val_path) if Path(val_path).is_dir() else Path(val_path).parent) / "baselines.json"
+    cache = json.loads(cache_file.read_text()) if cache_file.exists() else {}
+    todo = []
+    for shard in shards:
+        for i, name in enumerate(ShardReader(shard).names()):
+            for s in solvers:
+                if name not in cache.get(f"{s}/{mode}", {}):
+                    todo.append((str(shard), i, s))
+    if todo:
+        task = ray.remote(num_cpus=1)(_solve_task)
+        refs = [task.remote(sh, i, s, mode, time_limit) for sh, i, s in todo]
+        for (sh, i, s), (name, value, _) in zip(todo, ray.get(refs)):
+            cache.setdefault(f"{s}/{mode}", {})[name] = value
+        with atomic_path(cache_file) as tmp:
+            tmp.write_text(json.dumps(cache, indent=1, sort_keys=True))
+    return {s: cache[f"{s}/{mode}"] for s in solvers}
+
+
+@dataclass
+class ValidationResult:
+    metrics: dict[str, float]
+    names: list[str]
+    policy: np.ndarray
+    baselines: dict[str, np.ndarray]
+
+
+def compare(policy: np.ndarray, baselines: dict[str, np.ndarray], prefix: str = "val") -> dict[str, float]:
+    """Mean scores, ratios of the means (the paper's table) and win/tie/loss counts."""
+    out = {f"{prefix}/policy_mean": float(np.mean(policy))}
+    for s, b in baselines.items():
+        out[f"{prefix}/{s}_mean"] = float(np.mean(b))
+        out[f"{prefix}/ratio_to_{s}"] = float(np.mean(policy) / np.mean(b)) if np.mean(b) > 0 else float("nan")
+        tie = np.isclose(policy, b, rtol=1e-9, atol=1e-9)
+        out[f"{prefix}/wins_vs_{s}"] = float(np.sum((policy > b) & ~tie))
+        out[f"{prefix}/ties_vs_{s}"] = float(np.sum(tie))
+        out[f"{prefix}/losses_vs_{s}"] = float(np.sum((policy < b) & ~tie))
+    return out
+
+
+class Validator:
+    def __init__(self, val_path: str | Path, env_cfg: EnvConfig, max_instances: int = 0):
+        from envs.sources import expand_shards, prepare_instance
+        from shards.io import read_instances
+
+        self.env_cfg = env_cfg
+        self.mode = objective_mode(env_cfg)
+        insts = read_instances(expand_shards([str(val_path)]), unpruned=False)
+        if max_instances:
+            insts = insts[:max_instances]
+        self.prepared = [prepare_instance(i, env_cfg.prune) for i in insts]
+        self.names = [i.name for i in insts]
+        base = baseline_values(val_path, self.mode)
+        self.baselines = {s: np.array([base[s][n] for n in self.names]) for s in BASELINES}
+
+    def score(self, inst, nodes: np.ndarray) -> float:
+        if self.mode == "unitary":
+            return float(len(nodes))
+        return float(inst.acqs.utility[inst.graph.node_acq[nodes]].sum()) if len(nodes) else 0.0
+
+    def run(self, agent) -> ValidationResult:
+        from solvers.policy import rollout
+
+        values = []
+        for p in self.prepared:
+            nodes, _ = rollout(agent, p, self.env_cfg)
+            values.append(self.score(p.inst, nodes))
+        policy = np.asarray(values)
+        return ValidationResult(compare(policy, self.baselines), self.names, policy, self.baselines)
