@@ -1,0 +1,131 @@
+"""The GNN agent: shapes, masking, permutation equivariance, batching, checkpoints."""
+
+import numpy as np
+import pytest
+import torch
+
+from envs.eosp_env import EOSPEnv
+from envs.sources import FixedSource
+from eosp.config import EnvConfig, ModelConfig
+from models.agent import MASKED, EOSPAgent, batch_from_padded
+from models.checkpoint import load_agent, save_agent
+from solvers.policy import rollout
+from tests.conftest import generated
+
+torch.set_num_threads(1)
+
+
+def observations(n_obs=6, n=30, n_max=40, seed=1):
+    env = EOSPEnv(EnvConfig(max_acquisitions=n_max), source=FixedSource(generated("uniform", n, seed)))
+    obs, _ = env.reset(seed=0)
+    out = [obs]
+    while len(out) < n_obs:
+        obs, _, done, _, _ = env.step(env.action_space.sample())
+        out.append(obs)
+        if done:
+            obs, _ = env.reset()
+            out.append(obs)
+    return out[:n_obs]
+
+
+def stack(obss):
+    return {k: torch.as_tensor(np.stack([o[k] for o in obss])) for k in obss[0]}
+
+
+@pytest.fixture(scope="module")
+def agent():
+    torch.manual_seed(0)
+    return EOSPAgent(ModelConfig(hidden_dim=16, n_layers=3, heads=2)).eval()
+
+
+def test_shapes_and_masking(agent):
+    obss = observations()
+    gb, valid = batch_from_padded(stack(obss))
+    logits, values = agent(gb)
+    assert values.shape == (len(obss), 1)
+    padded = agent.padded_logits(logits, valid)
+    assert padded.shape == (len(obss), 40)
+    mask = torch.as_tensor(np.stack([o["action_mask"] for o in obss])) > 0
+    assert torch.all(padded[~mask] == MASKED)
+    assert torch.all(padded[mask] > MASKED / 2)
+    probs = torch.softmax(padded, dim=-1)
+    assert torch.all(probs[~mask] == 0)
+    # sampling never picks a masked action
+    draws = torch.distributions.Categorical(logits=padded).sample((2000,))
+    assert torch.all(mask.gather(1, draws.T))
+
+
+def test_lexicographic_value_heads():
+    agent = EOSPAgent(ModelConfig(hidden_dim=8, n_layers=1, heads=1, n_values=7))
+    gb, _ = batch_from_padded(stack(observations(3)))
+    assert agent(gb)[1].shape == (3, 7)
+
+
+def test_batch_equals_one_by_one(agent):
+    obss = observations(5)
+    gb, valid = batch_from_padded(stack(obss))
+    logits, values = agent(gb)
+    padded = agent.padded_logits(logits, valid)
+    for k, o in enumerate(obss):
+        g1, v1 = batch_from_padded(stack([o]))
+        l1, val1 = agent(g1)
+        torch.testing.assert_close(agent.padded_logits(l1, v1)[0], padded[k], rtol=1e-5, atol=1e-5)
+        torch.testing.assert_close(val1[0], values[k], rtol=1e-5, atol=1e-5)
+
+
+def test_node_logits_are_permutation_equivariant(agent):
+    (o,) = observations(1)
+    n = int(o["n_nodes"][0])
+    m = int(o["n_edges"][0])
+    perm = np.random.default_rng(0).permutation(n)  # new slot of old node i is inv[i]
+    inv = np.argsort(perm)
+    p = {k: v.copy() for k, v in o.items()}
+    p["x"][:n] = o["x"][perm]
+    p["action_mask"][:n] = o["action_mask"][perm]
+    p["edge_index"][:, :m] = inv[o["edge_index"][:, :m]]
+    shuffle = np.random.default_rng(1).permutation(m)  # edge order does not matter either
+    p["edge_index"][:, :m] = p["edge_index"][:, :m][:, shuffle]
+    p["edge_attr"][:m] = o["edge_attr"][:m][shuffle]
+    g0, v0 = batch_from_padded(stack([o]))
+    g1, v1 = batch_from_padded(stack([p]))
+    l0, val0 = agent(g0)
+    l1, val1 = agent(g1)
+    a = agent.padded_logits(l0, v0)[0, :n]
+    b = agent.padded_logits(l1, v1)[0, :n]
+    torch.testing.assert_close(b, a[perm], rtol=1e-4, atol=1e-4)
+    torch.testing.assert_close(val0, val1, rtol=1e-4, atol=1e-4)
+
+
+def test_any_number_of_nodes(agent):
+    """Trained for small instances, runs on bigger ones (no size in the weights)."""
+    from envs.sources import prepare_instance
+
+    for n in (8, 60):
+        inst = generated("uniform", n, 3)
+        nodes, value = rollout(agent, prepare_instance(inst), EnvConfig())
+        assert len(nodes) > 0
+
+
+def test_checkpoint_round_trip_same_actions(tmp_path, agent):
+    from envs.sources import prepare_instance
+
+    save_agent(agent, tmp_path / "ck", EnvConfig(reward="unitary"))
+    back, env_cfg, meta = load_agent(tmp_path / "ck")
+    assert env_cfg.reward == "unitary" and meta["model"]["hidden_dim"] == 16
+    p = prepare_instance(generated("clusters", 30, 2))
+    np.testing.assert_array_equal(rollout(agent, p, EnvConfig())[0], rollout(back, p, EnvConfig())[0])
+    # sampling is seeded
+    a = rollout(back, p, EnvConfig(), sample=True, seed=5)[0]
+    b = rollout(back, p, EnvConfig(), sample=True, seed=5)[0]
+    np.testing.assert_array_equal(a, b)
+
+
+def test_unknown_or_bad_checkpoint(tmp_path, agent):
+    from eosp.errors import InputError
+
+    with pytest.raises(InputError, match="unknown checkpoint"):
+        load_agent(tmp_path / "nothing")
+    save_agent(agent, tmp_path / "ck", EnvConfig())
+    (tmp_path / "ck" / "agent.pt").write_bytes(b"\x80\x04not a zip")
+    with pytest.raises(InputError, match="cannot read the weights"):
+        load_agent(tmp_path / "ck")
