@@ -204,8 +204,8 @@ class EnvConfig:
     acquisition), 'lexicographic' (per-class vector in info['reward_vector']) or 'utility' (raw)."""
     max_acquisitions: int = 128
     """Padding of the observation (nodes = actions); 0 sizes it to the instance (inference only)."""
-    max_out_degree: int = 8
-    """Edges kept per acquisition in the 'earliest' observation graph."""
+    max_out_degree: int = 4
+    """Edges kept per acquisition in the 'earliest' observation graph (4x that out of the last node)."""
     prune: bool = True
     """Play in the pruned discrete graph (the paper); false: in the unpruned one."""
     obs_edges: str = "earliest"
@@ -236,7 +236,7 @@ MODEL_PRESETS: dict[str, dict[str, Any]] = {
     # the paper's configuration
     "reference": {"hidden_dim": 64, "n_layers": 10, "heads": 4},
     # what trains in minutes on 2 CPU cores
-    "cpu": {"hidden_dim": 32, "n_layers": 4, "heads": 2},
+    "cpu": {"hidden_dim": 32, "n_layers": 3, "heads": 2},
 }
 
 
@@ -288,3 +288,26 @@ class RunConfig:
     model: ModelConfig = field(default_factory=ModelConfig)
     train: TrainConfig = field(default_factory=TrainConfig)
     ray: RayConfig = field(default_factory=RayConfig)
+
+
+@dataclass
+class EvalConfig:
+    """Solvers over a test set (jobs/evaluate.py)."""
+
+    data: tuple[str, ...] = ("data/demo/val",)
+    """Data set directories or shard files; instances are grouped by size in the report."""
+    solvers: tuple[str, ...] = ("greedy", "ramp")
+    """Any of: random, greedy, ramp, exact, policy, mcts."""
+    mode: str = "utility"
+    """'utility' or 'unitary' (count acquisitions)."""
+    time_limit: float = 60.0
+    """Seconds per instance for the searching solvers (ramp, exact)."""
+    checkpoint: str = ""
+    """Agent checkpoint for the policy and mcts solvers."""
+    budgets: tuple[int, ...] = (0, 10, 100)
+    """MCTS simulations per decision (mcts solver only)."""
+    out: str = "runs/eval"
+    """Directory of the results: results.parquet, report.md, schedules/."""
+    save_schedules: bool = True
+    mlflow_uri: str = ""
+    experiment: str = "eosp-eval"

@@ -18,6 +18,18 @@ paths), at the cost of one O(arcs) pass per subgradient step instead of a large
 LP.  The pass runs backwards, so it also gives for every node v the best
 completion ``togo[v]`` after v, which the exact search uses to bound partial
 schedules (see :func:`completion_bound`).
+
+The pass runs on the PRUNED graph with *waiting* allowed (a move from (j, t) to
+the next node of j, free), which gives the same value as the unpruned graph with
+waiting, hence a valid bound for the unpruned problem, with 3-9x fewer arcs.
+Why: keep 0 <= lam <= w, so every cost is >= 0.  A pruned arc u -> (j, t_j) has
+a witness k with arcs u -> (k, t_k) -> (j, t') and t' <= t_j; replacing the arc
+by these two (plus waiting from t' to t_j) adds c_k >= 0 and ends at the same
+node.  Both new arcs span strictly less time than the old one, so repeating the
+replacement on arcs that are themselves pruned terminates: every relaxed path of
+the unpruned graph maps to one of the pruned graph with waiting that is worth at
+least as much, from any node.  (Repeats are allowed in the relaxation, which is
+what makes the witness usable even if k was already visited.)
 """
 
 from __future__ import annotations
@@ -47,11 +59,14 @@ def acq_last_time(graph: DiscreteGraph) -> np.ndarray:
 
 
 @numba.njit(cache=True)
-def togo_pass(order, indptr, dst, node_acq, cost, togo, nxt):
+def togo_pass(order, indptr, dst, node_acq, cost, togo, nxt, wait):
     """Backward longest path: togo[v] = best sum of `cost` over a path after v (>= 0, empty allowed).
 
-    nxt[v] is the successor on that path (-1 to stop).  Returns togo at the source.
+    nxt[v] is the next node on that path (-1 to stop).  With `wait`, a path may
+    also move from (j, t) to the next node of j at no cost (start j later).
+    Returns togo at the source.
     """
+    n = node_acq.shape[0]
     for i in range(order.shape[0] - 1, -1, -1):
         v = order[i]
         best = 0.0
@@ -62,6 +77,9 @@ def togo_pass(order, indptr, dst, node_acq, cost, togo, nxt):
             if val > best:
                 best = val
                 arg = w
+        if wait and v > 0 and v + 1 < n and node_acq[v + 1] == node_acq[v] and togo[v + 1] > best:
+            best = togo[v + 1]
+            arg = v + 1
         togo[v] = best
         nxt[v] = arg
     return togo[order[0]]
@@ -69,11 +87,15 @@ def togo_pass(order, indptr, dst, node_acq, cost, togo, nxt):
 
 @numba.njit(cache=True)
 def _visits(nxt, node_acq, counts):
+    """Visits per acquisition of the path from the source (a wait move is no new visit)."""
     counts[:] = 0
-    v = nxt[0]
-    while v >= 0:
-        counts[node_acq[v]] += 1
-        v = nxt[v]
+    v = 0
+    w = nxt[0]
+    while w >= 0:
+        if node_acq[w] != node_acq[v]:
+            counts[node_acq[w]] += 1
+        v = w
+        w = nxt[w]
 
 
 @dataclass
@@ -87,13 +109,15 @@ class LagrangianBound:
     seconds: float
 
 
-def lagrangian(graph: DiscreteGraph, weights: np.ndarray, *, lower: float = 0.0, iterations: int = 600,
-               time_limit: float | None = None, integral: bool = False) -> LagrangianBound:
-    """Minimize L(lam) by projected subgradient steps with Polyak step sizes.
+def lagrangian(graph: DiscreteGraph, weights: np.ndarray, *, wait: bool, lower: float = 0.0,
+               iterations: int = 300, time_limit: float | None = None, integral: bool = False) -> LagrangianBound:
+    """Minimize L(lam) over 0 <= lam <= w by projected subgradient steps (Polyak step sizes).
 
-    `lower` is the value of a known schedule (the Polyak target): the closer, the
-    faster.  With `integral` (all weights integers, unitary mode) the method stops
-    as soon as floor(L) reaches `lower`, which then is proven optimal.
+    `graph` with `wait=False`: the unpruned graph itself; with `wait=True`: the
+    pruned graph (see the module docstring).  `lower` is the value of a known
+    schedule (the Polyak target): the closer, the faster.  With `integral` (all
+    weights integers, unitary mode) it stops as soon as floor(L) <= `lower`,
+    which then is proven optimal.
     """
     t0 = time.perf_counter()
     w = np.asarray(weights, dtype=np.float64)
@@ -102,76 +126,80 @@ def lagrangian(graph: DiscreteGraph, weights: np.ndarray, *, lower: float = 0.0,
     togo = np.zeros(graph.n_nodes, dtype=np.float64)
     nxt = np.full(graph.n_nodes, -1, dtype=np.int32)
     counts = np.zeros(n, dtype=np.int64)
-    # Start from lam = w / 2: a repeated acquisition then gains nothing from its
-    # second visit, which already removes most of the repetition of lam = 0.
+    # Start from lam = w / 2: a repeated acquisition then gains little from its
+    # second visit, which already removes most of the repetitions of lam = 0.
     lam = 0.5 * w
+    import os
+    sp = float(os.environ.get("LAG_SCALE_P", "0"))
+    scale = np.power(np.maximum(w, 1e-300), sp)
     best = math.inf
     best_lam = lam.copy()
     theta = 1.0
     stall = 0
     it = 0
     for it in range(1, iterations + 1):
-        val = togo_pass(order, graph.indptr, graph.dst, graph.node_acq, w - lam, togo, nxt) + math.fsum(lam)
-        if not math.isfinite(best) or val < best - 1e-12 * abs(best):
+        val = togo_pass(order, graph.indptr, graph.dst, graph.node_acq, w - lam, togo, nxt, wait) + math.fsum(lam)
+        if val < best - 1e-12 * abs(best) or not math.isfinite(best):
             best, best_lam, stall = val, lam.copy(), 0
         else:
             stall += 1
-            if stall >= 20:
+            if stall >= 10:
                 theta, stall = theta * 0.5, 0
         if integral and math.floor(best + 1e-6) <= lower:
             break
-        if best - lower <= 1e-9 * max(1.0, abs(lower)) or theta < 1e-6:
+        if best - lower <= 1e-12 * max(1.0, abs(lower)) or theta < 1e-4:
             break
         if time_limit is not None and time.perf_counter() - t0 > time_limit:
             break
         _visits(nxt, graph.node_acq, counts)
         g = 1.0 - counts  # subgradient of L at lam
-        # projection on 0 <= lam <= w (a multiplier above w_j only hides j: lowering it to w_j
-        # lowers sum(lam) and changes no path value, so the minimum lies in that box)
+        # projection on 0 <= lam <= w: a multiplier above w_j only hides j (lowering it to
+        # w_j lowers sum(lam) and no path value), and costs w - lam >= 0 make `wait` valid
         g[((lam <= 0.0) & (g > 0.0)) | ((lam >= w) & (g < 0.0))] = 0.0
-        norm = float(g @ g)
+        dg = scale * g
+        norm = float(g @ dg)
         if norm == 0.0:  # the relaxed path is a feasible schedule: L is attained
             break
-        target = max(lower, 0.0)
-        step = theta * (val - target) / norm
-        lam = np.clip(lam - step * g, 0.0, w)
-    togo_pass(order, graph.indptr, graph.dst, graph.node_acq, w - best_lam, togo, nxt)
+        step = theta * (val - max(lower, 0.0)) / norm
+        lam = np.clip(lam - step * dg, 0.0, w)
+    togo_pass(order, graph.indptr, graph.dst, graph.node_acq, w - best_lam, togo, nxt, wait)
     return LagrangianBound(best, best_lam, togo, it, time.perf_counter() - t0)
 
 
-def longest_path_bound(graph: DiscreteGraph, weights: np.ndarray) -> float:
+def longest_path_bound(graph: DiscreteGraph, weights: np.ndarray, *, wait: bool) -> float:
     """The bound ignoring "at most once" entirely (lam = 0): cheap but weak."""
     order = topological_order(graph)
     togo = np.zeros(graph.n_nodes, dtype=np.float64)
     nxt = np.full(graph.n_nodes, -1, dtype=np.int32)
     return float(togo_pass(order, graph.indptr, graph.dst, graph.node_acq,
-                           np.asarray(weights, dtype=np.float64), togo, nxt))
+                           np.asarray(weights, dtype=np.float64), togo, nxt, wait))
 
 
-def upper_bound(inst: Instance, mode: str = "utility", *, lower: float | None = None, iterations: int = 600,
+def upper_bound(inst: Instance, mode: str = "utility", *, lower: float | None = None, iterations: int = 300,
                 time_limit: float | None = None) -> float:
-    """An upper bound of the value of every schedule of `inst` (unpruned graph), at any size.
+    """An upper bound of the value of every schedule (path of the unpruned graph), at any size.
 
-    Without `lower`, the greedy schedule's value is used as the subgradient target.
-    In unitary mode the bound is rounded down (values are integers).
+    Lagrangian on the pruned graph with waiting.  Without `lower`, the greedy
+    schedule's value is the subgradient target.  Rounded down in unitary mode.
     """
     w = objective_weights(inst, mode)
     if lower is None:
         from solvers.greedy import solve as greedy
 
         lower = greedy(inst, mode=mode).value
-    lb = lagrangian(inst.graph, w, lower=lower, iterations=iterations, time_limit=time_limit,
+    lb = lagrangian(inst.pruned(), w, wait=True, lower=lower, iterations=iterations, time_limit=time_limit,
                     integral=mode == "unitary")
     return float(math.floor(lb.bound + 1e-6)) if mode == "unitary" else lb.bound
 
 
 def completion_bound(lb: LagrangianBound, graph: DiscreteGraph) -> np.ndarray:
-    """Per node v: an upper bound of what any schedule can still collect after v,
+    """Per node v: an upper bound of what a schedule can still collect after v,
     before subtracting the multipliers of the acquisitions it has already used
     and that are still open (their last node is after v).
 
-    Every acquisition j that can follow v has last_time(j) > t_v, so
-    sum over the completion of w_j <= togo[v] + sum_{j: last_time(j) > t_v} lam_j.
+    Every acquisition j that can follow v has last_time(j) > t_v, so the
+    completion is worth at most togo[v] + sum_{j: last_time(j) > t_v} lam_j.
+    `graph` has the nodes of the graph `lb` was computed on.
     """
     last = acq_last_time(graph)
     by_last = np.argsort(last, kind="stable")

@@ -17,9 +17,10 @@ beam); it needs no LP at all.
 Steps:
 
 1. incumbent: the better of greedy and RAMP;
-2. bound: the Lagrangian relaxation of "at most once" (:mod:`solvers.bound`),
-   run for a short budget; in unitary mode floor(bound) == incumbent already
-   proves optimality (the common case);
+2. bound: the Lagrangian relaxation of "at most once" (:mod:`solvers.bound`, on
+   the pruned graph with waiting, which bounds the unpruned problem), run for a
+   short budget; in unitary mode floor(bound) == incumbent already proves
+   optimality (the common case), in utility mode it sometimes does too;
 3. the exact label sweep over the unpruned graph, in which a label is cut when
    its value plus the Lagrangian completion bound of its node (minus the
    multipliers of its open acquisitions, which it cannot use again) cannot beat
@@ -48,7 +49,7 @@ from solvers.ramp import solve as ramp
 
 
 def solve(inst: Instance, *, mode: str = "utility", time_limit: float | None = None, seed: int = 0,
-          lagrangian_iterations: int = 200, max_labels: int = 20_000_000, **_: object) -> Solution:
+          lagrangian_iterations: int = 300, max_labels: int = 20_000_000, **_: object) -> Solution:
     t0 = time.perf_counter()
     unitary = mode == "unitary"
     w = objective_weights(inst, mode)
@@ -64,7 +65,8 @@ def solve(inst: Instance, *, mode: str = "utility", time_limit: float | None = N
     info = {"solver": "exact", "start": best.info["solver"], "start_value": value}
 
     budget = left()
-    lb = lagrangian(g, w, lower=value, iterations=lagrangian_iterations, integral=unitary,
+    pg = inst.pruned()
+    lb = lagrangian(pg, w, wait=True, lower=value, iterations=lagrangian_iterations, integral=unitary,
                     time_limit=None if budget is None else 0.3 * budget)
     bound = math.floor(lb.bound + 1e-6) if unitary else lb.bound
     info.update(lagrangian_bound=float(lb.bound), lagrangian_iterations=lb.iterations,
@@ -72,7 +74,7 @@ def solve(inst: Instance, *, mode: str = "utility", time_limit: float | None = N
     if bound <= value + (0.0 if unitary else 1e-12 * abs(value)):
         return _done(nodes, value, value, "optimal", info, t0)
 
-    res = label_search(g, w, beam=0, incumbent=value, lam=lb.lam, cbound=completion_bound(lb, g),
+    res = label_search(g, w, beam=0, incumbent=value, lam=lb.lam, cbound=completion_bound(lb, pg),
                        unitary=unitary, time_limit=left(), max_labels=max_labels, on_limit="stop")
     info.update(labels=res.labels, pruned=res.pruned, dominated=res.dominated)
     if res.nodes.size and res.value > value:

@@ -58,13 +58,16 @@ def rollout(agent: EOSPAgent, prepared: PreparedInstance, env_cfg: EnvConfig, sa
 
 
 def solve(inst: Instance, *, mode: str = "utility", time_limit: float | None = None, seed: int = 0,
-          checkpoint: str = "", sample: bool = False, **_: object) -> Solution:
+          checkpoint: str = "", agent: tuple | None = None, sample: bool = False, **_: object) -> Solution:
+    """`agent`: an already loaded (agent, env config, metadata) from models.checkpoint.load_agent."""
     from models.checkpoint import load_agent
 
-    if not checkpoint:
-        raise ValueError("the policy solver needs --checkpoint (a directory holding agent.pt and agent.json)")
-    torch.set_num_threads(1)
-    agent, env_cfg, _ = load_agent(checkpoint)
+    if agent is None:
+        if not checkpoint:
+            raise ValueError("the policy solver needs --checkpoint (a directory holding agent.pt and agent.json)")
+        torch.set_num_threads(1)
+        agent = load_agent(checkpoint)
+    agent, env_cfg, _ = agent
     prepared = prepare_instance(inst, env_cfg.prune)
     nodes, _ = rollout(agent, prepared, env_cfg, sample=sample, seed=seed)
     w = objective_weights(inst, mode)

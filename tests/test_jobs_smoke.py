@@ -26,3 +26,23 @@ def test_build_shards(tmp_path):
 
     insts = read_instances(sorted(out.glob("*.parquet")))
     assert [i.meta["seed"] for i in insts] == [5, 6, 7]
+
+
+def test_evaluate(tmp_path):
+    import pandas as pd
+
+    from shards.io import write_shard
+    from tests.conftest import generated
+
+    write_shard(tmp_path / "data" / "shard-0.parquet", [generated("uniform", 12, s) for s in range(3)])
+    r = run_job("evaluate.py", "--data", tmp_path / "data", "--solvers", "greedy", "ramp", "exact",
+                "--time-limit", 30, "--out", tmp_path / "out", "--mlflow-uri", f"sqlite:///{tmp_path / 'm.db'}",
+                "--ray.num-cpus", 2)
+    res = pd.read_parquet(tmp_path / "out" / "results.parquet")
+    assert len(res) == 9 and res.feasible.all()
+    wide = res.pivot(index="instance", columns="solver", values="value")
+    assert (wide["greedy"] <= wide["exact"] * (1 + 1e-12)).all() and (wide["ramp"] <= wide["exact"] * (1 + 1e-12)).all()
+    report = (tmp_path / "out" / "report.md").read_text()
+    assert "/ Greedy" in report and "| 12 | 3 |" in report
+    assert (tmp_path / "out" / "schedules").is_dir()
+    assert "Wall time" in r.stdout

@@ -1,0 +1,87 @@
+"""The paper's trajectory figure: roll angle against time for schedules of one instance.
+
+Candidates are drawn in gray over their visibility window (their roll curve when the
+attitudes are known, else a box spanning roll_min..roll_max), each schedule's
+acquisitions as thick colored segments and its maneuvers as arrows from the end of
+one acquisition to the start of the next.  Written as PNG and SVG.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import matplotlib
+import numpy as np
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+
+from instances.instance import Instance  # noqa: E402
+from instances.schedule import Schedule, to_internal_nodes  # noqa: E402
+
+
+def node_rolls(inst: Instance) -> tuple[np.ndarray, np.ndarray] | None:
+    """Roll at the start and at the end of every node, when the instance's attitudes are known."""
+    if inst.node_attitude is not None:
+        return inst.node_attitude[:, 0].astype(float), inst.node_attitude[:, 2].astype(float)
+    cfg = inst.meta.get("config")
+    if cfg and inst.acqs.lat is not None and inst.meta.get("generator") == "eosp-open-sim":
+        from instances.generator import scenario_of
+
+        scn = scenario_of(inst)
+        g = inst.graph
+        k = g.node_acq[1:]
+        r0, _ = scn.attitude(inst.acqs.lat[k], inst.acqs.lon[k], g.node_time[1:])
+        r1, _ = scn.attitude(inst.acqs.lat[k], inst.acqs.lon[k], g.node_time[1:] + inst.acqs.duration[k])
+        return np.r_[0.0, r0], np.r_[0.0, r1]
+    return None
+
+
+def plot_trajectories(inst: Instance, schedules: dict[str, Schedule], out: str | Path,
+                      title: str | None = None) -> list[Path]:
+    out = Path(out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    g, a = inst.graph, inst.acqs
+    rolls = node_rolls(inst)
+    fig, ax = plt.subplots(figsize=(12, 5))
+    if rolls is not None:
+        r0, r1 = rolls
+        for i in range(inst.n_acq):
+            lo, hi = g.acq_ptr[i], g.acq_ptr[i + 1]
+            if hi > lo:
+                t = np.r_[g.node_time[lo:hi], g.node_time[hi - 1] + a.duration[i]]
+                ax.plot(t, np.r_[r0[lo:hi], r1[hi - 1]], color="0.8", lw=1.0, zorder=1)
+    elif a.attitude is not None:
+        for i in range(inst.n_acq):
+            ax.fill_between([a.vtw_start[i], a.vtw_end[i]], a.attitude[i, 0], a.attitude[i, 1], color="0.85", lw=0)
+    else:
+        for i in range(inst.n_acq):
+            ax.plot([a.vtw_start[i], a.vtw_end[i]], [i, i], color="0.8", lw=1.0)
+    ylabel = "roll (deg)" if rolls is not None or a.attitude is not None else "acquisition (no attitude data)"
+    for k, (label, sched) in enumerate(schedules.items()):
+        color = f"C{k}"
+        nodes = to_internal_nodes(inst, sched)
+        if rolls is not None:
+            ys, ye = rolls[0][nodes], rolls[1][nodes]
+        elif a.attitude is not None:
+            ys = ye = a.attitude[sched.acq, 2]
+        else:
+            ys = ye = sched.acq.astype(float)
+        ends = sched.start + a.duration[sched.acq]
+        for j in range(len(sched)):
+            ax.plot([sched.start[j], ends[j]], [ys[j], ye[j]], color=color, lw=3, zorder=3,
+                    label=f"{label} ({len(sched)} acq., {float(a.utility[sched.acq].sum()):.6g})" if j == 0 else None)
+            if j + 1 < len(sched):
+                ax.annotate("", xy=(sched.start[j + 1], ys[j + 1]), xytext=(ends[j], ye[j]),
+                            arrowprops={"arrowstyle": "->", "color": color, "lw": 1.0}, zorder=2)
+    ax.set_xlabel("time (s)")
+    ax.set_ylabel(ylabel)
+    ax.set_title(title or f"{inst.name}: {inst.n_acq} candidates")
+    if schedules:
+        ax.legend(loc="upper right", fontsize=8)
+    fig.tight_layout()
+    paths = [out.with_suffix(".png"), out.with_suffix(".svg")]
+    for p in paths:
+        fig.savefig(p, dpi=130)
+    plt.close(fig)
+    return paths
