@@ -230,6 +230,9 @@ class ModelConfig:
     heads: int = 4
     n_values: int = 1
     """Outputs of the value head: 1, or one per priority class for the lexicographic reward."""
+    value_scale: float = 0.0
+    """The value head's output is multiplied by this (and the value loss divided by its square), so
+    that returns of tens are learned as numbers of order 1; 0 = estimate it from random episodes."""
 
 
 MODEL_PRESETS: dict[str, dict[str, Any]] = {
@@ -265,7 +268,7 @@ class TrainConfig:
     clip_param: float = 0.2
     entropy_coeff: float = 0.01
     vf_loss_coeff: float = 0.5
-    grad_clip: float = 1.0
+    grad_clip: float = 10.0
     validate_every: int = 5
     """Iterations between validations (and always after the last one)."""
     checkpoint_every: int = 5

@@ -105,7 +105,7 @@ def main(argv: list[str] | None = None) -> int:
     from eosp.ray_utils import init_ray
     from models.checkpoint import agent_from_rllib_weights, load_agent, rllib_weights_from_agent, save_agent
     from training.plots import learning_curve
-    from training.ppo import ppo_config
+    from training.ppo import estimate_value_scale, ppo_config
     from training.validation import Validator
 
     torch.set_num_threads(1)
@@ -129,6 +129,9 @@ def main(argv: list[str] | None = None) -> int:
                                                                  "iterations": t.iterations, "resume": True}})
         t = cfg.train
     run_dir.mkdir(parents=True, exist_ok=True)
+    if cfg.model.value_scale <= 0:
+        cfg.model.value_scale = estimate_value_scale(cfg)
+        print(f"[train] value scale {cfg.model.value_scale:.3g} (mean return of random episodes)", flush=True)
 
     mlflow.set_tracking_uri(mlflow_uri(cfg))
     mlflow.set_experiment(t.experiment)

@@ -137,7 +137,7 @@ class EOSPAgent(nn.Module):
         node_part, global_part = stacked[:total], stacked[total:]
         logits = self.action_head(torch.cat([node_part, global_part[gb.batch]], dim=-1)).squeeze(-1)
         logits = torch.where(gb.mask, logits, torch.full_like(logits, MASKED))
-        return logits, self.value_head(global_part)
+        return logits, self.value_head(global_part) * (self.cfg.value_scale or 1.0)
 
     def padded_logits(self, logits: torch.Tensor, node_valid: torch.Tensor) -> torch.Tensor:
         """Scatter per-node logits back to the padded [B, N_max] layout (padding = MASKED)."""

@@ -1,8 +1,8 @@
 #!/usr/bin/env bash
 # Stop the platform started by scripts/platform-up.sh (or make platform-up).
 #
-# Stops exactly what platform-up.sh started: each service's process group (SIGTERM,
-# then SIGKILL after EOSP_PLATFORM_GRACE seconds [10]), then any process left that
+# Stops exactly what platform-up.sh started: each service's process group (SIGTERM to its
+# leader, then to the group, then SIGKILL, within EOSP_PLATFORM_GRACE seconds [10]), then any process left that
 # carries this platform's EOSP_PLATFORM_ID in its environment (Ray job drivers and
 # workers run in sessions of their own).  It never runs `ray stop`, which would kill
 # every Ray process on the machine, other users' local ray.init() sessions included.
@@ -81,14 +81,29 @@ def marked() -> list[int]:
     return out
 
 
+def wait_groups(groups: dict, seconds: float) -> None:
+    deadline = time.monotonic() + seconds
+    while time.monotonic() < deadline and any(group_alive(g) for g in groups.values()):
+        time.sleep(0.2)
+
+
+# 1. SIGTERM to each leader (`ray start --block` stops its own processes in order; mlflow its workers)
 groups = {}
 for name, svc in state["services"].items():
     if group_alive(svc["pgid"]) and leader_is_ours(svc["pid"]):
         groups[name] = svc["pgid"]
-        os.killpg(svc["pgid"], signal.SIGTERM)
-deadline = time.monotonic() + grace
-while time.monotonic() < deadline and any(group_alive(g) for g in groups.values()):
-    time.sleep(0.2)
+        try:
+            os.kill(svc["pid"], signal.SIGTERM)
+        except ProcessLookupError:
+            pass
+wait_groups(groups, grace / 2)
+# 2. SIGTERM to whatever is left in the groups, 3. then SIGKILL
+for g in groups.values():
+    try:
+        os.killpg(g, signal.SIGTERM)
+    except ProcessLookupError:
+        pass
+wait_groups(groups, grace / 2)
 for name, g in groups.items():
     if group_alive(g):
         print(f"platform-down: {name} still running after {grace:.0f} s: SIGKILL", file=sys.stderr)

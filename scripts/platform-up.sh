@@ -120,6 +120,15 @@ if [[ $AUTH_MODE == token && -z ${RAY_AUTH_TOKEN:-} && -z ${RAY_AUTH_TOKEN_PATH:
 fi
 
 export EOSP_PLATFORM_ID=$ID RAY_AUTH_MODE=$AUTH_MODE RAY_USAGE_STATS_ENABLED=0 OMP_NUM_THREADS=1
+case $HOST in
+    # Ray replaces a loopback --node-ip-address by the machine's address (and its gRPC servers then
+    # listen on every interface) unless it runs in single-machine mode, which this variable selects
+    127.*|localhost|::1) export RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER=0;;
+esac
+# on SIGTERM (platform-down), tear down at once instead of draining the node for 30 s
+export RAY_GRACEFUL_SHUTDOWN_DRAIN_TIMEOUT_S=${RAY_GRACEFUL_SHUTDOWN_DRAIN_TIMEOUT_S:-0}
+# MLflow 3 starts a job runner with seven consumer processes by default: not needed here
+export MLFLOW_SERVER_ENABLE_JOB_EXECUTION=${MLFLOW_SERVER_ENABLE_JOB_EXECUTION:-false}
 # job entry points run `python ...`: that must be the project's Python
 export PATH=$BIN:$PATH
 

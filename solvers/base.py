@@ -33,6 +33,7 @@ def objective_weights(inst: Instance, mode: str) -> np.ndarray:
 REGISTRY: dict[str, str] = {
     "random": "solvers.random_walk:solve",
     "policy": "solvers.policy:solve",
+    "mcts": "solvers.mcts:solve",
     "greedy": "solvers.greedy:solve",
     "ramp": "solvers.ramp:solve",
     "exact": "solvers.exact:solve",

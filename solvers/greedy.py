@@ -20,10 +20,12 @@ Order of the acquisitions:
 * ``utility`` mode: decreasing utility (the operational rule: a higher class is
   never sacrificed for lower ones), ties by index;
 * ``unitary`` mode: every acquisition is worth 1, so the order only serves the
-  count.  Increasing end of window (last possible start) first, then shorter
-  window first: the earliest-deadline rule that is optimal for interval
-  scheduling with unit weights, and on these instances the best of the simple
-  orders we tried (see ``order=`` to try others).
+  count: by increasing window start (chronological), ties to the shorter window.
+  Of the simple orders tried (``order=``: "start", "deadline" = increasing last
+  start, "window" = shortest window first, "index") it counted the most: mean
+  ratio to the optimum 0.90 / 0.85 (uniform / conflict, 100 acquisitions, 6
+  seeds) and 0.83 / 0.75 at 300, against 0.89 / 0.77 and 0.82 / 0.74 for
+  "deadline" and 0.83 / 0.71, 0.67 / 0.62 for "window".
 
 Best position: the one that postpones the acquisitions after it the least (sum
 of the start delays, which keeps the most room for later insertions), ties to
@@ -108,17 +110,19 @@ def insertion_order(inst: Instance, mode: str, order: str | None = None) -> np.n
     first = g.node_time[g.acq_ptr[:-1]]
     last = g.node_time[g.acq_ptr[1:] - 1]
     idx = np.arange(n)
-    order = order or ("utility" if mode == "utility" else "deadline")
+    order = order or ("utility" if mode == "utility" else "start")
     if order == "utility":
         keys = (idx, -objective_weights(inst, mode))
     elif order == "deadline":
         keys = (idx, last - first, last)
     elif order == "window":
         keys = (idx, last, last - first)
+    elif order == "start":
+        keys = (idx, last - first, first)
     elif order == "index":
         keys = (idx,)
     else:
-        raise ValueError(f"unknown greedy order {order!r} (utility, deadline, window, index)")
+        raise ValueError(f"unknown greedy order {order!r} (utility, deadline, start, window, index)")
     return np.lexsort(keys).astype(np.int32)
 
 

@@ -53,17 +53,27 @@ def max_open(graph: DiscreteGraph) -> int:
 
     An acquisition j in the open set at node w was visited at some t_j with
     first(j) <= t_j <= t_w < last(j), so within the last W = max(last - first)
-    seconds; consecutive visits are at least the shortest arc apart.
+    seconds; consecutive visits of a path are at least the shortest arc apart.
     """
     first = graph.node_time[graph.acq_ptr[:-1]]
     last = graph.node_time[graph.acq_ptr[1:] - 1]
     span = float(np.max(last - first)) if last.size else 0.0
-    src = graph.src()
-    inner = src > 0
-    if not np.any(inner):
+    gap = _min_inner_gap(graph.node_time, graph.indptr, graph.dst)
+    if not np.isfinite(gap):  # no arc between two acquisitions: paths of one node
         return 1
-    gap = float(np.min(graph.node_time[graph.dst[inner]] - graph.node_time[src[inner]]))
     return int(math.floor(span / max(gap, 1e-9))) + 2
+
+
+@numba.njit(cache=True)
+def _min_inner_gap(node_time, indptr, dst):
+    """Smallest t_dst - t_src over the arcs that do not leave the source."""
+    gap = np.inf
+    for u in range(1, node_time.shape[0]):
+        for a in range(indptr[u], indptr[u + 1]):
+            d = node_time[dst[a]] - node_time[u]
+            if d < gap:
+                gap = d
+    return gap
 
 
 @numba.njit(cache=True, inline="always")
@@ -283,7 +293,7 @@ class SearchResult:
 def label_search(graph: DiscreteGraph, weights: np.ndarray, *, beam: int = 0, incumbent: float = 0.0,
                  lam: np.ndarray | None = None, cbound: np.ndarray | None = None, unitary: bool = False,
                  time_limit: float | None = None, max_labels: int = 20_000_000,
-                 on_limit: str = "beam1") -> SearchResult:
+                 on_limit: str = "beam1", check_every: int = 250_000) -> SearchResult:
     """Sweep the graph with labels; see the module docstring.
 
     `beam` = 0: unlimited labels per node (exact DP).  `cbound`/`lam`: a completion
@@ -292,6 +302,7 @@ def label_search(graph: DiscreteGraph, weights: np.ndarray, *, beam: int = 0, in
     by a meaningful amount (1 in unitary mode, a relative 1e-12 otherwise) are cut.
     `on_limit`: at the time or label limit, "beam1" finishes the sweep with one
     label per node, "stop" returns at once (the result is then the best label seen).
+    The clock is read every `check_every` label extensions.
     """
     t0 = time.perf_counter()
     n_nodes = graph.n_nodes
@@ -325,7 +336,7 @@ def label_search(graph: DiscreteGraph, weights: np.ndarray, *, beam: int = 0, in
     deadline = None if time_limit is None else t0 + time_limit
     while True:
         pos, why = _sweep(pos, order, graph.indptr, graph.dst, graph.node_acq, graph.node_time, w, last, lam, cbound,
-                          gain_abs, gain_rel, beam, 2_000_000, val, par, lnode, lnext, sets, ssize, head, cnt, wval,
+                          gain_abs, gain_rel, beam, check_every, val, par, lnode, lnext, sets, ssize, head, cnt, wval,
                           state, inc, counters)
         if why == STOP_DONE:
             break
@@ -385,7 +396,7 @@ def _path(label: int, par: np.ndarray, lnode: np.ndarray) -> np.ndarray:
 
 
 def solve(inst: Instance, *, mode: str = "utility", time_limit: float | None = None, seed: int = 0,
-          beam: int = 16, pruned: bool = True, **_: object) -> Solution:
+          beam: int = 4, pruned: bool = True, **_: object) -> Solution:
     """RAMP with `beam` labels per node on the pruned (default) or unpruned graph."""
     g = inst.pruned() if pruned else inst.graph
     w = objective_weights(inst, mode)

@@ -7,6 +7,26 @@ from pathlib import Path
 from eosp.config import RunConfig, to_dict
 
 
+def estimate_value_scale(cfg: RunConfig, episodes: int = 8) -> float:
+    """Mean return of random episodes on training instances: the scale of the value targets."""
+    import numpy as np
+
+    from envs.eosp_env import EOSPEnv
+    from envs.sources import ShardSource, expand_shards
+
+    env = EOSPEnv(cfg.env, source=ShardSource(expand_shards([cfg.train.train_data]), max_cached=episodes,
+                                             prune=cfg.env.prune))
+    returns = []
+    for ep in range(episodes):
+        env.reset(seed=cfg.train.seed + ep)
+        total, done = 0.0, not env.action_mask().any()
+        while not done:
+            _, r, done, _, _ = env.step(env.action_space.sample())
+            total += r
+        returns.append(total)
+    return float(max(1.0, np.mean(returns)))
+
+
 def ppo_config(cfg: RunConfig):
     from ray.rllib.algorithms.ppo import PPOConfig
     from ray.rllib.core.rl_module.rl_module import RLModuleSpec
@@ -15,6 +35,7 @@ def ppo_config(cfg: RunConfig):
     from training.rl_module import EOSPTorchRLModule
 
     t = cfg.train
+    scale = cfg.model.value_scale or 1.0
     env_config = to_dict(cfg.env)
     env_config["shards"] = [str(Path(t.train_data).resolve())]
     env_config["seed"] = t.seed
@@ -29,8 +50,9 @@ def ppo_config(cfg: RunConfig):
         .rl_module(rl_module_spec=RLModuleSpec(module_class=EOSPTorchRLModule, model_config=to_dict(cfg.model)))
         .training(train_batch_size_per_learner=t.train_batch_size, minibatch_size=t.minibatch_size,
                   num_epochs=t.num_epochs, lr=t.lr, gamma=t.gamma, lambda_=t.gae_lambda, clip_param=t.clip_param,
-                  entropy_coeff=t.entropy_coeff, vf_loss_coeff=t.vf_loss_coeff, vf_clip_param=1e6,
+                  entropy_coeff=t.entropy_coeff, vf_loss_coeff=t.vf_loss_coeff / scale**2, vf_clip_param=1e12,
                   grad_clip=t.grad_clip, use_kl_loss=False)
+        .fault_tolerance(restart_failed_env_runners=True)
         .debugging(seed=t.seed, log_level="WARN")
         .reporting(metrics_num_episodes_for_smoothing=20)
     )

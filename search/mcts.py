@@ -1,0 +1,177 @@
+"""Monte Carlo tree search with the learned policy and value (PUCT), as a small library.
+
+No Ray here: :func:`search` takes an environment (for its cheap ``snapshot`` /
+``restore``) and an ``evaluate(obs) -> (logits, value)`` function, and returns
+the action to play; :func:`solve` plays a whole episode with it.
+
+* Selection: PUCT, ``argmax_a Q(s, a) + c_puct P(s, a) sqrt(N(s)) / (1 + N(s, a))``,
+  with Q normalized to [0, 1] by the smallest and largest values seen in the tree
+  (returns are in reward units: tens of acquisitions, or normalized utility).
+* Expansion: a new node gets the network's priors and its value estimate; no
+  random rollouts.  Terminal nodes are worth 0 to go.
+* Unexplored children take their parent's value estimate as Q (the paper's choice:
+  an infinite value would force visiting every child of a 100-way node first).
+* Backup: along the path, G = reward + G; visit counts and value sums.
+* Decision: the most visited root action (ties: the higher Q, then the lower
+  index).  The subtree under it is kept for the next decision.
+* The best complete episode met during the search is remembered; :func:`solve`
+  returns it if it beats the episode actually played.
+
+Deterministic: no randomness is involved, so the same inputs give the same
+schedule (``seed`` only feeds optional Dirichlet noise at the root).
+With ``num_simulations=0`` the search returns the policy's argmax.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Callable
+
+import numpy as np
+
+Evaluate = Callable[[dict], tuple[np.ndarray, float]]
+
+
+@dataclass
+class Node:
+    snapshot: object
+    actions: np.ndarray  # allowed actions
+    prior: np.ndarray  # P(s, a) over `actions`
+    value: float  # network estimate of the return to go
+    terminal: bool
+    visits: np.ndarray = field(default=None)  # N(s, a)
+    value_sum: np.ndarray = field(default=None)  # W(s, a): sum of (reward + return below)
+    reward: np.ndarray = field(default=None)  # r(s, a) once expanded
+    children: dict = field(default_factory=dict)  # action index -> Node
+    path_reward: float = 0.0  # rewards from the start of the episode to here
+    parent: "Node | None" = None
+    action: int = -1  # the action leading here from the parent
+
+    def __post_init__(self):
+        k = len(self.actions)
+        self.visits = np.zeros(k, dtype=np.int64)
+        self.value_sum = np.zeros(k)
+        self.reward = np.zeros(k)
+
+
+@dataclass
+class SearchStats:
+    simulations: int = 0
+    expansions: int = 0
+    best_return: float = -math.inf
+    best_leaf: Node | None = None  # the best terminal node met (complete episode)
+
+    def best_actions(self) -> list[int]:
+        out, node = [], self.best_leaf
+        while node is not None and node.parent is not None:
+            out.append(node.action)
+            node = node.parent
+        return out[::-1]
+
+
+class MinMax:
+    def __init__(self):
+        self.lo, self.hi = math.inf, -math.inf
+
+    def update(self, q: float) -> None:
+        self.lo, self.hi = min(self.lo, q), max(self.hi, q)
+
+    def norm(self, q: np.ndarray) -> np.ndarray:
+        if self.hi > self.lo:
+            return (q - self.lo) / (self.hi - self.lo)
+        return np.zeros_like(q)
+
+
+def _softmax_prior(logits: np.ndarray, actions: np.ndarray) -> np.ndarray:
+    z = logits[actions] - logits[actions].max()
+    p = np.exp(z)
+    return p / p.sum()
+
+
+def make_node(env, obs: dict, evaluate: Evaluate, path_reward: float, terminal: bool,
+              parent: Node | None = None, action: int = -1) -> Node:
+    actions = np.flatnonzero(obs["action_mask"])
+    if terminal or actions.size == 0:
+        return Node(env.snapshot(), actions, np.zeros(0), 0.0, True, path_reward=path_reward, parent=parent,
+                    action=action)
+    logits, value = evaluate(obs)
+    return Node(env.snapshot(), actions, _softmax_prior(logits, actions), float(value), False,
+                path_reward=path_reward, parent=parent, action=action)
+
+
+def _select(node: Node, c_puct: float, minmax: MinMax) -> int:
+    n = node.visits
+    q = np.where(n > 0, node.value_sum / np.maximum(n, 1), node.value)  # unexplored: the parent's value
+    score = minmax.norm(q) + c_puct * node.prior * math.sqrt(max(1, n.sum())) / (1 + n)
+    return int(np.argmax(score))  # first maximum: deterministic
+
+
+def search(env, root: Node, evaluate: Evaluate, *, num_simulations: int, c_puct: float = 1.25,
+           stats: SearchStats | None = None) -> int:
+    """Run `num_simulations` simulations from `root` (the env's current state); return an index into
+    ``root.actions``.  The environment is left in the root's state."""
+    stats = stats or SearchStats()
+    minmax = MinMax()
+    if num_simulations <= 0 or root.terminal:
+        return int(np.argmax(root.prior)) if root.actions.size else -1
+    for _ in range(num_simulations):
+        node, path = root, []
+        while True:
+            k = _select(node, c_puct, minmax)
+            path.append((node, k))
+            child = node.children.get(k)
+            if child is None:
+                env.restore(node.snapshot)
+                obs, r, done, _, _ = env.step(int(node.actions[k]))
+                node.reward[k] = r
+                child = make_node(env, obs, evaluate, node.path_reward + r, done, node, int(node.actions[k]))
+                node.children[k] = child
+                stats.expansions += 1
+                break
+            if child.terminal:
+                break
+            node = child
+        leaf = path[-1][0].children[path[-1][1]]
+        g = leaf.value
+        if leaf.terminal and leaf.path_reward > stats.best_return:
+            stats.best_return = leaf.path_reward
+            stats.best_leaf = leaf
+        for parent, k in reversed(path):
+            g = parent.reward[k] + g
+            parent.visits[k] += 1
+            parent.value_sum[k] += g
+            minmax.update(parent.value_sum[k] / parent.visits[k])
+        stats.simulations += 1
+    env.restore(root.snapshot)
+    n = root.visits
+    q = np.where(n > 0, root.value_sum / np.maximum(n, 1), -np.inf)
+    best = np.flatnonzero(n == n.max())
+    return int(best[np.argmax(q[best])])
+
+
+def solve(env, evaluate: Evaluate, *, num_simulations: int, c_puct: float = 1.25, reuse_tree: bool = True,
+          seed: int = 0) -> tuple[np.ndarray, float, SearchStats]:
+    """Play one episode from the env's reset state with MCTS before each decision.
+
+    Returns the scheduled nodes, the episode's return in reward units, and search statistics.
+    """
+    obs, _ = env.reset(seed=seed)
+    stats = SearchStats()
+    root = make_node(env, obs, evaluate, 0.0, not obs["action_mask"].any())
+    while not root.terminal:
+        k = search(env, root, evaluate, num_simulations=num_simulations, c_puct=c_puct, stats=stats)
+        child = root.children.get(k) if reuse_tree else None
+        obs, r, done, _, _ = env.step(int(root.actions[k]))
+        if child is None:
+            child = make_node(env, obs, evaluate, root.path_reward + r, done, root, int(root.actions[k]))
+        root = child
+        env.restore(root.snapshot)
+    nodes, total = env.path(), root.path_reward
+    if stats.best_leaf is not None and stats.best_return > total + 1e-9 * max(1.0, abs(total)):
+        # a complete episode met during the search beats the one played: that is the answer
+        env.reset(seed=seed)
+        for a in stats.best_actions():
+            env.step(a)
+        nodes, total = env.path(), stats.best_return
+    return nodes, total, stats

@@ -1,0 +1,241 @@
+"""Baseline solvers: exact against brute force, heuristics below it, bounds above it,
+every schedule through the independent checker, greedy's never-remove rule."""
+
+import math
+
+import numpy as np
+import pytest
+
+from eosp.cli import main as cli_main
+from instances.interchange import write_instance
+from instances.schedule import check, from_internal_nodes, read_schedule
+from solvers import exact, greedy, ramp
+from solvers.base import get_solver, objective_weights
+from solvers.bound import completion_bound, lagrangian, togo_pass, topological_order, upper_bound
+from solvers.ramp import label_search
+from tests.conftest import generated
+from tests.synthetic import all_paths, synthetic_instance
+
+MODES = ("utility", "unitary")
+SOLVERS = {"greedy": greedy.solve, "ramp": ramp.solve, "exact": exact.solve}
+
+# Tiny instances the brute force enumerates in well under a second: synthetic ones
+# (random non-FIFO transitions) and generated ones with a 5 s step (clusters and
+# conflict have several targets visible at once, uniform mostly not).
+TINY = [("synthetic", 8, s) for s in range(4)] + [("synthetic", 10, s) for s in range(3)] + \
+       [(f, n, s) for f in ("clusters", "conflict", "uniform") for n in (8, 12) for s in range(2)]
+
+
+def tiny_instance(family, n, seed):
+    if family == "synthetic":
+        return synthetic_instance(n, seed)
+    return generated(family, n, seed, 5.0)
+
+
+def brute_force(inst, mode):
+    """Best value over every path of the unpruned graph that repeats no acquisition."""
+    w = objective_weights(inst, mode)
+    return max(math.fsum(w[inst.graph.node_acq[p]].tolist()) for p in all_paths(inst))
+
+
+def assert_valid(inst, sol, mode):
+    """The path passes the checker and its value is the one reported."""
+    verdict = check(inst, from_internal_nodes(inst, sol.nodes))
+    assert verdict.feasible, verdict.reason
+    w = objective_weights(inst, mode)
+    assert sol.value == pytest.approx(math.fsum(w[inst.graph.node_acq[sol.nodes]].tolist()), rel=1e-12, abs=1e-12)
+    g = inst.graph
+    for u, v in zip(np.concatenate([[0], sol.nodes[:-1]]), sol.nodes):  # consecutive nodes are arcs
+        assert g.successor(int(u), int(g.node_acq[v])) == v
+
+
+@pytest.mark.parametrize("family,n,seed", TINY)
+@pytest.mark.parametrize("mode", MODES)
+def test_exact_equals_brute_force_and_bounds_heuristics(family, n, seed, mode):
+    inst = tiny_instance(family, n, seed)
+    best = brute_force(inst, mode)
+    sols = {name: solve(inst, mode=mode) for name, solve in SOLVERS.items()}
+    for sol in sols.values():
+        assert_valid(inst, sol, mode)
+    assert sols["exact"].value == pytest.approx(best, rel=1e-12)
+    assert sols["exact"].info["status"] == "optimal"
+    assert sols["greedy"].value <= best * (1 + 1e-12)
+    assert sols["ramp"].value <= best * (1 + 1e-12)
+    assert upper_bound(inst, mode) >= best * (1 - 1e-12)
+
+
+@pytest.mark.parametrize("n,seed", [(8, 0), (10, 1), (12, 2)])
+def test_unbounded_label_search_is_exact(n, seed):
+    """With no beam the label DP on the unpruned graph is the exact optimum, without any bound."""
+    inst = synthetic_instance(n, seed)
+    for mode in MODES:
+        res = label_search(inst.graph, objective_weights(inst, mode), beam=0)
+        assert res.complete
+        assert res.value == pytest.approx(brute_force(inst, mode), rel=1e-12)
+
+
+@pytest.mark.parametrize("family,n,seed", [("synthetic", 10, 0), ("conflict", 12, 0), ("clusters", 30, 1)])
+def test_pruned_graph_with_waiting_bounds_the_unpruned_relaxation(family, n, seed):
+    """The Lagrangian pass on the pruned graph with waiting equals the unpruned one with
+    waiting, and is never below the unpruned one without (for any 0 <= lam <= w)."""
+    inst = tiny_instance(family, n, seed) if n <= 12 else generated(family, n, seed, 2.0)
+    rng = np.random.default_rng(seed)
+    w = objective_weights(inst, "utility")
+    for _ in range(5):
+        cost = w * (1.0 - rng.uniform(0, 1, w.size))
+        out = []
+        for g, wait in ((inst.pruned(), True), (inst.graph, True), (inst.graph, False)):
+            togo = np.zeros(g.n_nodes)
+            nxt = np.zeros(g.n_nodes, np.int32)
+            out.append(togo_pass(topological_order(g), g.indptr, g.dst, g.node_acq, cost, togo, nxt, wait))
+        assert out[0] == pytest.approx(out[1], rel=1e-12)
+        assert out[0] >= out[2] * (1 - 1e-12)
+
+
+@pytest.mark.parametrize("family,seed", [("uniform", 0), ("conflict", 1)])
+@pytest.mark.parametrize("mode", MODES)
+def test_solvers_on_a_30_acquisition_instance(family, seed, mode):
+    inst = generated(family, 30, seed, 2.0)
+    sols = {name: solve(inst, mode=mode) for name, solve in SOLVERS.items()}
+    for sol in sols.values():
+        assert_valid(inst, sol, mode)
+    e = sols["exact"]
+    assert e.info["status"] == "optimal" and e.info["gap"] == 0.0
+    assert sols["greedy"].value <= e.value * (1 + 1e-12)
+    assert sols["ramp"].value <= e.value * (1 + 1e-12)
+    lb = lagrangian(inst.pruned(), objective_weights(inst, mode), wait=True, iterations=50)
+    assert lb.bound >= e.value * (1 - 1e-12)
+
+
+@pytest.mark.parametrize("family,n,seed", [("synthetic", 10, 2), ("conflict", 12, 0), ("conflict", 30, 1)])
+@pytest.mark.parametrize("mode", MODES)
+def test_greedy_never_removes_an_acquisition(family, n, seed, mode):
+    inst = tiny_instance(family, n, seed) if n <= 12 else generated(family, n, seed, 2.0)
+    sol = greedy.solve(inst, mode=mode)
+    trace = sol.info["trace"]
+    assert sorted(trace[:, 0].tolist()) == list(range(inst.n_acq))  # every acquisition considered once
+    if mode == "utility":  # by decreasing utility
+        assert np.all(np.diff(inst.acqs.utility[trace[:, 0]]) <= 0)
+    seq: list[int] = []
+    for acq, pos in trace.tolist():
+        if pos >= 0:
+            assert 0 <= pos <= len(seq)
+            seq.insert(pos, acq)
+    # replaying the insertions gives the final sequence: nothing was ever removed
+    assert seq == inst.graph.node_acq[sol.nodes].tolist()
+    assert_valid(inst, sol, mode)
+
+
+def earliest_starts(g, seq):
+    """Nodes of a sequence of acquisitions, each as early as its predecessor allows (None: infeasible)."""
+    nodes, cur = [], 0
+    for acq in seq:
+        cur = g.successor(cur, acq)
+        if cur < 0:
+            return None
+        nodes.append(cur)
+    return nodes
+
+
+@pytest.mark.parametrize("family,n,seed", [("conflict", 30, 1), ("clusters", 30, 0)])
+def test_greedy_postpones_but_keeps(family, n, seed):
+    """Replaying the trace: every intermediate sequence is feasible, keeps all the
+    acquisitions before it, and some insertion moves an acquisition already placed."""
+    inst = generated(family, n, seed, 2.0)
+    g = inst.graph
+    seq: list[int] = []
+    starts: dict[int, float] = {}
+    moved = 0
+    for acq, pos in greedy.solve(inst).info["trace"].tolist():
+        if pos < 0:
+            continue
+        seq.insert(pos, acq)
+        nodes = earliest_starts(g, seq)
+        assert nodes is not None
+        new = {a: float(g.node_time[v]) for a, v in zip(seq, nodes)}
+        assert set(starts) <= set(new)
+        moved += sum(new[a] != t for a, t in starts.items())
+        starts = new
+    assert moved > 0
+
+
+@pytest.mark.parametrize("mode", MODES)
+def test_exact_limits_report_a_valid_bound(mode):
+    inst = generated("clusters", 30, 2, 2.0)
+    full = exact.solve(inst, mode=mode)
+    assert full.info["status"] == "optimal"
+    for kw in ({"time_limit": 1e-3}, {"max_labels": 50, "lagrangian_iterations": 2}):
+        cut = exact.solve(inst, mode=mode, **kw)
+        assert cut.info["status"] in (("optimal", "time_limit") if "time_limit" in kw else ("time_limit",))
+        assert_valid(inst, cut, mode)
+        assert cut.value <= full.value * (1 + 1e-12)
+        assert cut.info["bound"] >= full.value * (1 - 1e-12)
+        assert cut.info["gap"] == pytest.approx(max(0.0, (cut.info["bound"] - cut.value) / cut.info["bound"]))
+
+
+@pytest.mark.parametrize("n,seed", [(10, 0), (12, 3)])
+def test_interrupted_label_search_bounds_the_optimum(n, seed):
+    """Stopped early (out of label memory), max(best label, best bound of the labels
+    not swept yet) is still >= the optimum."""
+    inst = synthetic_instance(n, seed)
+    for mode in MODES:
+        w = objective_weights(inst, mode)
+        best = brute_force(inst, mode)
+        lb = lagrangian(inst.pruned(), w, wait=True, iterations=3)
+        cb = completion_bound(lb, inst.pruned())
+        stopped = 0
+        for cap in (12, 16, 20, 24):
+            res = label_search(inst.graph, w, beam=0, lam=lb.lam, cbound=cb, max_labels=cap, on_limit="stop")
+            stopped += not res.complete
+            assert max(res.value, res.frontier_bound) >= best * (1 - 1e-12)
+        assert stopped
+
+
+def test_ramp_time_limit_still_gives_a_complete_schedule():
+    inst = generated("conflict", 30, 0, 2.0)
+    w = objective_weights(inst, "unitary")
+    full = label_search(inst.pruned(), w, beam=64)
+    cut = label_search(inst.pruned(), w, beam=64, time_limit=0.0, check_every=1000)
+    assert full.complete and not cut.complete
+    assert 0 < cut.value <= full.value
+    sol = ramp.solve(inst, mode="unitary", beam=64, time_limit=0.0)
+    assert_valid(inst, sol, "unitary")
+    assert sol.value > 0
+
+
+@pytest.mark.parametrize("pruned", [True, False])
+@pytest.mark.parametrize("beam", [1, 4])
+def test_ramp_graph_and_beam_options(pruned, beam):
+    inst = generated("clusters", 30, 0, 2.0)
+    for mode in MODES:
+        sol = ramp.solve(inst, mode=mode, beam=beam, pruned=pruned)
+        assert_valid(inst, sol, mode)
+        assert sol.info["complete"]
+
+
+@pytest.mark.parametrize("name", ["greedy", "ramp", "exact"])
+def test_cli_solve_through_the_registry(tmp_path, name, capsys):
+    inst = generated("uniform", 12, 1, 2.0)
+    write_instance(inst, tmp_path / "inst")
+    out = tmp_path / f"{name}.parquet"
+    assert cli_main(["solve", str(tmp_path / "inst"), "--solver", name, "--out", str(out), "--mode", "unitary"]) == 0
+    sched = read_schedule(out)
+    assert check(inst, sched).feasible
+    assert len(sched) == get_solver(name)(inst, mode="unitary").value
+    if name == "exact":
+        assert "status optimal" in capsys.readouterr().out
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("family", ["uniform", "conflict"])
+def test_exact_at_100_acquisitions(family):
+    from eosp.config import family_config
+    from instances.generator import generate
+
+    inst = generate(family_config(family, 100, 0))
+    for mode in MODES:
+        e = exact.solve(inst, mode=mode, time_limit=300)
+        assert e.info["status"] == "optimal"
+        assert_valid(inst, e, mode)
+        assert greedy.solve(inst, mode=mode).value <= e.value * (1 + 1e-12)
+        assert ramp.solve(inst, mode=mode).value <= e.value * (1 + 1e-12)
