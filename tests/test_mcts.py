@@ -1,0 +1,63 @@
+"""MCTS: budget 0 is the policy, a large budget finds the optimum of a tiny instance, determinism."""
+
+import numpy as np
+import pytest
+import torch
+
+from envs.sources import prepare_instance
+from eosp.config import EnvConfig, ModelConfig
+from models.agent import EOSPAgent
+from search.mcts import solve as mcts_solve
+from solvers.policy import evaluate, make_env_for, rollout
+from tests.conftest import generated
+from tests.synthetic import all_paths, synthetic_instance
+
+torch.set_num_threads(1)
+
+
+@pytest.fixture(scope="module")
+def agent():
+    torch.manual_seed(3)
+    return EOSPAgent(ModelConfig(hidden_dim=8, n_layers=2, heads=1)).eval()
+
+
+def run(agent, inst, budget, reward="utility", seed=0):
+    cfg = EnvConfig(reward=reward)
+    env = make_env_for(prepare_instance(inst), cfg)
+    return mcts_solve(env, lambda o: (lambda lv: (lv[0], float(lv[1][0])))(evaluate(agent, o)),
+                      num_simulations=budget, seed=seed)
+
+
+def test_budget_zero_is_the_policy_argmax(agent):
+    inst = generated("uniform", 30, 2)
+    nodes, _, stats = run(agent, inst, 0)
+    ref, _ = rollout(agent, prepare_instance(inst), EnvConfig(reward="utility"))
+    np.testing.assert_array_equal(nodes, ref)
+    assert stats.simulations == 0
+
+
+@pytest.mark.parametrize("seed", [1, 2, 3, 4])
+def test_large_budget_finds_the_optimum_of_a_tiny_instance(agent, seed):
+    inst = synthetic_instance(6, seed)
+    best = max(inst.acqs.utility[inst.graph.node_acq[p]].sum() if p else 0.0
+               for p in all_paths(inst, inst.pruned()))
+    nodes, ret, _ = run(agent, inst, 400)
+    value = inst.acqs.utility[inst.graph.node_acq[nodes]].sum()
+    assert value == pytest.approx(best, rel=1e-12) and ret == pytest.approx(best, rel=1e-9)
+    from solvers.exact import solve as exact
+
+    assert value <= exact(inst, time_limit=30).value * (1 + 1e-12)
+
+
+def test_same_seed_same_result(agent):
+    inst = generated("clusters", 30, 1)
+    a = run(agent, inst, 8, seed=5)
+    b = run(agent, inst, 8, seed=5)
+    np.testing.assert_array_equal(a[0], b[0])
+    assert a[1] == b[1] and a[2].expansions == b[2].expansions
+
+
+def test_search_beats_or_matches_the_policy(agent):
+    inst = generated("uniform", 30, 4)
+    pol = run(agent, inst, 0, reward="unitary")[1]
+    assert run(agent, inst, 20, reward="unitary")[1] >= pol
