@@ -19,11 +19,13 @@ def estimate_value_scale(cfg: RunConfig, episodes: int = 8) -> float:
     returns = []
     for ep in range(episodes):
         env.reset(seed=cfg.train.seed + ep)
-        total, done = 0.0, not env.action_mask().any()
+        total, per_class, done = 0.0, 0.0, not env.action_mask().any()
         while not done:
-            _, r, done, _, _ = env.step(env.action_space.sample())
+            _, r, done, _, info = env.step(env.action_space.sample())
             total += r
-        returns.append(total)
+            per_class = per_class + info.get("reward_vector", 0.0)
+        # lexicographic: the heads learn per-class counts, scaled by the largest one
+        returns.append(float(np.max(per_class)) if cfg.env.reward == "lexicographic" else total)
     return float(max(1.0, np.mean(returns)))
 
 
@@ -39,6 +41,11 @@ def ppo_config(cfg: RunConfig):
     env_config = to_dict(cfg.env)
     env_config["shards"] = [str(Path(t.train_data).resolve())]
     env_config["seed"] = t.seed
+    learner = {}
+    if cfg.env.reward == "lexicographic":
+        from training.lexicographic import LexicographicPPOLearner
+
+        learner = {"learner_class": LexicographicPPOLearner}
     pc = (
         PPOConfig()
         .environment(env=EOSPEnv, env_config=env_config, disable_env_checking=True)
@@ -46,7 +53,7 @@ def ppo_config(cfg: RunConfig):
         .env_runners(num_env_runners=t.num_env_runners, num_envs_per_env_runner=t.num_envs_per_env_runner,
                      num_cpus_per_env_runner=1, rollout_fragment_length="auto",
                      gym_env_vectorize_mode="sync")
-        .learners(num_learners=0)
+        .learners(num_learners=0, **learner)
         .rl_module(rl_module_spec=RLModuleSpec(module_class=EOSPTorchRLModule, model_config=to_dict(cfg.model)))
         .training(train_batch_size_per_learner=t.train_batch_size, minibatch_size=t.minibatch_size,
                   num_epochs=t.num_epochs, lr=t.lr, gamma=t.gamma, lambda_=t.gae_lambda, clip_param=t.clip_param,

@@ -47,5 +47,5 @@ class EOSPTorchRLModule(TorchRLModule, ValueFunctionAPI):
     def compute_values(self, batch: dict[str, Any], embeddings: Any | None = None) -> torch.Tensor:
         if embeddings is None:
             _, embeddings = self._run(batch)
-        # scalar value for PPO: the first head (lexicographic learners read all heads)
-        return embeddings[..., 0]
+        # one head: PPO's scalar value; several (lexicographic reward): all of them, [B, classes]
+        return embeddings[..., 0] if embeddings.shape[-1] == 1 else embeddings
