@@ -27,3 +27,10 @@ test-all: install
 bench: install
 	$(PY) benchmarks/bench_graphs.py
 	$(PY) benchmarks/bench_env.py
+
+# local Ray head + MLflow server on 127.0.0.1 (state, ports and logs in .platform/; see platform/README.md)
+platform-up: install
+	scripts/platform-up.sh
+
+platform-down:
+	scripts/platform-down.sh

@@ -314,3 +314,21 @@ class EvalConfig:
     save_schedules: bool = True
     mlflow_uri: str = ""
     experiment: str = "eosp-eval"
+
+
+@dataclass
+class TuneConfig:
+    """Ray Tune sweep over the architecture and the learning rate (jobs/tune.py)."""
+
+    name: str = "sweep"
+    """Sweep name: runs in RUN_DIR/tune/NAME, one MLflow parent run of that name."""
+    hidden_dims: tuple[int, ...] = (16, 32)
+    n_layers: tuple[int, ...] = (2, 3)
+    lrs: tuple[float, ...] = (1e-3,)
+    num_samples: int = 1
+    """Repeats of the grid (with different seeds)."""
+    metric: str = "val/policy_mean"
+    """Reported metric the scheduler and the best-trial choice maximize."""
+    grace_period: int = 2
+    """ASHA: iterations every trial runs before it can be stopped."""
+    cpus_per_trial: int = 1

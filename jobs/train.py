@@ -47,6 +47,8 @@ def parse(argv: list[str] | None) -> tuple[RunConfig, argparse.Namespace]:
                                 formatter_class=argparse.RawDescriptionHelpFormatter, epilog=__doc__)
     p.add_argument("--demo", action="store_true",
                    help="small embedded defaults: build a tiny data set if missing, train briefly, compare to Greedy")
+    p.add_argument("--config", default="", help="a RunConfig JSON (e.g. a sweep's best_config.json) used as the "
+                                                "base; flags given on the command line apply on top")
     add_config_args(p, RunConfig)
     ns = p.parse_args(argv)
     if ns.demo:
@@ -56,7 +58,11 @@ def parse(argv: list[str] | None) -> tuple[RunConfig, argparse.Namespace]:
     preset = vars(ns).get("train.preset", "cpu")
     if preset not in MODEL_PRESETS:
         p.error(f"unknown preset {preset!r}; one of {', '.join(MODEL_PRESETS)}")
-    base = RunConfig(model=from_dict(ModelConfig, MODEL_PRESETS[preset]))
+    if ns.config:
+        base = from_dict(RunConfig, json.loads(Path(ns.config).read_text()))
+        base.train.resume, base.train.run_name = False, ""
+    else:
+        base = RunConfig(model=from_dict(ModelConfig, MODEL_PRESETS[preset]))
     cfg = config_from_args(RunConfig, ns, base=base)
     if cfg.env.reward == "lexicographic":
         cfg.model.n_values = max(cfg.model.n_values, 7)
@@ -79,23 +85,6 @@ def ensure_demo_data(cfg: RunConfig) -> None:
                                 seed=seed), cfg.ray)
 
 
-def iteration_metrics(r: dict, prev_steps: int) -> tuple[dict[str, float], int]:
-    er = r.get("env_runners", {})
-    lr = r.get("learners", {}).get("default_policy", {})
-    steps = int(r.get("num_env_steps_sampled_lifetime", 0))
-    dt = float(r.get("time_this_iter_s", 0.0)) or 1e-9
-    out = {
-        "train/episode_return_mean": er.get("episode_return_mean"),
-        "train/episode_len_mean": er.get("episode_len_mean"),
-        "train/policy_loss": lr.get("policy_loss"), "train/vf_loss": lr.get("vf_loss"),
-        "train/entropy": lr.get("entropy"), "train/vf_explained_var": lr.get("vf_explained_var"),
-        "train/total_loss": lr.get("total_loss"),
-        "perf/iteration_s": dt, "perf/env_steps_per_s": (steps - prev_steps) / dt,
-        "perf/env_steps_lifetime": steps,
-    }
-    return {k: float(v) for k, v in out.items() if v is not None and v == v}, steps
-
-
 def main(argv: list[str] | None = None) -> int:
     cfg, ns = parse(argv)
     import mlflow
@@ -103,9 +92,10 @@ def main(argv: list[str] | None = None) -> int:
     import torch
 
     from eosp.ray_utils import init_ray
-    from models.checkpoint import agent_from_rllib_weights, load_agent, rllib_weights_from_agent, save_agent
+    from models.checkpoint import load_agent, save_agent
+    from training.loop import Trainer
     from training.plots import learning_curve
-    from training.ppo import estimate_value_scale, ppo_config
+    from training.ppo import estimate_value_scale
     from training.validation import Validator
 
     torch.set_num_threads(1)
@@ -149,32 +139,23 @@ def main(argv: list[str] | None = None) -> int:
         with atomic_path(run_file) as tmp:
             tmp.write_text(json.dumps(state, indent=1))
 
-    algo = ppo_config(cfg).build_algo()
-    if t.resume and (ckpt_dir / "last").exists():
-        agent, _, _ = load_agent(ckpt_dir / "last")
-        algo.learner_group.set_weights({"default_policy": rllib_weights_from_agent(agent)})
-        algo.env_runner_group.sync_weights(from_worker_or_learner_group=algo.learner_group, inference_only=True)
-        print(f"[train] resumed {t.run_name} at iteration {start_iter}", flush=True)
+    # baselines first: their Ray tasks need the CPUs that the env runners will hold
     validator = Validator(t.val_data, cfg.env) if t.val_data else None
     if validator:
         base = {f"val/{s}_mean": float(v.mean()) for s, v in validator.baselines.items()}
         mlflow.log_metrics(base, step=0)
+    trainer = Trainer(cfg, validator)
+    if t.resume and (ckpt_dir / "last").exists():
+        trainer.load(load_agent(ckpt_dir / "last")[0])
+        print(f"[train] resumed {t.run_name} at iteration {start_iter}", flush=True)
 
-    steps = 0
     t_start = time.perf_counter()
     for it in range(start_iter, t.iterations):
-        r = algo.train()
-        metrics, steps = iteration_metrics(r, steps)  # the algorithm is new in every session: lifetime from 0
         last = it + 1 == t.iterations
-        agent = None
-        if validator and ((it + 1) % t.validate_every == 0 or last):
-            agent = agent_from_rllib_weights(algo.learner_group.get_weights()["default_policy"], cfg.model)
-            res = validator.run(agent)
-            metrics.update(res.metrics)
-            score = res.metrics["val/policy_mean"]
-            if score > best:
-                best = score
-                save_agent(agent, ckpt_dir / "best", cfg.env, {"iteration": it + 1, "val": res.metrics})
+        metrics, agent = trainer.train(validate=(it + 1) % t.validate_every == 0 or last)
+        if agent is not None and metrics["val/policy_mean"] > best:
+            best = metrics["val/policy_mean"]
+            save_agent(agent, ckpt_dir / "best", cfg.env, {"iteration": it + 1, "val": metrics})
         mlflow.log_metrics(metrics, step=it + 1)
         history.append({"iteration": it + 1, **metrics})
         print(f"[train] iteration {it + 1}/{t.iterations}: return {metrics.get('train/episode_return_mean', 0):.3f}"
@@ -182,7 +163,7 @@ def main(argv: list[str] | None = None) -> int:
               + (f", val ratio to greedy {metrics['val/ratio_to_greedy']:.4f} to ramp {metrics['val/ratio_to_ramp']:.4f}"
                  if "val/ratio_to_greedy" in metrics else ""), flush=True)
         if (it + 1) % t.checkpoint_every == 0 or last:
-            agent = agent or agent_from_rllib_weights(algo.learner_group.get_weights()["default_policy"], cfg.model)
+            agent = agent or trainer.agent()
             save_agent(agent, ckpt_dir / "last", cfg.env, {"iteration": it + 1})
             save_state(it + 1)
     wall = time.perf_counter() - t_start
@@ -197,7 +178,7 @@ def main(argv: list[str] | None = None) -> int:
         log_agent_model(final)
     mlflow.log_metric("perf/train_wall_s", wall)
     mlflow.end_run()
-    algo.stop()
+    trainer.stop()
     summary = history[-1] if history else {}
     print(f"[train] done: {t.run_name}, {len(history)} iterations this session in {wall:.0f} s; "
           f"checkpoints in {ckpt_dir}")

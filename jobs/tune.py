@@ -1,0 +1,172 @@
+"""Ray Tune sweep over hidden_dim, n_layers and the learning rate, with ASHA, tracked in MLflow.
+
+    python jobs/tune.py --tune.name arch --tune.hidden-dims 16 32 64 --tune.n-layers 2 3 5 \\
+        --train.train-data data/gen/train100 --train.val-data data/gen/val100 --train.iterations 30
+    ray job submit --working-dir . -- python jobs/tune.py ...     # unchanged on a cluster
+
+Every trial is a PPO training (the same loop as jobs/train.py) reporting its
+validation score each iteration; ASHA stops the poor ones after
+``grace_period`` iterations.  MLflow: one parent run named after the sweep, one
+child run per trial (parameters and per-iteration metrics).  Trials checkpoint
+every iteration; rerunning the same command resumes an interrupted sweep.  At the
+end the best trial's configuration is written to ``best_config.json``
+(``python jobs/train.py --config .../best_config.json``) and its agent to
+``best/`` (``eosp solve --solver policy --checkpoint .../best``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import shutil
+import sys
+import tempfile
+from pathlib import Path
+
+if __package__ in (None, ""):
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+os.environ.setdefault("OMP_NUM_THREADS", "1")
+
+from eosp.args import add_config_args, config_from_args  # noqa: E402
+from eosp.config import MODEL_PRESETS, ModelConfig, RunConfig, TuneConfig, from_dict, to_dict  # noqa: E402
+
+
+def trial(config: dict) -> None:
+    """One Tune trial: `config["run"]` is a RunConfig dict with the sampled values applied."""
+    import torch
+    from ray import tune
+
+    from models.checkpoint import load_agent, save_agent
+    from training.loop import Trainer
+    from training.ppo import estimate_value_scale
+    from training.validation import Validator
+
+    torch.set_num_threads(1)
+    cfg = from_dict(RunConfig, config["run"])
+    cfg.model.hidden_dim = int(config["hidden_dim"])
+    cfg.model.n_layers = int(config["n_layers"])
+    cfg.train.lr = float(config["lr"])
+    cfg.train.num_env_runners = 0  # sampling inside the trial: one CPU per trial
+    start = 0
+    ck = tune.get_checkpoint()
+    state = None
+    if ck is not None:
+        with ck.as_directory() as d:
+            state = json.loads((Path(d) / "trial.json").read_text())
+            agent, _, _ = load_agent(d)
+        cfg.model.value_scale = state["value_scale"]
+        start = state["iteration"]
+    elif cfg.model.value_scale <= 0:
+        cfg.model.value_scale = estimate_value_scale(cfg)
+    validator = Validator(cfg.train.val_data, cfg.env) if cfg.train.val_data else None
+    trainer = Trainer(cfg, validator)
+    if state is not None:
+        trainer.load(agent)
+    for it in range(start, cfg.train.iterations):
+        metrics, agent = trainer.train(validate=True)
+        agent = agent or trainer.agent()
+        with tempfile.TemporaryDirectory() as d:
+            save_agent(agent, d, cfg.env, {"iteration": it + 1})
+            (Path(d) / "trial.json").write_text(json.dumps({"iteration": it + 1, "value_scale": cfg.model.value_scale,
+                                                            "run": to_dict(cfg)}))
+            tune.report({**{k.replace("/", "_"): v for k, v in metrics.items()}, "iteration": it + 1},
+                        checkpoint=tune.Checkpoint.from_directory(d))
+    trainer.stop()
+
+
+def run(cfg: RunConfig, tc: TuneConfig) -> dict:
+    import mlflow
+    import ray
+    from ray import tune
+    from ray.air.integrations.mlflow import MLflowLoggerCallback
+    from ray.tune.schedulers import ASHAScheduler
+
+    from eosp.ray_utils import init_ray
+    from training.validation import baseline_values, objective_mode
+
+    init_ray(cfg.ray.address, cfg.ray.num_cpus)
+    uri = cfg.train.mlflow_uri or f"sqlite:///{Path('mlflow.db').resolve()}"
+    storage = (Path(cfg.train.run_dir) / "tune").resolve()
+    sweep_dir = storage / tc.name
+    # baselines once, in the driver, before the trials hold the CPUs
+    if cfg.train.val_data:
+        baseline_values(cfg.train.val_data, objective_mode(cfg.env))
+    # the database and the experiment are created here, not by racing trials
+    mlflow.set_tracking_uri(uri)
+    exp = mlflow.set_experiment(cfg.train.experiment)
+    sweep_dir.mkdir(parents=True, exist_ok=True)
+    state_file = sweep_dir / "sweep.json"
+    client = mlflow.tracking.MlflowClient(uri)
+    if state_file.exists():
+        parent_id = json.loads(state_file.read_text())["mlflow_parent_run_id"]
+    else:
+        parent_id = client.create_run(exp.experiment_id, run_name=tc.name, tags={"eosp.kind": "tune-sweep"}).info.run_id
+        client.log_param(parent_id, "search_space", json.dumps(to_dict(tc)))
+        state_file.write_text(json.dumps({"mlflow_parent_run_id": parent_id, "tune": to_dict(tc), "run": to_dict(cfg)}))
+    metric = tc.metric.replace("/", "_")
+    space = {"run": to_dict(cfg), "hidden_dim": tune.grid_search(list(tc.hidden_dims)),
+             "n_layers": tune.grid_search(list(tc.n_layers)), "lr": tune.grid_search(list(tc.lrs))}
+    trainable = tune.with_resources(trial, {"cpu": tc.cpus_per_trial})
+    callbacks = [MLflowLoggerCallback(tracking_uri=uri, experiment_name=cfg.train.experiment,
+                                      tags={"mlflow.parentRunId": parent_id, "eosp.sweep": tc.name})]
+    if tune.Tuner.can_restore(str(sweep_dir)) and (sweep_dir / "tuner.pkl").exists():
+        print(f"[tune] resuming sweep {tc.name} from {sweep_dir}", flush=True)
+        tuner = tune.Tuner.restore(str(sweep_dir), trainable, resume_errored=True, param_space=space)
+    else:
+        tuner = tune.Tuner(
+            trainable, param_space=space,
+            tune_config=tune.TuneConfig(metric=metric, mode="max", num_samples=tc.num_samples,
+                                        scheduler=ASHAScheduler(time_attr="iteration", grace_period=tc.grace_period,
+                                                                max_t=max(cfg.train.iterations, tc.grace_period))),
+            run_config=tune.RunConfig(name=tc.name, storage_path=str(storage), callbacks=callbacks,
+                                      failure_config=tune.FailureConfig(max_failures=1),
+                                      checkpoint_config=tune.CheckpointConfig(num_to_keep=1)),
+        )
+    results = tuner.fit()
+    best = results.get_best_result(metric=metric, mode="max", scope="all")
+    best_cfg = from_dict(RunConfig, best.config["run"])
+    best_cfg.model.hidden_dim = int(best.config["hidden_dim"])
+    best_cfg.model.n_layers = int(best.config["n_layers"])
+    best_cfg.train.lr = float(best.config["lr"])
+    out_best = sweep_dir / "best"
+    if out_best.exists():
+        shutil.rmtree(out_best)
+    ck = best.get_best_checkpoint(metric=metric, mode="max") or best.checkpoint
+    with ck.as_directory() as d:
+        shutil.copytree(d, out_best)
+        best_cfg.model.value_scale = json.loads((Path(d) / "trial.json").read_text())["value_scale"]
+    (sweep_dir / "best_config.json").write_text(json.dumps(to_dict(best_cfg), indent=1))
+    summary = {"best_score": float(best.metrics.get(metric, float("nan"))), "hidden_dim": best_cfg.model.hidden_dim,
+               "n_layers": best_cfg.model.n_layers, "lr": best_cfg.train.lr, "trials": len(results)}
+    client.log_metric(parent_id, "best_score", summary["best_score"])
+    for k in ("hidden_dim", "n_layers", "lr"):
+        client.set_tag(parent_id, f"best.{k}", str(summary[k]))
+    client.log_artifact(parent_id, str(sweep_dir / "best_config.json"))
+    client.set_terminated(parent_id)
+    print(f"[tune] {len(results)} trials; best {metric} = {summary['best_score']:.6g} with hidden_dim "
+          f"{summary['hidden_dim']}, n_layers {summary['n_layers']}, lr {summary['lr']}; config "
+          f"{sweep_dir / 'best_config.json'}, checkpoint {out_best}", flush=True)
+    ray.shutdown()
+    return summary
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0],
+                                formatter_class=argparse.RawDescriptionHelpFormatter, epilog=__doc__)
+    add_config_args(p, TuneConfig, prefix="tune.")
+    add_config_args(p, RunConfig)
+    ns = p.parse_args(argv)
+    preset = vars(ns).get("train.preset", "cpu")
+    cfg = config_from_args(RunConfig, ns, base=RunConfig(model=from_dict(ModelConfig, MODEL_PRESETS[preset])))
+    tc = TuneConfig(**{k.split(".", 1)[1]: (tuple(v) if isinstance(v, list) else v)
+                       for k, v in vars(ns).items() if k.startswith("tune.")})
+    if cfg.env.reward == "lexicographic":
+        cfg.model.n_values = max(cfg.model.n_values, 7)
+    run(cfg, tc)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

