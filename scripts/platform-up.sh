@@ -22,7 +22,7 @@
 #   EOSP_RAY_DASHBOARD_PORT  dashboard / job submission port                    [a free port]
 #   EOSP_RAY_AUTH_MODE       Ray authentication: token or disabled              [token]
 #   EOSP_RAY_OBJECT_STORE_BYTES  object store size                              [Ray's default]
-#   EOSP_RAY_TEMP_DIR        Ray session/log directory           [STATE/ray, or /tmp/eosp-ray-ID if long]
+#   EOSP_RAY_TEMP_DIR        Ray sessions and logs    [STATE/ray, or /tmp/eosp-ray-ID if STATE is long]
 #   EOSP_MLFLOW_PORT         MLflow port                                        [a free port]
 #   EOSP_MLFLOW_BACKEND_URI  MLflow backend store                 [sqlite:///STATE/mlflow/mlflow.db]
 #   EOSP_MLFLOW_ARTIFACTS    MLflow artifact store (served by the server)       [STATE/mlflow/artifacts]
@@ -97,9 +97,9 @@ MLFLOW_PORT=${EOSP_MLFLOW_PORT:-$P_MLFLOW}
 ID=$("$PY" -c 'import secrets; print(secrets.token_hex(6))')
 if [[ -n ${EOSP_RAY_TEMP_DIR:-} ]]; then
     RAY_TMP=$EOSP_RAY_TEMP_DIR
-elif (( ${#STATE} <= 48 )); then
+elif (( ${#STATE} <= 30 )); then
     RAY_TMP=$STATE/ray
-else  # Unix socket paths under the session directory must stay under 107 bytes
+else  # Ray's Unix sockets (TEMP/session_DATE_PID/sockets/dash_MetricsHead) must stay under 107 bytes
     RAY_TMP=/tmp/eosp-ray-$ID
 fi
 MLFLOW_DIR=$STATE/mlflow
