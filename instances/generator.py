@@ -254,6 +254,19 @@ def generate(cfg: InstanceConfig, name: str | None = None) -> Instance:
         found += int(np.sum(we[lo:hi] - ws[lo:hi] - dur_all[lo:hi] >= step))
         if found >= n and tc.distribution != "csv":
             break
+    for _ in range(20):  # rare: too few candidates had a daylight window, draw more (same stream before)
+        if found >= n or tc.distribution == "csv":
+            break
+        if tc.distribution == "uniform":
+            la2, lo2 = _sample_visible(scn, rng, n - found)
+        else:
+            la2, lo2, c2 = _cluster_points(scn, rng, n - found, tc.n_clusters, tc.cluster_radius_km)
+            cluster = np.concatenate([cluster, c2])
+        d2 = np.round(rng.uniform(tc.duration_min_s, tc.duration_max_s, la2.size), 1)
+        w2s, w2e = _windows(scn, la2, lo2)
+        lat, lon, dur_all = np.concatenate([lat, la2]), np.concatenate([lon, lo2]), np.concatenate([dur_all, d2])
+        ws, we = np.concatenate([ws, w2s]), np.concatenate([we, w2e])
+        found += int(np.sum(w2e - w2s - d2 >= step))
     fits = np.isfinite(ws) & (we - ws - dur_all >= step)
     idx = np.flatnonzero(fits)
     if tc.distribution == "csv":

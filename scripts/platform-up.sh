@@ -53,6 +53,12 @@ for exe in "$RAY" "$MLFLOW"; do
     [[ -x $exe ]] || { echo "platform-up: $exe not found (install the project: make install)" >&2; exit 2; }
 done
 case $AUTH_MODE in token|disabled) ;; *) echo "platform-up: EOSP_RAY_AUTH_MODE must be token or disabled" >&2; exit 2;; esac
+case $HOST in
+    0.0.0.0|::|'') echo "platform-up: EOSP_PLATFORM_HOST must be one address of this machine (Ray advertises it)," \
+                        "not a wildcard" >&2; exit 2;;
+esac
+# this platform is its own cluster: never attach to one named by the caller's environment
+unset RAY_ADDRESS RAY_API_SERVER_ADDRESS
 
 mkdir -p "$STATE"
 STATE=$(cd "$STATE" && pwd)
@@ -213,7 +219,6 @@ cat >"$STATE/env" <<EOF
 export RAY_API_SERVER_ADDRESS=$DASH_URL
 export RAY_AUTH_MODE=$AUTH_MODE
 export MLFLOW_TRACKING_URI=$MLFLOW_URL
-export EOSP_RAY_GCS_ADDRESS=$URL_HOST:$RAY_PORT
 EOF
 
 cat <<EOF

@@ -9,6 +9,7 @@ job entry point), scripts' safe defaults, and that nothing unpickles untrusted f
 from __future__ import annotations
 
 import ast
+import json
 import os
 import re
 import shlex
@@ -24,8 +25,6 @@ ROOT = Path(__file__).resolve().parents[1]
 PLATFORM = ROOT / "platform"
 DOCKER = ROOT / "docker"
 KUBERAY = PLATFORM / "kuberay"
-# entry points the manifests may name before they exist (listed as planned in platform/README.md)
-PLANNED_JOBS = {"tune.py", "evaluate.py"}
 
 pytestmark = pytest.mark.platform
 
@@ -294,55 +293,111 @@ def command_lines(text: str) -> list[str]:
     return re.sub(r"\\\n\s*", " ", "\n".join(lines)).splitlines()
 
 
-def entry_points() -> list[tuple[str, str, list[str]]]:
-    """(where, script, args) of every job command line: the RayJob entry points, and the examples
-    in the comments of the cluster launcher file, the compose file and the RayCluster manifest."""
-    texts = [(f"{p.name}:{d['metadata']['name']}", d["spec"]["entrypoint"])
-             for p, d in manifests() if d["kind"] == "RayJob"]
-    for path in (PLATFORM / "ray-cluster.yaml", DOCKER / "compose.yaml", KUBERAY / "raycluster.yaml"):
-        texts.append((path.name, path.read_text()))
+def documented_commands() -> list[tuple[str, str, list[str]]]:
+    """(where, script, args) of the job command lines in the comments of the cluster launcher
+    file, the compose file and the RayCluster manifest."""
     out = []
-    for where, text in texts:
-        for line in command_lines(text):
-            # the train RayJob resumes when its run exists: $(test -f RUN.json && echo true || echo false)
-            line = re.sub(r"\$\(test -f \S+ && echo true \|\| echo false\)", "true", line)
-            for part in line.split("&&"):
-                m = ENTRY.search(part.strip())
-                if m:
-                    out.append((where, m.group(2), shlex.split(m.group(3))))
+    for path in (PLATFORM / "ray-cluster.yaml", DOCKER / "compose.yaml", KUBERAY / "raycluster.yaml"):
+        for line in command_lines(path.read_text()):
+            m = ENTRY.search(line.strip())
+            if m:
+                out.append((path.name, m.group(2), shlex.split(m.group(3))))
     return out
 
 
-def test_every_job_entry_point_exists_or_is_planned():
-    found = entry_points()
-    scripts = {s for _, s, _ in found}
-    assert {"train.py", "build_shards.py", "tune.py", "evaluate.py"} <= scripts
-    readme = (PLATFORM / "README.md").read_text()
-    for where, script, _ in found:
-        if (ROOT / "jobs" / script).exists():
+def rayjob_invocations(tmp: Path) -> list[tuple[str, str, list[str]]]:
+    """(where, script, args) of the job processes each RayJob starts, through both shells they meet.
+
+    KubeRay's submitter pastes `spec.entrypoint` unquoted into its shell command
+    `ray job submit --address URL --no-wait -- ENTRYPOINT ; ...`; `ray job submit` joins the
+    words it gets (subprocess.list2cmdline) and the head runs that with /bin/sh.  Here a fake
+    `ray` prints the words it gets and a fake `python` records its arguments.
+    """
+    bin_dir, log = tmp / "bin", tmp / "python.log"
+    bin_dir.mkdir(exist_ok=True)
+    record = f"import json, sys; open({str(log)!r}, 'a').write(json.dumps(sys.argv[1:]) + chr(10))"
+    (bin_dir / "python").write_text(f"#!/bin/sh\nexec {sys.executable} -c {shlex.quote(record)} \"$@\"\n")
+    (bin_dir / "python").chmod(0o755)
+    env = {**os.environ, "PATH": f"{bin_dir}:{os.environ['PATH']}"}
+    out = []
+    for path, d in manifests():
+        if d["kind"] != "RayJob":
             continue
-        assert script in PLANNED_JOBS, f"{where}: jobs/{script} does not exist"
-        assert re.search(rf"`python jobs/{re.escape(script)}[^`]*`\s*\|\s*planned", readme), script
+        words = f"{shlex.quote(sys.executable)} -c 'import json, sys; print(json.dumps(sys.argv[1:]))'"
+        submitter = f"{words} -- {d['spec']['entrypoint'].strip()} ; echo submitted"
+        r = subprocess.run(["bash", "-c", submitter], capture_output=True, text=True, env=env, timeout=60)
+        assert r.returncode == 0 and r.stdout.splitlines()[-1] == "submitted", (path, r.stdout, r.stderr)
+        words = json.loads(r.stdout.splitlines()[0])
+        entrypoint = subprocess.list2cmdline(words[1:] if words[:1] == ["--"] else words)  # click eats the --
+        log.unlink(missing_ok=True)
+        r = subprocess.run(entrypoint, shell=True, capture_output=True, text=True, env=env, timeout=60)
+        assert r.returncode == 0, (path, entrypoint, r.stderr)
+        for line in log.read_text().splitlines():
+            script, *args = json.loads(line)
+            assert script.startswith("/opt/eosp/jobs/"), (path, script)  # the image's copy of the project
+            out.append((f"{path.name}:{d['metadata']['name']}", Path(script).name, args))
+    return out
 
 
-def test_existing_job_entry_points_parse_their_arguments(capsys):
+@pytest.fixture(scope="module")
+def entry_points(tmp_path_factory) -> list[tuple[str, str, list[str]]]:
+    return rayjob_invocations(tmp_path_factory.mktemp("entrypoints")) + documented_commands()
+
+
+def test_rayjob_entry_points_survive_the_submitter_shell(entry_points):
+    jobs = {where.split(":")[1] for where, _, _ in entry_points if ":" in where}
+    assert jobs == {"eosp-train", "eosp-tune", "eosp-evaluate", "eosp-build-shards"}
+    by_job = {}
+    for where, script, args in entry_points:
+        by_job.setdefault(where, []).append((script, args))
+    # the three data sets are built on the head, in order
+    assert [a[1] for _, a in by_job["rayjob-build-shards.yaml:eosp-build-shards"]] == [
+        "/shared/data/train", "/shared/data/val", "/shared/data/test"]
+    # the resume test runs on the head: no run here, so a fresh start
+    ((_, train_args),) = by_job["rayjob-train.yaml:eosp-train"]
+    assert train_args[-2:] == ["--train.resume", "false"]
+
+
+def test_every_job_entry_point_exists(entry_points):
+    found = entry_points
+    assert {"train.py", "build_shards.py", "tune.py", "evaluate.py"} <= {s for _, s, _ in found}
+    for where, script, _ in found:
+        assert (ROOT / "jobs" / script).exists(), f"{where}: jobs/{script} does not exist"
+
+
+def test_job_entry_points_parse_their_arguments(entry_points, capsys):
+    """Every job command line is accepted by the job's own parser (the job itself is not run)."""
     from unittest import mock
 
     import jobs.build_shards
+    import jobs.evaluate
+    import jobs.tune
     from jobs.train import parse
 
-    n = 0
-    for where, script, args in entry_points():
+    seen = set()
+    for where, script, args in entry_points:
         if script == "train.py":
             cfg, _ = parse(args)
             assert cfg.train.run_dir.startswith("/shared/") and cfg.train.train_data.startswith("/shared/"), where
-            n += 1
         elif script == "build_shards.py":
             with mock.patch.object(jobs.build_shards, "run", return_value={"shards": [], "wall_seconds": 0.0}) as run:
                 assert jobs.build_shards.main(args) == 0
             assert run.call_args.args[0].out.startswith("/shared/data/"), where
-            n += 1
-    assert n >= 4  # rayjob-train, two build_shards, and the launcher's and compose's examples
+        elif script == "tune.py":
+            with mock.patch.object(jobs.tune, "run", return_value={}) as run:
+                assert jobs.tune.main(args) == 0
+            cfg, tc = run.call_args.args
+            assert cfg.train.run_dir.startswith("/shared/") and tc.name, where
+        elif script == "evaluate.py":
+            with mock.patch.object(jobs.evaluate, "run", return_value=None) as run:
+                assert jobs.evaluate.main(args) == 0
+            cfg = run.call_args.args[0]
+            assert all(d.startswith("/shared/data/") for d in cfg.data) and cfg.out.startswith("/shared/"), where
+        else:
+            continue
+        seen.add((where, script))
+    assert {s for _, s in seen} == {"train.py", "build_shards.py", "tune.py", "evaluate.py"}
+    assert len(seen) >= 7  # the four RayJobs and the examples of the launcher, compose and RayCluster files
 
 
 def test_runtime_env_file_excludes_local_state():
