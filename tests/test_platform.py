@@ -191,7 +191,7 @@ def test_submitted_job_logs_to_mlflow_and_survives_a_killed_env_runner(platform,
 
     import mlflow
 
-    p, n = platform, 12
+    p, n = platform, 16
     t0 = time.monotonic()
     job = submit(p, data, "eosp-test-runner-kill", "runner-kill", n)
     states = StateApiClient(address=p.dashboard, headers={"Authorization": f"Bearer {p.token}"})

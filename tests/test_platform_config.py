@@ -2,8 +2,9 @@
 
 Dockerfile (hadolint when installed), compose file (parsed; `docker-compose config` when
 installed), Ray cluster launcher file (Ray's own validation), KubeRay and Kubernetes manifests
-(the Kubernetes schemas when `kubernetes-validate` is installed, the KubeRay API fields, every
-job entry point), scripts' safe defaults, and that nothing unpickles untrusted files.
+(the Kubernetes schemas when `kubernetes-validate` is installed, the KubeRay API fields), every
+job command line (through the shells it meets, then the job's own parser), the scripts' safe
+defaults, and that nothing unpickles files.
 """
 
 from __future__ import annotations
@@ -328,7 +329,11 @@ def rayjob_invocations(tmp: Path) -> list[tuple[str, str, list[str]]]:
         r = subprocess.run(["bash", "-c", submitter], capture_output=True, text=True, env=env, timeout=60)
         assert r.returncode == 0 and r.stdout.splitlines()[-1] == "submitted", (path, r.stdout, r.stderr)
         words = json.loads(r.stdout.splitlines()[0])
-        entrypoint = subprocess.list2cmdline(words[1:] if words[:1] == ["--"] else words)  # click eats the --
+        words = words[1:] if words[:1] == ["--"] else words  # click eats the --
+        # the submitter's shell must pass everything on: no command substitution, no && of its own
+        for token in ("$(", "&&", "||", ";", "|", ">"):
+            assert " ".join(words).count(token) == d["spec"]["entrypoint"].count(token), (path, token)
+        entrypoint = subprocess.list2cmdline(words)
         log.unlink(missing_ok=True)
         r = subprocess.run(entrypoint, shell=True, capture_output=True, text=True, env=env, timeout=60)
         assert r.returncode == 0, (path, entrypoint, r.stderr)
