@@ -14,6 +14,10 @@ def _fmt(x: float) -> str:
     return f"{x:,.0f}" if abs(x) >= 1000 else f"{x:.4g}"
 
 
+def _ratio(x: float) -> str:
+    return "-" if x != x else f"{x:.4f}"
+
+
 def summary(results: pd.DataFrame) -> pd.DataFrame:
     """One row per (size group, solver): mean score, ratios of means to the references, gaps, W/T/L.
 
@@ -56,14 +60,14 @@ def markdown(results: pd.DataFrame, mode: str) -> str:
         means = {r.solver: r["mean"] for _, r in sub.iterrows()}
         n = int(sub.instances.max())
         lines.append(f"| {group} | {n} | " + " | ".join(_fmt(means.get(x, np.nan)) for x in solvers) + " |")
-    lines += ["", "| #Acq. | method | / Greedy | / RAMP | / optimum (proven) | gap to bound | W/T/L vs Greedy | "
+    lines += ["", "| #Acq. | method | / Greedy | / RAMP | / optimum (proven) | mean gap to bound | W/T/L vs Greedy | "
                   "W/T/L vs RAMP |", "|---|---|---|---|---|---|---|---|"]
     for _, r in s.iterrows():
         ro, gb = r.get("ratio_optimum", np.nan), r.get("gap_to_bound", np.nan)
         opt = f"{ro:.4f} ({int(r['proven'])})" if ro == ro else "-"
         gap = f"{gb:.2%}" if gb == gb else "-"
-        lines.append(f"| {r.group} | {r.solver} | {_fmt(r.get('ratio_greedy', np.nan))} | "
-                     f"{_fmt(r.get('ratio_ramp', np.nan))} | {opt} | {gap} | {r.get('wtl_greedy', '-')} | "
+        lines.append(f"| {r.group} | {r.solver} | {_ratio(r.get('ratio_greedy', np.nan))} | "
+                     f"{_ratio(r.get('ratio_ramp', np.nan))} | {opt} | {gap} | {r.get('wtl_greedy', '-')} | "
                      f"{r.get('wtl_ramp', '-')} |")
     lines += mcts_table(results)
     t = results.groupby(["group", "solver"])["seconds"].mean().unstack()
