@@ -180,7 +180,7 @@ def main(argv: list[str] | None = None) -> int:
     mlflow.end_run()
     trainer.stop()
     summary = history[-1] if history else {}
-    print(f"[train] done: {t.run_name}, {len(history)} iterations this session in {wall:.0f} s; "
+    print(f"[train] done: {t.run_name}, {t.iterations - start_iter} iterations this session in {wall:.0f} s; "
           f"checkpoints in {ckpt_dir}")
     if "val/ratio_to_greedy" in summary:
         print("[train] validation (greedy decoding) vs baselines:")
@@ -188,8 +188,9 @@ def main(argv: list[str] | None = None) -> int:
             print(f"  {s:7s} mean {summary[f'val/{s}_mean']:.6g}  policy/{s} {summary[f'val/ratio_to_{s}']:.4f}  "
                   f"wins/ties/losses {summary[f'val/wins_vs_{s}']:.0f}/{summary[f'val/ties_vs_{s}']:.0f}/"
                   f"{summary[f'val/losses_vs_{s}']:.0f}")
-    print(f"[train] MLflow: mlflow ui --backend-store-uri {mlflow_uri(cfg)}   (run {run_id}, experiment "
-          f"'{t.experiment}')")
+    uri = mlflow_uri(cfg)
+    where = f"open {uri}" if uri.startswith("http") else f"mlflow ui --backend-store-uri {uri}"
+    print(f"[train] MLflow: {where}   (run {run_id}, experiment '{t.experiment}')")
     ray.shutdown()
     return 0
 
