@@ -1,8 +1,8 @@
 """Monte Carlo tree search with the learned policy and value (PUCT), as a small library.
 
 No Ray here: :func:`search` takes an environment (for its cheap ``snapshot`` /
-``restore``) and an ``evaluate(obs) -> (logits, value)`` function, and returns
-the action to play; :func:`solve` plays a whole episode with it.
+``restore``) and an ``evaluate(list of obs) -> (logits [B, N], values [B])``
+function, and returns the action to play; :func:`solve` plays a whole episode.
 
 * Selection: PUCT, ``argmax_a Q(s, a) + c_puct P(s, a) sqrt(N(s)) / (1 + N(s, a))``,
   with Q normalized to [0, 1] by the smallest and largest values seen in the tree
@@ -12,13 +12,17 @@ the action to play; :func:`solve` plays a whole episode with it.
 * Unexplored children take their parent's value estimate as Q (the paper's choice:
   an infinite value would force visiting every child of a 100-way node first).
 * Backup: along the path, G = reward + G; visit counts and value sums.
+* Batched evaluation: ``batch`` descents are made one after the other with a
+  *virtual loss* (each edge on the way counts one more visit worth the lowest
+  value seen), then their new leaves are evaluated in one network call, then the
+  virtual losses are replaced by the real backups.  ``batch=1`` is plain
+  sequential MCTS; a batch of 8 amortizes the per-call overhead of a small GNN.
 * Decision: the most visited root action (ties: the higher Q, then the lower
   index).  The subtree under it is kept for the next decision.
 * The best complete episode met during the search is remembered; :func:`solve`
   returns it if it beats the episode actually played.
 
-Deterministic: no randomness is involved, so the same inputs give the same
-schedule (``seed`` only feeds optional Dirichlet noise at the root).
+Deterministic: nothing is random, the same inputs give the same schedule.
 With ``num_simulations=0`` the search returns the policy's argmax.
 """
 
@@ -30,35 +34,43 @@ from typing import Callable
 
 import numpy as np
 
-Evaluate = Callable[[dict], tuple[np.ndarray, float]]
+EvaluateMany = Callable[[list], tuple[np.ndarray, np.ndarray]]
 
 
 @dataclass
 class Node:
     snapshot: object
     actions: np.ndarray  # allowed actions
-    prior: np.ndarray  # P(s, a) over `actions`
-    value: float  # network estimate of the return to go
     terminal: bool
+    path_reward: float = 0.0  # rewards from the start of the episode to here
+    parent: "Node | None" = None
+    action: int = -1  # the action leading here from the parent
+    prior: np.ndarray | None = None  # P(s, a) over `actions`; None until evaluated
+    value: float = 0.0  # network estimate of the return to go
+    obs: dict | None = None  # kept until evaluated
     visits: np.ndarray = field(default=None)  # N(s, a)
     value_sum: np.ndarray = field(default=None)  # W(s, a): sum of (reward + return below)
     reward: np.ndarray = field(default=None)  # r(s, a) once expanded
     children: dict = field(default_factory=dict)  # action index -> Node
-    path_reward: float = 0.0  # rewards from the start of the episode to here
-    parent: "Node | None" = None
-    action: int = -1  # the action leading here from the parent
 
     def __post_init__(self):
         k = len(self.actions)
         self.visits = np.zeros(k, dtype=np.int64)
         self.value_sum = np.zeros(k)
         self.reward = np.zeros(k)
+        if self.terminal:
+            self.prior = np.zeros(0)
+
+    @property
+    def pending(self) -> bool:
+        return self.prior is None
 
 
 @dataclass
 class SearchStats:
     simulations: int = 0
     expansions: int = 0
+    evaluations: int = 0  # network calls
     best_return: float = -math.inf
     best_leaf: Node | None = None  # the best terminal node met (complete episode)
 
@@ -83,21 +95,24 @@ class MinMax:
         return np.zeros_like(q)
 
 
-def _softmax_prior(logits: np.ndarray, actions: np.ndarray) -> np.ndarray:
-    z = logits[actions] - logits[actions].max()
-    p = np.exp(z)
-    return p / p.sum()
-
-
-def make_node(env, obs: dict, evaluate: Evaluate, path_reward: float, terminal: bool,
-              parent: Node | None = None, action: int = -1) -> Node:
+def new_node(env, obs: dict, path_reward: float, terminal: bool, parent: Node | None = None,
+             action: int = -1) -> Node:
     actions = np.flatnonzero(obs["action_mask"])
-    if terminal or actions.size == 0:
-        return Node(env.snapshot(), actions, np.zeros(0), 0.0, True, path_reward=path_reward, parent=parent,
-                    action=action)
-    logits, value = evaluate(obs)
-    return Node(env.snapshot(), actions, _softmax_prior(logits, actions), float(value), False,
-                path_reward=path_reward, parent=parent, action=action)
+    terminal = terminal or actions.size == 0
+    return Node(env.snapshot(), actions, terminal, path_reward, parent, action, obs=None if terminal else obs)
+
+
+def evaluate_nodes(nodes: list[Node], evaluate: EvaluateMany, stats: SearchStats) -> None:
+    """Priors and values of pending nodes, in one network call."""
+    todo = [n for n in nodes if n.pending]
+    if not todo:
+        return
+    logits, values = evaluate([n.obs for n in todo])
+    stats.evaluations += 1
+    for n, lg, v in zip(todo, logits, values):
+        z = lg[n.actions] - lg[n.actions].max()
+        p = np.exp(z)
+        n.prior, n.value, n.obs = p / p.sum(), float(v), None
 
 
 def _select(node: Node, c_puct: float, minmax: MinMax) -> int:
@@ -107,42 +122,56 @@ def _select(node: Node, c_puct: float, minmax: MinMax) -> int:
     return int(np.argmax(score))  # first maximum: deterministic
 
 
-def search(env, root: Node, evaluate: Evaluate, *, num_simulations: int, c_puct: float = 1.25,
-           stats: SearchStats | None = None) -> int:
+def _descend(env, root: Node, c_puct: float, minmax: MinMax, stats: SearchStats) -> tuple[list, Node]:
+    """Select down to a new (or terminal, or still pending) node; expand a new one with one env step."""
+    node, path = root, []
+    while True:
+        k = _select(node, c_puct, minmax)
+        path.append((node, k))
+        child = node.children.get(k)
+        if child is None:
+            env.restore(node.snapshot)
+            obs, r, done, _, _ = env.step(int(node.actions[k]))
+            node.reward[k] = r
+            child = new_node(env, obs, node.path_reward + r, done, node, int(node.actions[k]))
+            node.children[k] = child
+            stats.expansions += 1
+            return path, child
+        if child.terminal or child.pending:
+            return path, child
+        node = child
+
+
+def search(env, root: Node, evaluate: EvaluateMany, *, num_simulations: int, c_puct: float = 1.25,
+           batch: int = 8, stats: SearchStats | None = None) -> int:
     """Run `num_simulations` simulations from `root` (the env's current state); return an index into
     ``root.actions``.  The environment is left in the root's state."""
     stats = stats or SearchStats()
-    minmax = MinMax()
+    evaluate_nodes([root], evaluate, stats)
     if num_simulations <= 0 or root.terminal:
         return int(np.argmax(root.prior)) if root.actions.size else -1
-    for _ in range(num_simulations):
-        node, path = root, []
-        while True:
-            k = _select(node, c_puct, minmax)
-            path.append((node, k))
-            child = node.children.get(k)
-            if child is None:
-                env.restore(node.snapshot)
-                obs, r, done, _, _ = env.step(int(node.actions[k]))
-                node.reward[k] = r
-                child = make_node(env, obs, evaluate, node.path_reward + r, done, node, int(node.actions[k]))
-                node.children[k] = child
-                stats.expansions += 1
-                break
-            if child.terminal:
-                break
-            node = child
-        leaf = path[-1][0].children[path[-1][1]]
-        g = leaf.value
-        if leaf.terminal and leaf.path_reward > stats.best_return:
-            stats.best_return = leaf.path_reward
-            stats.best_leaf = leaf
-        for parent, k in reversed(path):
-            g = parent.reward[k] + g
-            parent.visits[k] += 1
-            parent.value_sum[k] += g
-            minmax.update(parent.value_sum[k] / parent.visits[k])
-        stats.simulations += 1
+    minmax = MinMax()
+    done = 0
+    while done < num_simulations:
+        descents = []
+        for _ in range(min(batch, num_simulations - done)):
+            path, leaf = _descend(env, root, c_puct, minmax, stats)
+            loss = minmax.lo if minmax.lo < math.inf else 0.0
+            for parent, k in path:  # virtual loss: steer the next descents elsewhere
+                parent.visits[k] += 1
+                parent.value_sum[k] += loss
+            descents.append((path, leaf, loss))
+        evaluate_nodes([leaf for _, leaf, _ in descents], evaluate, stats)
+        for path, leaf, loss in descents:
+            if leaf.terminal and leaf.path_reward > stats.best_return:
+                stats.best_return, stats.best_leaf = leaf.path_reward, leaf
+            g = leaf.value
+            for parent, k in reversed(path):
+                g = parent.reward[k] + g
+                parent.value_sum[k] += g - loss  # the real value replaces the virtual one
+                minmax.update(parent.value_sum[k] / parent.visits[k])
+            stats.simulations += 1
+            done += 1
     env.restore(root.snapshot)
     n = root.visits
     q = np.where(n > 0, root.value_sum / np.maximum(n, 1), -np.inf)
@@ -150,21 +179,21 @@ def search(env, root: Node, evaluate: Evaluate, *, num_simulations: int, c_puct:
     return int(best[np.argmax(q[best])])
 
 
-def solve(env, evaluate: Evaluate, *, num_simulations: int, c_puct: float = 1.25, reuse_tree: bool = True,
-          seed: int = 0) -> tuple[np.ndarray, float, SearchStats]:
+def solve(env, evaluate: EvaluateMany, *, num_simulations: int, c_puct: float = 1.25, batch: int = 8,
+          reuse_tree: bool = True, seed: int = 0) -> tuple[np.ndarray, float, SearchStats]:
     """Play one episode from the env's reset state with MCTS before each decision.
 
     Returns the scheduled nodes, the episode's return in reward units, and search statistics.
     """
     obs, _ = env.reset(seed=seed)
     stats = SearchStats()
-    root = make_node(env, obs, evaluate, 0.0, not obs["action_mask"].any())
+    root = new_node(env, obs, 0.0, False)
     while not root.terminal:
-        k = search(env, root, evaluate, num_simulations=num_simulations, c_puct=c_puct, stats=stats)
+        k = search(env, root, evaluate, num_simulations=num_simulations, c_puct=c_puct, batch=batch, stats=stats)
         child = root.children.get(k) if reuse_tree else None
         obs, r, done, _, _ = env.step(int(root.actions[k]))
         if child is None:
-            child = make_node(env, obs, evaluate, root.path_reward + r, done, root, int(root.actions[k]))
+            child = new_node(env, obs, root.path_reward + r, done, root, int(root.actions[k]))
         root = child
         env.restore(root.snapshot)
     nodes, total = env.path(), root.path_reward

@@ -30,6 +30,15 @@ def evaluate(agent: EOSPAgent, obs: dict[str, np.ndarray]) -> tuple[np.ndarray, 
     return agent.padded_logits(logits, valid)[0].numpy(), values[0].numpy()
 
 
+@torch.no_grad()
+def evaluate_batch(agent: EOSPAgent, obss: list[dict[str, np.ndarray]]) -> tuple[np.ndarray, np.ndarray]:
+    """Logits [B, N] and first value head [B] of several observations of one instance, in one call."""
+    batch = {k: torch.as_tensor(np.stack([o[k] for o in obss])) for k in obss[0]}
+    gb, valid = batch_from_padded(batch)
+    logits, values = agent(gb)
+    return agent.padded_logits(logits, valid).numpy(), values[:, 0].numpy()
+
+
 def make_env_for(prepared: PreparedInstance, env_cfg: EnvConfig) -> EOSPEnv:
     cfg = replace(env_cfg, max_acquisitions=0, shards=())
     src = FixedSource.__new__(FixedSource)

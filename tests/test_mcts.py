@@ -8,7 +8,7 @@ from envs.sources import prepare_instance
 from eosp.config import EnvConfig, ModelConfig
 from models.agent import EOSPAgent
 from search.mcts import solve as mcts_solve
-from solvers.policy import evaluate, make_env_for, rollout
+from solvers.policy import evaluate_batch, make_env_for, rollout
 from tests.conftest import generated
 from tests.synthetic import all_paths, synthetic_instance
 
@@ -21,11 +21,10 @@ def agent():
     return EOSPAgent(ModelConfig(hidden_dim=8, n_layers=2, heads=1)).eval()
 
 
-def run(agent, inst, budget, reward="utility", seed=0):
+def run(agent, inst, budget, reward="utility", seed=0, batch=8):
     cfg = EnvConfig(reward=reward)
     env = make_env_for(prepare_instance(inst), cfg)
-    return mcts_solve(env, lambda o: (lambda lv: (lv[0], float(lv[1][0])))(evaluate(agent, o)),
-                      num_simulations=budget, seed=seed)
+    return mcts_solve(env, lambda obss: evaluate_batch(agent, obss), num_simulations=budget, seed=seed, batch=batch)
 
 
 def test_budget_zero_is_the_policy_argmax(agent):
@@ -36,17 +35,25 @@ def test_budget_zero_is_the_policy_argmax(agent):
     assert stats.simulations == 0
 
 
-@pytest.mark.parametrize("seed", [1, 2, 3, 4])
-def test_large_budget_finds_the_optimum_of_a_tiny_instance(agent, seed):
+@pytest.mark.parametrize("seed,batch", [(1, 1), (2, 8), (3, 1), (4, 8)])
+def test_large_budget_finds_the_optimum_of_a_tiny_instance(agent, seed, batch):
     inst = synthetic_instance(6, seed)
     best = max(inst.acqs.utility[inst.graph.node_acq[p]].sum() if p else 0.0
                for p in all_paths(inst, inst.pruned()))
-    nodes, ret, _ = run(agent, inst, 400)
+    nodes, ret, _ = run(agent, inst, 400, batch=batch)
     value = inst.acqs.utility[inst.graph.node_acq[nodes]].sum()
     assert value == pytest.approx(best, rel=1e-12) and ret == pytest.approx(best, rel=1e-9)
     from solvers.exact import solve as exact
 
     assert value <= exact(inst, time_limit=30).value * (1 + 1e-12)
+
+
+def test_batched_evaluation_makes_fewer_network_calls(agent):
+    inst = generated("uniform", 30, 4)
+    one = run(agent, inst, 40, batch=1, reward="unitary")
+    eight = run(agent, inst, 40, batch=8, reward="unitary")
+    assert eight[2].evaluations * 3 < one[2].evaluations
+    assert eight[1] >= run(agent, inst, 0, reward="unitary")[1]
 
 
 def test_same_seed_same_result(agent):
