@@ -15,8 +15,9 @@ nodes and out of the last node exist for the MDP), (2) the other nodes of a
 die, (3) nodes no longer reachable from w die.  (3) is one sweep over nodes in
 time order (a topological order: arcs go forward in time) starting at w: a node
 stays alive iff one of its predecessors is w or alive.  Predecessors are
-scanned latest first, so the first one checked usually decides; nodes that die
-are never visited again, so an episode costs O(nodes + arcs) in total.
+scanned latest first, so the first one checked usually decides; the arcs of a
+node that died are never scanned again: an episode costs O(arcs) of arc work plus
+one read of an alive flag per later node and step.
 """
 
 from __future__ import annotations

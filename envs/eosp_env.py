@@ -137,8 +137,12 @@ class EOSPEnv(gym.Env):
         if cfg.max_acquisitions and source.max_acquisitions() > cfg.max_acquisitions:
             raise ValueError(f"instances have up to {source.max_acquisitions()} acquisitions but the observation "
                              f"is padded to max_acquisitions={cfg.max_acquisitions}")
+        if cfg.max_out_degree < 1:
+            raise ValueError("max_out_degree must be at least 1")
         self.n_max = n_max
-        self.e_max = cfg.max_edges or n_max * (cfg.max_out_degree + 4)
+        # 'full' keeps every surviving arc of the continuous graph: room for all of them by default
+        self.e_max = cfg.max_edges or (n_max * max(n_max - 1, 1) if cfg.obs_edges == "full"
+                                       else n_max * (cfg.max_out_degree + 4))
         self.observation_space = gym.spaces.Dict({
             "x": gym.spaces.Box(-np.inf, np.inf, (n_max, N_NODE_FEATURES), np.float32),
             "edge_index": gym.spaces.Box(0, max(n_max - 1, 0), (2, self.e_max), np.int32),
@@ -206,7 +210,8 @@ class EOSPEnv(gym.Env):
         self.state = Snapshot(snap.prepared, snap.alive.copy(), snap.alive_count.copy(), snap.first_alive.copy(),
                               snap.path.copy(), snap.scalars.copy(), snap.scheduled.copy(), snap.mask.copy(),
                               snap.value)
-        self.action_space.current_mask = self._padded_mask()
+        self._mask_padded = self._padded_mask()
+        self.action_space.current_mask = self._mask_padded
 
     def action_mask(self) -> np.ndarray:
         return self.state.mask.copy()
@@ -229,7 +234,8 @@ class EOSPEnv(gym.Env):
         s = self.state
         eg = s.prepared.eg
         core.action_mask(eg.indptr, eg.dst, eg.node_acq, s.alive, s.scalars[1], s.mask.shape[0], s.mask)
-        self.action_space.current_mask = self._padded_mask()
+        self._mask_padded = self._padded_mask()
+        self.action_space.current_mask = self._mask_padded
 
     def _padded_mask(self) -> np.ndarray:
         out = np.zeros(self.n_max, dtype=np.int8)
@@ -264,7 +270,7 @@ class EOSPEnv(gym.Env):
                               s.scheduled, int(s.scalars[1]), s.mask, self.cfg.max_out_degree,
                               self.cfg.obs_edges == "full", x, ei, ea)
         return {"x": x, "edge_index": ei, "edge_attr": ea, "n_nodes": np.array([inst.n_acq], dtype=np.int32),
-                "n_edges": np.array([m], dtype=np.int32), "action_mask": self._padded_mask()}
+                "n_edges": np.array([m], dtype=np.int32), "action_mask": self._mask_padded.copy()}
 
 
 def episode_value_from_rewards(rewards: list[float], mode: str, mean_utility: float) -> float:

@@ -64,6 +64,7 @@ def cmd_export(ns: argparse.Namespace) -> int:
         raise InputError(ns.shard, "this shard holds only pruned arcs; the interchange format needs the unpruned "
                                    "graph", row=ns.index)
     inst.meta.pop("unpruned_arcs", None)
+    inst.meta.pop("source", None)
     write_instance(inst, ns.out, overwrite=ns.overwrite)
     print(f"{ns.out}: exported {inst.name}")
     return 0
@@ -132,8 +133,14 @@ def cmd_plot(ns: argparse.Namespace) -> int:
     from evaluation.plots import plot_trajectories
     from instances.schedule import read_schedule
 
+    from instances.schedule import check
+
     inst = _load_instance(ns.instance_dir)
     schedules = {Path(s).stem: read_schedule(s) for s in ns.schedules}
+    for name, sched in zip(ns.schedules, schedules.values()):
+        verdict = check(inst, sched)  # plot only schedules that make sense for this instance
+        if not verdict.feasible:
+            raise InputError(name, f"not a feasible schedule of this instance: {verdict.reason}")
     written = plot_trajectories(inst, schedules, ns.out)
     print("wrote " + ", ".join(str(p) for p in written))
     return 0

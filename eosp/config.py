@@ -132,10 +132,41 @@ def apply_overrides(cfg: Any, overrides: dict[str, Any]) -> Any:
         elif is_dataclass(current) and isinstance(value, dict):
             apply_overrides(current, value)
         else:
-            if isinstance(current, tuple) and isinstance(value, list):
-                value = tuple(value)
-            setattr(cfg, head, value)
+            setattr(cfg, head, _coerce(type(cfg).__name__, head, current, value))
     return cfg
+
+
+def default_mlflow_uri(uri: str = "") -> str:
+    """The given tracking URI, or the sqlite database mlflow.db in the working directory (absolute path:
+    Tune trials and Ray workers run in other directories)."""
+    from pathlib import Path
+
+    return uri or f"sqlite:///{Path('mlflow.db').resolve()}"
+
+
+def _coerce(owner: str, name: str, current: Any, value: Any) -> Any:
+    """Check a new value against the field's current type (bool, int, float, str, tuple)."""
+    def bad(expected: str) -> ValueError:
+        return ValueError(f"{owner}.{name}: expected {expected}, got {value!r}")
+
+    if isinstance(current, bool):
+        if not isinstance(value, bool):
+            raise bad("true/false")
+    elif isinstance(current, int):
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise bad("an integer")
+    elif isinstance(current, float):
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise bad("a number")
+        value = float(value)
+    elif isinstance(current, str):
+        if not isinstance(value, str):
+            raise bad("a string")
+    elif isinstance(current, tuple):
+        if not isinstance(value, (list, tuple)):
+            raise bad("a list")
+        value = tuple(value)
+    return value
 
 
 def to_dict(cfg: Any) -> dict[str, Any]:
@@ -155,6 +186,12 @@ def to_dict(cfg: Any) -> dict[str, Any]:
 def from_dict(cls: type, data: dict[str, Any]) -> Any:
     """Inverse of :func:`to_dict`; unknown keys are an error."""
     return apply_overrides(cls(), data)
+
+
+def changed(cfg: Any, default: Any) -> dict[str, Any]:
+    """Dotted keys of the fields where `cfg` differs from `default`."""
+    a, b = flatten(cfg), flatten(default)
+    return {k: v for k, v in a.items() if v != b[k]}
 
 
 def flatten(cfg: Any, prefix: str = "") -> dict[str, Any]:
@@ -185,6 +222,9 @@ class DatasetConfig:
     """Instance k of the data set uses seed + k: data sets with distant seeds do not overlap."""
     include_unpruned: bool = True
     """Also store the unpruned arcs (needed by greedy, exact, and schedule checks)."""
+    instance: InstanceConfig = field(default_factory=InstanceConfig)
+    """Generator settings applied on top of the family's (e.g. --instance.satellite.slew-model,
+    --instance.orbit.tle, --instance.graph.step-s); n_acquisitions, seed and family come from above."""
 
 
 @dataclass
@@ -307,7 +347,7 @@ class EvalConfig:
     """Seconds per instance for the searching solvers (ramp, exact)."""
     checkpoint: str = ""
     """Agent checkpoint for the policy and mcts solvers."""
-    budgets: tuple[int, ...] = (0, 10, 100)
+    budgets: tuple[int, ...] = (0, 10, 100, 1000)
     """MCTS simulations per decision (mcts solver only)."""
     out: str = "runs/eval"
     """Directory of the results: results.parquet, report.md, schedules/."""

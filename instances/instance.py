@@ -66,6 +66,15 @@ class Instance:
             self._pruned = prune(self.graph, self.acqs.duration)
         return self._pruned
 
+    def require_unpruned(self, what: str) -> None:
+        """Refuse to go on with a shard instance stored without its unpruned arcs."""
+        if self.meta.get("unpruned_arcs", True) is False:
+            from eosp.errors import InputError
+
+            raise InputError(self.meta.get("source", self.name), f"{what} needs the unpruned arcs, and this "
+                             "instance was stored with its pruned graph only (build shards with "
+                             "--include-unpruned true)")
+
     def set_pruned(self, graph: DiscreteGraph) -> None:
         self._pruned = graph
 

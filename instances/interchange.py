@@ -161,6 +161,11 @@ def read_instance(directory: str | Path, name: str | None = None) -> Instance:
     _fail_rows(npath, real & ((ntime < lo - TIME_TOL) | (ntime > hi + TIME_TOL)), "time",
                "node time outside its window [vtw_start, vtw_end - duration]")
 
+    per_acq = np.bincount(nacq[real], minlength=n)
+    if np.any(per_acq == 0):
+        raise InputError(npath, f"acquisition {int(np.flatnonzero(per_acq == 0)[0])} has no node: every "
+                                "acquisition needs at least one candidate start", column="acq")
+
     apath = d / "arcs.parquet"
     table = read_parquet(apath)
     check_columns(apath, table, ARC_COLUMNS, {})

@@ -89,14 +89,23 @@ def read_schedule(path: str | Path) -> Schedule:
             if not isinstance(row["start"], (int, float)) or isinstance(row["start"], bool):
                 raise InputError(path, "must be a number", column="start", row=k)
             rows.append(row)
-        return Schedule(acq=np.array([r["acq"] for r in rows], dtype=np.int64).astype(np.int32),
-                        node=np.array([r["node"] for r in rows], dtype=np.int64).astype(np.int32),
+        for key in ("acq", "node"):
+            for k, r in enumerate(rows):
+                if not 0 <= r[key] <= np.iinfo(np.int32).max:
+                    raise InputError(path, "id out of range (0 .. 2**31-1)", column=key, row=k)
+        return Schedule(acq=np.array([r["acq"] for r in rows], dtype=np.int32),
+                        node=np.array([r["node"] for r in rows], dtype=np.int32),
                         start=np.array([r["start"] for r in rows], dtype=np.float64))
     table = read_parquet(path)
     check_columns(path, table, SCHEDULE_COLUMNS, {})
-    return Schedule(acq=column(path, table, "acq", "int").astype(np.int32),
-                    node=column(path, table, "node", "int").astype(np.int32),
-                    start=column(path, table, "start", "float"))
+    ids = {}
+    for key in ("acq", "node"):
+        v = column(path, table, key, "int")  # int64: check before narrowing
+        bad = (v < 0) | (v > np.iinfo(np.int32).max)
+        if bad.any():
+            raise InputError(path, "id out of range (0 .. 2**31-1)", column=key, row=int(np.flatnonzero(bad)[0]))
+        ids[key] = v.astype(np.int32)
+    return Schedule(acq=ids["acq"], node=ids["node"], start=column(path, table, "start", "float"))
 
 
 @dataclass
@@ -109,6 +118,7 @@ class Verdict:
 
 def check(inst: Instance, schedule: Schedule) -> Verdict:
     """Apply the contract's feasibility rules; the value is the float64 sum of the utilities."""
+    inst.require_unpruned("checking a schedule")
     g = inst.graph
     acqs = inst.acqs
     n_acq = len(acqs)

@@ -20,7 +20,7 @@ if __package__ in (None, ""):
     sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from eosp.args import add_config_args, config_from_args  # noqa: E402
-from eosp.config import DatasetConfig, RayConfig, family_config, to_dict  # noqa: E402
+from eosp.config import DatasetConfig, InstanceConfig, RayConfig, changed, family_config, to_dict  # noqa: E402
 
 
 def build_shard(cfg: DatasetConfig, shard: int) -> dict:
@@ -31,7 +31,9 @@ def build_shard(cfg: DatasetConfig, shard: int) -> dict:
     t0 = time.perf_counter()
     first = shard * cfg.per_shard
     seeds = range(cfg.seed + first, cfg.seed + min(cfg.n_instances, first + cfg.per_shard))
-    insts = [generate(family_config(cfg.family, cfg.n_acquisitions, s)) for s in seeds]
+    extra = {k: v for k, v in changed(cfg.instance, InstanceConfig()).items()
+             if k not in ("n_acquisitions", "seed", "family")}
+    insts = [generate(family_config(cfg.family, cfg.n_acquisitions, s, **extra)) for s in seeds]
     path = Path(cfg.out) / f"shard-{shard:05d}.parquet"
     write_shard(path, insts, include_unpruned=cfg.include_unpruned, extra_meta={"dataset": to_dict(cfg)})
     return {"file": path.name, "instances": [i.name for i in insts], "seconds": round(time.perf_counter() - t0, 3),

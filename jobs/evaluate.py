@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import re
 import sys
 import time
 from pathlib import Path
@@ -27,7 +28,7 @@ if __package__ in (None, ""):
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 
 from eosp.args import add_config_args, config_from_args  # noqa: E402
-from eosp.config import EvalConfig, RayConfig, flatten  # noqa: E402
+from eosp.config import EvalConfig, RayConfig, default_mlflow_uri, flatten  # noqa: E402
 
 
 class SolverWorker:
@@ -58,10 +59,11 @@ class SolverWorker:
         sched = from_internal_nodes(inst, sol.nodes)
         verdict = check(inst, sched)
         label = f"mcts({budget})" if solver == "mcts" else solver
-        if cfg.save_schedules:
-            write_schedule(sched, Path(cfg.out) / "schedules" / inst.name / f"{label}.parquet")
+        if cfg.save_schedules and verdict.feasible:  # only schedules that pass the checker are written
+            folder = re.sub(r"[^\w.-]", "_", f"{Path(shard).stem}-{index}-{inst.name}")
+            write_schedule(sched, Path(cfg.out) / "schedules" / folder / f"{label}.parquet")
         value = float(len(sched)) if cfg.mode == "unitary" else verdict.value
-        return {"instance": inst.name, "group": inst.n_acq, "solver": label, "value": value,
+        return {"instance": f"{Path(shard).stem}#{index}:{inst.name}", "group": inst.n_acq, "solver": label, "value": value,
                 "utility": verdict.value, "acquisitions": len(sched), "seconds": seconds,
                 "feasible": verdict.feasible, "reason": verdict.reason,
                 "bound": float(sol.info.get("bound", np.nan)), "status": str(sol.info.get("status", "")),
@@ -115,12 +117,14 @@ def run(cfg: EvalConfig, ray_cfg: RayConfig) -> "object":
     report = markdown(results, cfg.mode) + f"\nWall time: {wall:.1f} s on {n_workers} workers.\n"
     with atomic_path(out / "report.md") as tmp:
         tmp.write_text(report)
-    mlflow.set_tracking_uri(cfg.mlflow_uri or f"sqlite:///{Path('mlflow.db').resolve()}")
+    mlflow.set_tracking_uri(default_mlflow_uri(cfg.mlflow_uri))
     mlflow.set_experiment(cfg.experiment)
     with mlflow.start_run(run_name=out.name):
         mlflow.log_params({k: str(v) for k, v in flatten(cfg).items()})
         for (group, solver), sub in results.groupby(["group", "solver"]):
-            mlflow.log_metric(f"mean_{solver}_{group}", float(sub.value.mean()))
+            # MLflow refuses parentheses in names: mcts(100) -> mcts_100
+            mlflow.log_metric(re.sub(r"[^\w./ -]", "_", f"mean/{solver}/{group}").replace("_/", "/").rstrip("_"),
+                              float(sub.value.mean()))
         mlflow.log_metric("wall_s", wall)
         mlflow.log_artifact(str(out / "results.parquet"))
         mlflow.log_artifact(str(out / "report.md"))

@@ -72,7 +72,9 @@ def parse(argv: list[str] | None) -> tuple[RunConfig, argparse.Namespace]:
 
 
 def mlflow_uri(cfg: RunConfig) -> str:
-    return cfg.train.mlflow_uri or f"sqlite:///{Path('mlflow.db').resolve()}"
+    from eosp.config import default_mlflow_uri
+
+    return default_mlflow_uri(cfg.train.mlflow_uri)
 
 
 def ensure_demo_data(cfg: RunConfig) -> None:
@@ -113,6 +115,11 @@ def main(argv: list[str] | None = None) -> int:
         if not run_file.exists():
             raise SystemExit(f"--train.resume: no run {run_file} to resume")
         prev = json.loads(run_file.read_text())
+        given = {k for k in vars(ns) if "." in k and k not in ("train.resume", "train.iterations", "train.run_name",
+                                                                 "train.run_dir")}
+        if given:
+            print(f"[train] warning: --train.resume continues the saved configuration; ignoring "
+                  f"{', '.join('--' + k.replace('_', '-') for k in sorted(given))}", file=sys.stderr)
         run_id, start_iter, best = prev["mlflow_run_id"], prev["iteration"], prev.get("best", float("-inf"))
         history = prev.get("history", [])
         cfg = from_dict(RunConfig, {**prev["config"], "train": {**prev["config"]["train"],
@@ -156,6 +163,7 @@ def main(argv: list[str] | None = None) -> int:
         if agent is not None and metrics["val/policy_mean"] > best:
             best = metrics["val/policy_mean"]
             save_agent(agent, ckpt_dir / "best", cfg.env, {"iteration": it + 1, "val": metrics})
+            save_state(max(start_iter, it + 1 - (it + 1) % t.checkpoint_every))  # `best` is never lost
         mlflow.log_metrics(metrics, step=it + 1)
         history.append({"iteration": it + 1, **metrics})
         print(f"[train] iteration {it + 1}/{t.iterations}: return {metrics.get('train/episode_return_mean', 0):.3f}"

@@ -87,7 +87,9 @@ def run(cfg: RunConfig, tc: TuneConfig) -> dict:
     from training.validation import baseline_values, objective_mode
 
     init_ray(cfg.ray.address, cfg.ray.num_cpus)
-    uri = cfg.train.mlflow_uri or f"sqlite:///{Path('mlflow.db').resolve()}"
+    from eosp.config import default_mlflow_uri
+
+    uri = default_mlflow_uri(cfg.train.mlflow_uri)
     storage = (Path(cfg.train.run_dir) / "tune").resolve()
     sweep_dir = storage / tc.name
     # baselines once, in the driver, before the trials hold the CPUs
@@ -130,6 +132,7 @@ def run(cfg: RunConfig, tc: TuneConfig) -> dict:
     best_cfg.model.hidden_dim = int(best.config["hidden_dim"])
     best_cfg.model.n_layers = int(best.config["n_layers"])
     best_cfg.train.lr = float(best.config["lr"])
+    best_cfg.train.num_env_runners = cfg.train.num_env_runners  # trials sample in-process; a full run need not
     out_best = sweep_dir / "best"
     if out_best.exists():
         shutil.rmtree(out_best)

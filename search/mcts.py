@@ -72,14 +72,17 @@ class SearchStats:
     expansions: int = 0
     evaluations: int = 0  # network calls
     best_return: float = -math.inf
-    best_leaf: Node | None = None  # the best terminal node met (complete episode)
+    best_actions: list = field(default_factory=list)  # the best complete episode met, from the episode start
+    played: list = field(default_factory=list)  # actions played before the current root
 
-    def best_actions(self) -> list[int]:
-        out, node = [], self.best_leaf
-        while node is not None and node.parent is not None:
-            out.append(node.action)
-            node = node.parent
-        return out[::-1]
+    def record(self, leaf: Node) -> None:
+        """Remember a terminal leaf's episode as an action list (no reference to the tree is kept)."""
+        if leaf.path_reward > self.best_return:
+            tail, node = [], leaf
+            while node.parent is not None:
+                tail.append(node.action)
+                node = node.parent
+            self.best_return, self.best_actions = leaf.path_reward, self.played + tail[::-1]
 
 
 class MinMax:
@@ -103,8 +106,8 @@ def new_node(env, obs: dict, path_reward: float, terminal: bool, parent: Node | 
 
 
 def evaluate_nodes(nodes: list[Node], evaluate: EvaluateMany, stats: SearchStats) -> None:
-    """Priors and values of pending nodes, in one network call."""
-    todo = [n for n in nodes if n.pending]
+    """Priors and values of pending nodes (each once), in one network call."""
+    todo = list({id(n): n for n in nodes if n.pending}.values())
     if not todo:
         return
     logits, values = evaluate([n.obs for n in todo])
@@ -148,7 +151,7 @@ def search(env, root: Node, evaluate: EvaluateMany, *, num_simulations: int, c_p
     ``root.actions``.  The environment is left in the root's state."""
     stats = stats or SearchStats()
     evaluate_nodes([root], evaluate, stats)
-    if num_simulations <= 0 or root.terminal:
+    if num_simulations <= 0 or root.terminal or root.actions.size == 1:  # nothing to search
         return int(np.argmax(root.prior)) if root.actions.size else -1
     minmax = MinMax()
     done = 0
@@ -163,8 +166,8 @@ def search(env, root: Node, evaluate: EvaluateMany, *, num_simulations: int, c_p
             descents.append((path, leaf, loss))
         evaluate_nodes([leaf for _, leaf, _ in descents], evaluate, stats)
         for path, leaf, loss in descents:
-            if leaf.terminal and leaf.path_reward > stats.best_return:
-                stats.best_return, stats.best_leaf = leaf.path_reward, leaf
+            if leaf.terminal:
+                stats.record(leaf)
             g = leaf.value
             for parent, k in reversed(path):
                 g = parent.reward[k] + g
@@ -194,13 +197,15 @@ def solve(env, evaluate: EvaluateMany, *, num_simulations: int, c_puct: float = 
         obs, r, done, _, _ = env.step(int(root.actions[k]))
         if child is None:
             child = new_node(env, obs, root.path_reward + r, done, root, int(root.actions[k]))
+        stats.played.append(int(root.actions[k]))
         root = child
+        root.parent = None  # the rest of the old tree can go: memory stays one subtree
         env.restore(root.snapshot)
     nodes, total = env.path(), root.path_reward
-    if stats.best_leaf is not None and stats.best_return > total + 1e-9 * max(1.0, abs(total)):
+    if stats.best_actions and stats.best_return > total + 1e-9 * max(1.0, abs(total)):
         # a complete episode met during the search beats the one played: that is the answer
         env.reset(seed=seed)
-        for a in stats.best_actions():
+        for a in stats.best_actions:
             env.step(a)
         nodes, total = env.path(), stats.best_return
     return nodes, total, stats

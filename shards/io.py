@@ -47,6 +47,7 @@ SCHEMA = pa.schema([
     ("pruned_indptr", pa.list_(_I64)), ("pruned_dst", pa.list_(_I32)),
     ("arc_indptr", pa.list_(_I64)), ("arc_dst", pa.list_(_I32)),
 ])
+TRANSIENT_META = ("unpruned_arcs", "source")  # added on read, never stored
 _REQUIRED = ("duration", "vtw_start", "vtw_end", "utility", "node_acq", "node_time", "node_ids",
              "pruned_indptr", "pruned_dst")
 
@@ -60,7 +61,8 @@ def _row(inst: Instance, include_unpruned: bool) -> dict:
         return None if x is None else np.ascontiguousarray(x).reshape(-1)
 
     return {
-        "name": inst.name, "meta_json": json.dumps(inst.meta, sort_keys=True), "n_acq": inst.n_acq,
+        "name": inst.name, "meta_json": json.dumps({k: v for k, v in inst.meta.items() if k not in TRANSIENT_META},
+                                                   sort_keys=True), "n_acq": inst.n_acq,
         "n_nodes": g.n_nodes, "duration": a.duration, "vtw_start": a.vtw_start, "vtw_end": a.vtw_end,
         "utility": a.utility, "priority": opt(a.priority), "lat": opt(a.lat), "lon": opt(a.lon),
         "attitude": opt(a.attitude), "node_acq": g.node_acq, "node_time": g.node_time,
@@ -183,6 +185,8 @@ def _instance_from_row(path: Path, row: int, t: pa.Table, unpruned: bool) -> Ins
 
     n = t.column("n_acq")[0].as_py()
     big_n = t.column("n_nodes")[0].as_py()
+    if n is None or big_n is None or n < 1 or big_n < 1:
+        raise InputError(path, "n_acq and n_nodes must be positive", column="n_acq", row=row)
     for name in ("duration", "vtw_start", "vtw_end", "utility"):
         if len(need(name, np.float64)) != n:
             raise InputError(path, f"length differs from n_acq={n}", column=name, row=row)
@@ -208,6 +212,8 @@ def _instance_from_row(path: Path, row: int, t: pa.Table, unpruned: bool) -> Ins
     from graphs.discrete import acq_ptr_from_node_acq
 
     acq_ptr = acq_ptr_from_node_acq(node_acq, n)
+    if np.any(np.diff(acq_ptr) == 0):
+        raise InputError(path, "an acquisition has no node", column="node_acq", row=row)
     pindptr, pdst = need("pruned_indptr", np.int64), need("pruned_dst", np.int32)
     _check_csr(path, row, "pruned", pindptr, pdst, node_acq, node_time, dur)
     if unpruned and t.column("arc_indptr").null_count == 0:
@@ -217,8 +223,12 @@ def _instance_from_row(path: Path, row: int, t: pa.Table, unpruned: bool) -> Ins
         aindptr, adst = pindptr, pdst  # unpruned arcs not stored: keep the pruned ones in their place
         unpruned = False
     node_att = maybe("node_attitude", np.float32)
-    meta = json.loads(t.column("meta_json")[0].as_py() or "{}")
+    try:
+        meta = json.loads(t.column("meta_json")[0].as_py() or "{}")
+    except json.JSONDecodeError as exc:
+        raise InputError(path, f"not valid JSON: {exc}", column="meta_json", row=row) from None
     meta["unpruned_arcs"] = bool(unpruned)
+    meta["source"] = f"{path}#{row}"
     inst = Instance(name=t.column("name")[0].as_py(), acqs=acqs,
                     graph=DiscreteGraph(node_acq, node_time, aindptr, adst, acq_ptr), node_ids=node_ids, meta=meta,
                     node_attitude=None if node_att is None else node_att.reshape(big_n, 4))

@@ -133,6 +133,7 @@ def solve(inst: Instance, *, mode: str = "utility", time_limit: float | None = N
     Replaying the trace (insert each accepted acquisition at its position in a
     list) gives the final sequence: nothing inserted is ever removed.
     """
+    inst.require_unpruned("the greedy solver")
     g = inst.graph
     w = objective_weights(inst, mode)
     seq = insertion_order(inst, mode, order)

@@ -24,6 +24,9 @@ def solve(inst: Instance, *, mode: str = "utility", time_limit: float | None = N
         torch.set_num_threads(1)
         agent = load_agent(checkpoint)
     model, env_cfg, _ = agent
+    if model.cfg.n_values != 1:
+        raise ValueError("MCTS needs a scalar value network; this checkpoint has one value head per priority class "
+                         "(lexicographic reward): use the policy solver, or a checkpoint trained with another reward")
     env = make_env_for(prepare_instance(inst, env_cfg.prune), env_cfg)
     t0 = time.perf_counter()
     nodes, ret, stats = mcts_solve(env, lambda obss: evaluate_batch(model, obss), num_simulations=int(budget or 0),

@@ -224,3 +224,35 @@ def test_meta_json_round_trip(tmp_path):
     write_instance(inst, tmp_path / "a")
     meta = json.loads((tmp_path / "a" / "meta.json").read_text())
     assert meta["generator"] == "eosp-open-sim" and meta["family"] == "uniform"
+
+
+def test_acquisition_without_node(inst_dir):
+    nodes = pq.read_table(inst_dir / "nodes.parquet")
+    acq = nodes.column("acq").to_numpy()
+    keep = acq != 5
+    # drop acquisition 5's nodes and the arcs touching them; keep the ids dense
+    ids = nodes.column("node").to_numpy()
+    new = np.full(ids.max() + 1, -1)
+    new[ids[keep]] = np.arange(keep.sum())
+    pq.write_table(pa.table({"node": new[ids[keep]].astype(np.int32), "acq": acq[keep],
+                             "time": nodes.column("time").to_numpy()[keep]}), inst_dir / "nodes.parquet")
+    arcs = pq.read_table(inst_dir / "arcs.parquet")
+    src, dst = new[arcs.column("src").to_numpy()], new[arcs.column("dst").to_numpy()]
+    ok = (src >= 0) & (dst >= 0)
+    pq.write_table(pa.table({"src": src[ok].astype(np.int32), "dst": dst[ok].astype(np.int32)}),
+                   inst_dir / "arcs.parquet")
+    with pytest.raises(InputError, match="acquisition 5 has no node"):
+        read_instance(inst_dir)
+
+
+def test_schedule_ids_out_of_int32_range(tmp_path):
+    from eosp.errors import InputError as IE
+
+    pq.write_table(pa.table({"acq": pa.array([2**32], pa.int64()), "node": pa.array([1], pa.int64()),
+                             "start": [0.0]}), tmp_path / "s.parquet")
+    with pytest.raises(IE, match="out of range") as info:
+        read_schedule(tmp_path / "s.parquet")
+    assert info.value.column == "acq" and info.value.row == 0
+    (tmp_path / "s.jsonl").write_text('{"acq": 1, "node": 36893488147419103232, "start": 0.0}\n')
+    with pytest.raises(IE, match="out of range"):
+        read_schedule(tmp_path / "s.jsonl")

@@ -18,7 +18,8 @@ def run_job(script, *args, timeout=600):
 def test_build_shards(tmp_path):
     out = tmp_path / "ds"
     r = run_job("build_shards.py", "--out", out, "--n-acquisitions", 10, "--n-instances", 3, "--per-shard", 2,
-                "--seed", 5, "--ray.num-cpus", 2)
+                "--seed", 5, "--ray.num-cpus", 2, "--instance.graph.step-s", 4,
+                "--instance.satellite.slew-model", "bang_coast_bang")
     assert "shard 2/2" in r.stdout
     manifest = json.loads((out / "manifest.json").read_text())
     assert [s["file"] for s in manifest["shards"]] == ["shard-00000.parquet", "shard-00001.parquet"]
@@ -26,6 +27,8 @@ def test_build_shards(tmp_path):
 
     insts = read_instances(sorted(out.glob("*.parquet")))
     assert [i.meta["seed"] for i in insts] == [5, 6, 7]
+    assert insts[0].meta["config"]["graph"]["step_s"] == 4.0
+    assert insts[0].meta["config"]["satellite"]["slew_model"] == "bang_coast_bang"
 
 
 def test_evaluate(tmp_path):

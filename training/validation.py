@@ -44,20 +44,27 @@ def baseline_values(val_path: str | Path, mode: str, solvers=BASELINES, time_lim
     shards = expand_shards([str(val_path)])
     cache_file = (Path(val_path) if Path(val_path).is_dir() else Path(val_path).parent) / "baselines.json"
     cache = json.loads(cache_file.read_text()) if cache_file.exists() else {}
-    todo = []
+
+    def key(shard: Path, i: int) -> str:
+        # the shard's identity is part of the key: a regenerated data set is not served stale values
+        st = shard.stat()
+        return f"{shard.name}:{st.st_size}:{int(st.st_mtime)}#{i}"
+
+    todo, names = [], {}
     for shard in shards:
         for i, name in enumerate(ShardReader(shard).names()):
+            names[key(shard, i)] = name
             for s in solvers:
-                if name not in cache.get(f"{s}/{mode}", {}):
-                    todo.append((str(shard), i, s))
+                if key(shard, i) not in cache.get(f"{s}/{mode}/{time_limit:g}", {}):
+                    todo.append((shard, i, s))
     if todo:
         task = ray.remote(num_cpus=1)(_solve_task)
-        refs = [task.remote(sh, i, s, mode, time_limit) for sh, i, s in todo]
-        for (sh, i, s), (name, value, _) in zip(todo, ray.get(refs)):
-            cache.setdefault(f"{s}/{mode}", {})[name] = value
+        refs = [task.remote(str(sh), i, s, mode, time_limit) for sh, i, s in todo]
+        for (sh, i, s), (_, value, _) in zip(todo, ray.get(refs)):
+            cache.setdefault(f"{s}/{mode}/{time_limit:g}", {})[key(sh, i)] = value
         with atomic_path(cache_file) as tmp:
             tmp.write_text(json.dumps(cache, indent=1, sort_keys=True))
-    return {s: cache[f"{s}/{mode}"] for s in solvers}
+    return {s: {names[k]: v for k, v in cache[f"{s}/{mode}/{time_limit:g}"].items() if k in names} for s in solvers}
 
 
 @dataclass
@@ -88,7 +95,7 @@ class Validator:
 
         self.env_cfg = env_cfg
         self.mode = objective_mode(env_cfg)
-        insts = read_instances(expand_shards([str(val_path)]), unpruned=False)
+        insts = read_instances(expand_shards([str(val_path)]), unpruned=not env_cfg.prune)
         if max_instances:
             insts = insts[:max_instances]
         self.prepared = [prepare_instance(i, env_cfg.prune) for i in insts]
