@@ -268,7 +268,7 @@ class EOSPEnv(gym.Env):
         m = build_observation(eg.node_acq, eg.node_time, eg.node_finish, eg.indptr, eg.dst, eg.acq_ptr, a.vtw_start,
                               a.vtw_end, a.duration, s.prepared.static, s.alive, s.alive_count, s.first_alive,
                               s.scheduled, int(s.scalars[1]), s.mask, self.cfg.max_out_degree,
-                              self.cfg.obs_edges == "full", x, ei, ea)
+                              self.cfg.last_edges_cap, self.cfg.obs_edges == "full", x, ei, ea)
         return {"x": x, "edge_index": ei, "edge_attr": ea, "n_nodes": np.array([inst.n_acq], dtype=np.int32),
                 "n_edges": np.array([m], dtype=np.int32), "action_mask": self._mask_padded.copy()}
 

@@ -5,8 +5,8 @@ graph, chosen by ``obs_edges``:
 
 * ``"earliest"`` (default, what the GNN trains on): for every acquisition still
   in the graph, the arcs out of its earliest alive node, at most
-  ``max_out_degree`` of them (the ones reaching the earliest starts), plus the
-  arcs out of the last scheduled node (at most ``4 * max_out_degree``).  These
+  ``max_out_degree`` of them (the ones reaching the earliest starts), plus all the
+  arcs out of the last scheduled node (one per allowed action).  These
   are the transitions that matter for the next decisions: the graph stays
   sparse (about n * k edges instead of the ~n^2 / 1.1 of the full continuous
   graph) and the learner's cost is driven by edges.
@@ -62,7 +62,7 @@ def _clip(x):
 
 @numba.njit(cache=True)
 def build_observation(node_acq, node_time, node_finish, indptr, dst, acq_ptr, vtw_start, vtw_end, duration,
-                      static, alive, alive_count, first_alive, scheduled, last, mask, k_out, full,
+                      static, alive, alive_count, first_alive, scheduled, last, mask, k_out, k_last_cap, full,
                       x, edge_index, edge_attr):
     """Fill x [N_max, F], edge_index [2, E_max], edge_attr [E_max, 2]; returns the number of edges."""
     n = acq_ptr.shape[0] - 1
@@ -92,7 +92,10 @@ def build_observation(node_acq, node_time, node_finish, indptr, dst, acq_ptr, vt
             x[node_acq[v], 7] = _clip((node_time[v] - t_now) / TIME_SCALE)
 
     m = 0
-    k_last = 4 * k_out
+    # every allowed action gets its edge from the last node, whatever the instance size
+    k_last = max(1, indptr[last + 1] - indptr[last])
+    if k_last_cap > 0:
+        k_last = min(k_last, k_last_cap)
     if last_acq >= 0:
         m = _edges_from(last, last_acq, 1.0, k_last, node_acq, node_time, node_finish, indptr, dst, alive,
                         edge_index, edge_attr, m, e_max)

@@ -246,6 +246,8 @@ class EnvConfig:
     """Padding of the observation (nodes = actions); 0 sizes it to the instance (inference only)."""
     max_out_degree: int = 4
     """Edges kept per acquisition in the 'earliest' observation graph (4x that out of the last node)."""
+    last_edges_cap: int = 0
+    """Edges kept out of the last scheduled node; 0 = all of them (one per allowed action)."""
     prune: bool = True
     """Play in the pruned discrete graph (the paper); false: in the unpruned one."""
     obs_edges: str = "earliest"
