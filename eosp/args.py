@@ -88,3 +88,11 @@ def _belongs(cls: type, dotted: str) -> bool:
             sub = f.default_factory() if f.default_factory is not MISSING else f.default  # type: ignore[misc]
             return is_dataclass(sub) and _belongs(type(sub), rest)
     return False
+
+
+def prefixed_config(cls: type, ns: argparse.Namespace, prefix: str) -> Any:
+    """A flat config added with ``add_config_args(..., prefix=prefix)`` (e.g. RayConfig under 'ray.')."""
+    from eosp.config import apply_overrides
+
+    return apply_overrides(cls(), {k[len(prefix):]: tuple(v) if isinstance(v, list) else v
+                                   for k, v in vars(ns).items() if k.startswith(prefix)})

@@ -19,7 +19,7 @@ from pathlib import Path
 if __package__ in (None, ""):
     sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from eosp.args import add_config_args, config_from_args  # noqa: E402
+from eosp.args import add_config_args, config_from_args, prefixed_config  # noqa: E402
 from eosp.config import DatasetConfig, InstanceConfig, RayConfig, changed, family_config, to_dict  # noqa: E402
 
 
@@ -73,7 +73,7 @@ def main(argv: list[str] | None = None) -> int:
     add_config_args(p, RayConfig, prefix="ray.")
     ns = p.parse_args(argv)
     cfg = config_from_args(DatasetConfig, ns)
-    ray_cfg = RayConfig(**{k.split(".", 1)[1]: v for k, v in vars(ns).items() if k.startswith("ray.")})
+    ray_cfg = prefixed_config(RayConfig, ns, "ray.")
     m = run(cfg, ray_cfg)
     tot = sum(s["bytes"] for s in m["shards"])
     print(f"[build_shards] {cfg.n_instances} instances in {len(m['shards'])} shards, {tot / 1e6:.1f} MB, "

@@ -27,7 +27,7 @@ if __package__ in (None, ""):
 
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 
-from eosp.args import add_config_args, config_from_args  # noqa: E402
+from eosp.args import add_config_args, config_from_args, prefixed_config  # noqa: E402
 from eosp.config import EvalConfig, RayConfig, default_mlflow_uri, flatten  # noqa: E402
 
 
@@ -138,7 +138,7 @@ def main(argv: list[str] | None = None) -> int:
     add_config_args(p, RayConfig, prefix="ray.")
     ns = p.parse_args(argv)
     cfg = config_from_args(EvalConfig, ns)
-    ray_cfg = RayConfig(**{k.split(".", 1)[1]: v for k, v in vars(ns).items() if k.startswith("ray.")})
+    ray_cfg = prefixed_config(RayConfig, ns, "ray.")
     run(cfg, ray_cfg)
     return 0
 

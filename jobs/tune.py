@@ -29,7 +29,7 @@ if __package__ in (None, ""):
 
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 
-from eosp.args import add_config_args, config_from_args  # noqa: E402
+from eosp.args import add_config_args, config_from_args, prefixed_config  # noqa: E402
 from eosp.config import MODEL_PRESETS, ModelConfig, RunConfig, TuneConfig, from_dict, to_dict  # noqa: E402
 
 
@@ -163,8 +163,7 @@ def main(argv: list[str] | None = None) -> int:
     ns = p.parse_args(argv)
     preset = vars(ns).get("train.preset", "cpu")
     cfg = config_from_args(RunConfig, ns, base=RunConfig(model=from_dict(ModelConfig, MODEL_PRESETS[preset])))
-    tc = TuneConfig(**{k.split(".", 1)[1]: (tuple(v) if isinstance(v, list) else v)
-                       for k, v in vars(ns).items() if k.startswith("tune.")})
+    tc = prefixed_config(TuneConfig, ns, "tune.")
     if cfg.env.reward == "lexicographic":
         cfg.model.n_values = max(cfg.model.n_values, 7)
     run(cfg, tc)

@@ -4,26 +4,18 @@ from __future__ import annotations
 
 import time
 
-import torch
 
 from envs.sources import prepare_instance
 from instances.instance import Instance
 from search.mcts import solve as mcts_solve
 from solvers.base import Solution, objective_weights
-from solvers.policy import evaluate_batch, make_env_for
+from solvers.policy import evaluate_batch, make_env_for, resolve_agent
 
 
 def solve(inst: Instance, *, mode: str = "utility", time_limit: float | None = None, seed: int = 0,
           checkpoint: str = "", agent: tuple | None = None, budget: int | None = 100, c_puct: float = 1.25,
           batch: int = 8, **_: object) -> Solution:
-    from models.checkpoint import load_agent
-
-    if agent is None:
-        if not checkpoint:
-            raise ValueError("the mcts solver needs --checkpoint (a directory holding agent.pt and agent.json)")
-        torch.set_num_threads(1)
-        agent = load_agent(checkpoint)
-    model, env_cfg, _ = agent
+    model, env_cfg, _ = resolve_agent("mcts", checkpoint, agent)
     if model.cfg.n_values != 1:
         raise ValueError("MCTS needs a scalar value network; this checkpoint has one value head per priority class "
                          "(lexicographic reward): use the policy solver, or a checkpoint trained with another reward")
