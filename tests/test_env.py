@@ -29,6 +29,24 @@ def test_gymnasium_checker_passes():
     check_env(gym.make("EOSP-v0", config=EnvConfig(prune=False)).unwrapped, skip_render_check=True)
 
 
+def test_checker_parts_on_the_default_pruned_env():
+    """Every part of the checker on the default (pruned) env; the step-determinism check is run with an
+    action allowed after the reset it is played from (the checker itself samples it one state earlier)."""
+    from gymnasium.utils import env_checker as ec
+    from gymnasium.utils import passive_env_checker as pc
+
+    env = gym.make("EOSP-v0").unwrapped
+    ec.check_action_space(env.action_space)
+    ec.check_observation_space(env.observation_space)
+    ec.check_reset_return_type(env)
+    ec.check_reset_seed_determinism(env)
+    ec.check_reset_options(env)
+    pc.env_reset_passive_checker(env)
+    pc.env_step_passive_checker(env, env.action_space.sample())
+    env.reset(seed=123)
+    ec.check_step_determinism(env)
+
+
 class Reference:
     """The paper's update rules on Python sets, written independently of envs.core."""
 
