@@ -21,3 +21,7 @@ class InputError(ValueError):
             where.append(f"row {row}")
         super().__init__(": ".join([where[0], ", ".join(where[1:])]) + f": {message}" if len(where) > 1
                          else f"{self.file}: {message}")
+
+    def __reduce__(self):
+        # Ray and multiprocessing send exceptions between processes by pickling them
+        return (type(self), (self.file, self.message, self.column, self.row))

@@ -89,6 +89,11 @@ def run(cfg: RunConfig, tc: TuneConfig) -> dict:
     init_ray(cfg.ray.address, cfg.ray.num_cpus)
     from eosp.config import default_mlflow_uri
 
+    # trials run in their own working directories: every path they read must be absolute
+    cfg.train.train_data = str(Path(cfg.train.train_data).resolve())
+    if cfg.train.val_data:
+        cfg.train.val_data = str(Path(cfg.train.val_data).resolve())
+
     uri = default_mlflow_uri(cfg.train.mlflow_uri)
     storage = (Path(cfg.train.run_dir) / "tune").resolve()
     sweep_dir = storage / tc.name

@@ -256,3 +256,11 @@ def test_schedule_ids_out_of_int32_range(tmp_path):
     (tmp_path / "s.jsonl").write_text('{"acq": 1, "node": 36893488147419103232, "start": 0.0}\n')
     with pytest.raises(IE, match="out of range"):
         read_schedule(tmp_path / "s.jsonl")
+
+
+def test_input_error_survives_pickling():
+    """Ray sends exceptions between processes: the message must come through intact."""
+    import pickle
+
+    err = pickle.loads(pickle.dumps(InputError("x.parquet", "bad value", column="utility", row=4)))
+    assert str(err) == "x.parquet: column 'utility', row 4: bad value" and err.row == 4
