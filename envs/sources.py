@@ -39,11 +39,11 @@ def prepare_instance(inst: Instance, prune: bool = True) -> PreparedInstance:
 class FixedSource:
     """Always the same instance (or a uniform draw from a short list)."""
 
-    def __init__(self, instances: Instance | list[Instance], prune: bool = True):
-        insts = [instances] if isinstance(instances, Instance) else list(instances)
+    def __init__(self, instances: Instance | PreparedInstance | list, prune: bool = True):
+        insts = list(instances) if isinstance(instances, (list, tuple)) else [instances]
         if not insts:
             raise ValueError("FixedSource needs at least one instance")
-        self.prepared = [prepare_instance(i, prune) for i in insts]
+        self.prepared = [i if isinstance(i, PreparedInstance) else prepare_instance(i, prune) for i in insts]
 
     def max_acquisitions(self) -> int:
         return max(p.inst.n_acq for p in self.prepared)

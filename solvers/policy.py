@@ -40,10 +40,8 @@ def evaluate_batch(agent: EOSPAgent, obss: list[dict[str, np.ndarray]]) -> tuple
 
 
 def make_env_for(prepared: PreparedInstance, env_cfg: EnvConfig) -> EOSPEnv:
-    cfg = replace(env_cfg, max_acquisitions=0, shards=())
-    src = FixedSource.__new__(FixedSource)
-    src.prepared = [prepared]
-    return EOSPEnv(cfg, source=src)
+    """An environment sized to this (already prepared) instance, with the agent's env settings."""
+    return EOSPEnv(replace(env_cfg, max_acquisitions=0, shards=()), source=FixedSource(prepared))
 
 
 def rollout(agent: EOSPAgent, prepared: PreparedInstance, env_cfg: EnvConfig, sample: bool = False,
