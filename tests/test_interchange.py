@@ -259,8 +259,7 @@ def test_schedule_ids_out_of_int32_range(tmp_path):
 
 
 def test_input_error_survives_pickling():
-    """Ray sends exceptions between processes: the message must come through intact."""
-    import pickle
-
-    err = pickle.loads(pickle.dumps(InputError("x.parquet", "bad value", column="utility", row=4)))
+    """Ray sends exceptions between processes (by __reduce__): the message must come through intact."""
+    cls, args = InputError("x.parquet", "bad value", column="utility", row=4).__reduce__()
+    err = cls(*args)
     assert str(err) == "x.parquet: column 'utility', row 4: bad value" and err.row == 4
