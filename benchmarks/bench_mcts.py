@@ -42,8 +42,8 @@ def main() -> None:
         torch.manual_seed(0)
         agent = (EOSPAgent(ModelConfig(**MODEL_PRESETS["cpu"])).eval(), EnvConfig(), {})
     solve(generate(family_config("uniform", 20, 0)), agent=agent, budget=5)  # warm-up
-    print(f"| acq | budget | decisions | simulations | expansions | episode (s) | ms / simulation | "
-          f"ms / expansion |\n|---|---|---|---|---|---|---|---|")
+    print("| acq | budget | decisions | simulations | expansions | episode (s) | ms / simulation | "
+          "ms / expansion |\n|---|---|---|---|---|---|---|---|")
     for n in a.sizes:
         inst = generate(family_config("uniform", n, a.seed))
         prepare_instance(inst)  # pruning outside the timing (done once per instance)

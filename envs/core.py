@@ -67,7 +67,6 @@ def _reverse(n_nodes, indptr, dst, order):
 
 
 def prepare(graph: DiscreteGraph, durations: np.ndarray) -> EnvGraph:
-    n = graph.n_acq
     big_n = graph.n_nodes
     finish = graph.node_time.copy()
     finish[1:] += durations[graph.node_acq[1:]]
