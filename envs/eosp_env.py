@@ -45,7 +45,6 @@ Termination
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, fields
 from typing import Any
 
@@ -271,9 +270,3 @@ class EOSPEnv(gym.Env):
                               self.cfg.last_edges_cap, self.cfg.obs_edges == "full", x, ei, ea)
         return {"x": x, "edge_index": ei, "edge_attr": ea, "n_nodes": np.array([inst.n_acq], dtype=np.int32),
                 "n_edges": np.array([m], dtype=np.int32), "action_mask": self._mask_padded.copy()}
-
-
-def episode_value_from_rewards(rewards: list[float], mode: str, mean_utility: float) -> float:
-    """Turn summed rewards back into the schedule value (normalized and utility modes)."""
-    total = math.fsum(rewards)
-    return total * mean_utility if mode in ("normalized", "lexicographic") else total

@@ -9,16 +9,9 @@
 # The MLflow store (STATE/mlflow) and the logs are kept.
 set -euo pipefail
 
-ROOT=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
-STATE=${EOSP_PLATFORM_DIR:-$ROOT/.platform}
+# shellcheck source=scripts/platform-common.sh
+source "$(dirname "${BASH_SOURCE[0]}")/platform-common.sh"
 GRACE=${EOSP_PLATFORM_GRACE:-10}
-if [[ -n ${EOSP_PYTHON:-} ]]; then
-    PY=$EOSP_PYTHON
-elif [[ -x $ROOT/.venv/bin/python ]]; then
-    PY=$ROOT/.venv/bin/python
-else
-    PY=$(command -v python3)
-fi
 
 if [[ ! -f $STATE/platform.json ]]; then
     echo "platform-down: nothing to stop (no $STATE/platform.json)"

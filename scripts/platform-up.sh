@@ -31,21 +31,14 @@
 #   EOSP_PYTHON              the Python with the project installed              [.venv/bin/python]
 set -euo pipefail
 
-ROOT=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
-STATE=${EOSP_PLATFORM_DIR:-$ROOT/.platform}
+# shellcheck source=scripts/platform-common.sh
+source "$(dirname "${BASH_SOURCE[0]}")/platform-common.sh"
 HOST=${EOSP_PLATFORM_HOST:-127.0.0.1}
 NUM_CPUS=${EOSP_RAY_NUM_CPUS:-2}
 AUTH_MODE=${EOSP_RAY_AUTH_MODE:-token}
 TIMEOUT=${EOSP_PLATFORM_TIMEOUT:-180}
 MLFLOW_WORKERS=${EOSP_MLFLOW_WORKERS:-1}
 
-if [[ -n ${EOSP_PYTHON:-} ]]; then
-    PY=$EOSP_PYTHON
-elif [[ -x $ROOT/.venv/bin/python ]]; then
-    PY=$ROOT/.venv/bin/python
-else
-    PY=$(command -v python3)
-fi
 BIN=$(cd "$(dirname "$PY")" && pwd)
 RAY=$BIN/ray
 MLFLOW=$BIN/mlflow

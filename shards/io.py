@@ -48,8 +48,6 @@ SCHEMA = pa.schema([
     ("arc_indptr", pa.list_(_I64)), ("arc_dst", pa.list_(_I32)),
 ])
 TRANSIENT_META = ("unpruned_arcs", "source")  # added on read, never stored
-_REQUIRED = ("duration", "vtw_start", "vtw_end", "utility", "node_acq", "node_time", "node_ids",
-             "pruned_indptr", "pruned_dst")
 
 
 def _row(inst: Instance, include_unpruned: bool) -> dict:

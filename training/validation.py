@@ -104,9 +104,9 @@ class Validator:
         self.baselines = {s: np.array([base[s][n] for n in self.names]) for s in BASELINES}
 
     def score(self, inst, nodes: np.ndarray) -> float:
-        if self.mode == "unitary":
-            return float(len(nodes))
-        return float(inst.acqs.utility[inst.graph.node_acq[nodes]].sum()) if len(nodes) else 0.0
+        from solvers.base import objective_weights
+
+        return float(objective_weights(inst, self.mode)[inst.graph.node_acq[nodes]].sum()) if len(nodes) else 0.0
 
     def run(self, agent) -> ValidationResult:
         from solvers.policy import rollout
