@@ -14,14 +14,12 @@ import sys
 import time
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-
 import numpy as np  # noqa: E402
 
-from envs.eosp_env import EOSPEnv  # noqa: E402
-from envs.sources import FixedSource  # noqa: E402
+from eosp.envs.eosp_env import EOSPEnv  # noqa: E402
+from eosp.envs.sources import FixedSource  # noqa: E402
 from eosp.config import EnvConfig, family_config  # noqa: E402
-from instances.generator import generate  # noqa: E402
+from eosp.instances.generator import generate  # noqa: E402
 
 
 def run(n: int, family: str, episodes: int, obs_edges: str, snapshot: bool) -> dict:

@@ -16,16 +16,14 @@ import tempfile
 import time
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-
 import numpy as np  # noqa: E402
 
 from eosp.config import family_config  # noqa: E402
-from graphs.build import build_arcs  # noqa: E402
-from graphs.continuous import continuous_graph  # noqa: E402
-from graphs.prune import prune  # noqa: E402
-from instances.generator import generate, scenario_of  # noqa: E402
-from shards.io import write_shard  # noqa: E402
+from eosp.graphs.build import build_arcs  # noqa: E402
+from eosp.graphs.continuous import continuous_graph  # noqa: E402
+from eosp.graphs.prune import prune  # noqa: E402
+from eosp.instances.generator import generate, scenario_of  # noqa: E402
+from eosp.shards.io import write_shard  # noqa: E402
 
 
 def bench(family: str, n: int, seed: int, step: float) -> dict:

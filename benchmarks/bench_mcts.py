@@ -15,15 +15,13 @@ import sys
 import time
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-
 import torch  # noqa: E402
 
-from envs.sources import prepare_instance  # noqa: E402
+from eosp.envs.sources import prepare_instance  # noqa: E402
 from eosp.config import MODEL_PRESETS, EnvConfig, ModelConfig, family_config  # noqa: E402
-from instances.generator import generate  # noqa: E402
-from models.agent import EOSPAgent  # noqa: E402
-from solvers.mcts import solve  # noqa: E402
+from eosp.instances.generator import generate  # noqa: E402
+from eosp.models.agent import EOSPAgent  # noqa: E402
+from eosp.solvers.mcts import solve  # noqa: E402
 
 
 def main() -> None:
@@ -35,7 +33,7 @@ def main() -> None:
     a = p.parse_args()
     torch.set_num_threads(1)
     if a.checkpoint:
-        from models.checkpoint import load_agent
+        from eosp.models.checkpoint import load_agent
 
         agent = load_agent(a.checkpoint)
     else:

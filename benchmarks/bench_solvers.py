@@ -19,14 +19,12 @@ import sys
 import time
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-
 import numpy as np  # noqa: E402
 
 from eosp.config import family_config  # noqa: E402
-from instances.generator import generate  # noqa: E402
-from instances.schedule import check, from_internal_nodes  # noqa: E402
-from solvers import exact, greedy, ramp  # noqa: E402
+from eosp.instances.generator import generate  # noqa: E402
+from eosp.instances.schedule import check, from_internal_nodes  # noqa: E402
+from eosp.solvers import exact, greedy, ramp  # noqa: E402
 
 MODES = ("utility", "unitary")
 

@@ -5,7 +5,7 @@
 
 import gymnasium as gym
 
-from envs.eosp_env import EOSPEnv, InvalidAction  # noqa: F401
+from eosp.envs.eosp_env import EOSPEnv, InvalidAction  # noqa: F401
 
 if "EOSP-v0" not in gym.registry:
-    gym.register("EOSP-v0", entry_point="envs.eosp_env:EOSPEnv")
+    gym.register("EOSP-v0", entry_point="eosp.envs.eosp_env:EOSPEnv")

@@ -27,7 +27,7 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
-from graphs.discrete import DiscreteGraph, arc_to_acq
+from eosp.graphs.discrete import DiscreteGraph, arc_to_acq
 
 
 @dataclass

@@ -51,11 +51,11 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-from envs import core
-from envs.observation import N_EDGE_FEATURES, N_NODE_FEATURES, build_observation
-from envs.sources import FixedSource, PreparedInstance, ShardSource, expand_shards, owned_shards, prepare_instance
+from eosp.envs import core
+from eosp.envs.observation import N_EDGE_FEATURES, N_NODE_FEATURES, build_observation
+from eosp.envs.sources import FixedSource, PreparedInstance, ShardSource, expand_shards, owned_shards, prepare_instance
 from eosp.config import CLASS_UTILITIES, N_CLASSES, EnvConfig, from_dict
-from instances.instance import Instance
+from eosp.instances.instance import Instance
 
 REWARDS = ("normalized", "utility", "unitary", "lexicographic")
 
@@ -99,7 +99,7 @@ class Snapshot:
 
 def _embedded_default(seed: int) -> Instance:
     from eosp.config import family_config
-    from instances.generator import generate
+    from eosp.instances.generator import generate
 
     return generate(family_config("uniform", 30, seed, graph={"step_s": 2.0}))
 
@@ -220,7 +220,7 @@ class EOSPEnv(gym.Env):
         return self.state.path[: self.state.scalars[0]].copy()
 
     def schedule(self):
-        from instances.schedule import from_internal_nodes
+        from eosp.instances.schedule import from_internal_nodes
 
         return from_internal_nodes(self.state.prepared.inst, self.path())
 

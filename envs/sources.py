@@ -14,9 +14,9 @@ from pathlib import Path
 
 import numpy as np
 
-from envs.core import EnvGraph, prepare
-from envs.observation import static_features
-from instances.instance import Instance
+from eosp.envs.core import EnvGraph, prepare
+from eosp.envs.observation import static_features
+from eosp.instances.instance import Instance
 
 
 @dataclass
@@ -55,7 +55,7 @@ class FixedSource:
 
 
 def expand_shards(paths: list[str] | tuple[str, ...]) -> list[Path]:
-    from shards.io import dataset_shards
+    from eosp.shards.io import dataset_shards
 
     out: list[Path] = []
     for p in paths:
@@ -78,7 +78,7 @@ class ShardSource:
     """Instances of a set of shards, drawn uniformly, loaded lazily, kept in an LRU cache."""
 
     def __init__(self, paths: list[Path], max_cached: int = 256, prune: bool = True):
-        from shards.io import ShardReader
+        from eosp.shards.io import ShardReader
 
         if not paths:
             raise ValueError("ShardSource needs at least one shard")

@@ -16,8 +16,8 @@ import numpy as np
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
-from instances.instance import Instance  # noqa: E402
-from instances.schedule import Schedule, to_internal_nodes  # noqa: E402
+from eosp.instances.instance import Instance  # noqa: E402
+from eosp.instances.schedule import Schedule, to_internal_nodes  # noqa: E402
 
 
 def node_rolls(inst: Instance) -> tuple[np.ndarray, np.ndarray] | None:
@@ -26,7 +26,7 @@ def node_rolls(inst: Instance) -> tuple[np.ndarray, np.ndarray] | None:
         return inst.node_attitude[:, 0].astype(float), inst.node_attitude[:, 2].astype(float)
     cfg = inst.meta.get("config")
     if cfg and inst.acqs.lat is not None and inst.meta.get("generator") == "eosp-open-sim":
-        from instances.generator import scenario_of
+        from eosp.instances.generator import scenario_of
 
         scn = scenario_of(inst)
         g = inst.graph

@@ -18,7 +18,6 @@ import sys
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
 
 VARIANTS = ("normalized", "lexicographic", "unitary")
 
@@ -69,12 +68,12 @@ def report(a) -> None:
     import numpy as np
     import torch
 
-    from envs.sources import expand_shards, prepare_instance
+    from eosp.envs.sources import expand_shards, prepare_instance
     from eosp.config import CLASS_UTILITIES, N_CLASSES
-    from models.checkpoint import load_agent
-    from shards.io import read_instances
-    from solvers.base import get_solver
-    from solvers.policy import rollout
+    from eosp.models.checkpoint import load_agent
+    from eosp.shards.io import read_instances
+    from eosp.solvers.base import get_solver
+    from eosp.solvers.policy import rollout
 
     torch.set_num_threads(1)
     insts = read_instances(expand_shards([str(ROOT / a.val)]))

@@ -18,7 +18,6 @@ import sys
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
 
 
 def main() -> None:
@@ -32,8 +31,8 @@ def main() -> None:
     a, extra = p.parse_known_args()
 
     from eosp.config import family_config
-    from instances.generator import generate
-    from shards.io import write_shard
+    from eosp.instances.generator import generate
+    from eosp.shards.io import write_shard
 
     name = f"{a.family}-n{a.n}-s{a.seed}"
     shard = ROOT / a.data / name / "shard-00000.parquet"

@@ -22,8 +22,8 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from instances.geometry import rotation_angle_deg
-from instances.slew import PIECEWISE, slew_time, slew_times
+from eosp.sim.geometry import rotation_angle_deg
+from eosp.sim.slew import PIECEWISE, slew_time, slew_times
 
 
 @numba.njit(cache=True, inline="always")

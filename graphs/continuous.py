@@ -10,7 +10,7 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from graphs.discrete import DiscreteGraph
+from eosp.graphs.discrete import DiscreteGraph
 
 
 @numba.njit(cache=True)

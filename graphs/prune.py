@@ -23,7 +23,7 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from graphs.discrete import DiscreteGraph, arc_to_acq
+from eosp.graphs.discrete import DiscreteGraph, arc_to_acq
 
 
 @numba.njit(cache=True)

@@ -20,11 +20,11 @@ from pathlib import Path
 import numpy as np
 
 from eosp.config import CLASS_UTILITIES, InstanceConfig, to_dict
-from graphs.build import build_arcs
-from graphs.discrete import DiscreteGraph, acq_ptr_from_node_acq
-from instances.geometry import R_EARTH, Orbit, pointing, rotation_angle_deg, sun_direction, target_ecef
-from instances.instance import Acquisitions, Instance
-from instances.slew import pack_slew_model, slew_times
+from eosp.graphs.build import build_arcs
+from eosp.graphs.discrete import DiscreteGraph, acq_ptr_from_node_acq
+from eosp.sim.geometry import R_EARTH, Orbit, pointing, rotation_angle_deg, sun_direction, target_ecef
+from eosp.instances.instance import Acquisitions, Instance
+from eosp.sim.slew import pack_slew_model, slew_times
 
 GENERATOR_NAME = "eosp-open-sim"
 GENERATOR_VERSION = 1

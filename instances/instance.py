@@ -12,7 +12,7 @@ from typing import Any
 
 import numpy as np
 
-from graphs.discrete import DiscreteGraph
+from eosp.graphs.discrete import DiscreteGraph
 
 ATTITUDE_COLUMNS = ("roll_min", "roll_max", "roll_mean", "pitch_min", "pitch_max", "pitch_mean")
 
@@ -61,7 +61,7 @@ class Instance:
     def pruned(self) -> DiscreteGraph:
         """The pruned discrete graph (computed once)."""
         if self._pruned is None:
-            from graphs.prune import prune
+            from eosp.graphs.prune import prune
 
             self._pruned = prune(self.graph, self.acqs.duration)
         return self._pruned

@@ -19,8 +19,8 @@ import pyarrow.parquet as pq
 
 from eosp.atomic import atomic_dir
 from eosp.errors import InputError
-from graphs.discrete import DiscreteGraph, acq_ptr_from_node_acq
-from instances.instance import ATTITUDE_COLUMNS, Acquisitions, Instance
+from eosp.graphs.discrete import DiscreteGraph, acq_ptr_from_node_acq
+from eosp.instances.instance import ATTITUDE_COLUMNS, Acquisitions, Instance
 
 TIME_TOL = 1e-6
 

@@ -19,8 +19,8 @@ import pyarrow.parquet as pq
 
 from eosp.atomic import atomic_path
 from eosp.errors import InputError
-from instances.instance import Instance
-from instances.interchange import TIME_TOL, check_columns, column, read_parquet
+from eosp.instances.instance import Instance
+from eosp.instances.interchange import TIME_TOL, check_columns, column, read_parquet
 
 SCHEDULE_COLUMNS = {"acq": "int", "node": "int", "start": "float"}
 

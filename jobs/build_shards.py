@@ -16,17 +16,14 @@ import sys
 import time
 from pathlib import Path
 
-if __package__ in (None, ""):
-    sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-
 from eosp.args import add_config_args, config_from_args, prefixed_config  # noqa: E402
 from eosp.config import DatasetConfig, InstanceConfig, RayConfig, changed, family_config, to_dict  # noqa: E402
 
 
 def build_shard(cfg: DatasetConfig, shard: int) -> dict:
     """Generate the instances of one shard and write it; returns its manifest entry."""
-    from instances.generator import generate
-    from shards.io import write_shard
+    from eosp.instances.generator import generate
+    from eosp.shards.io import write_shard
 
     t0 = time.perf_counter()
     first = shard * cfg.per_shard
@@ -45,7 +42,7 @@ def run(cfg: DatasetConfig, ray_cfg: RayConfig) -> dict:
     import ray
 
     from eosp.atomic import atomic_path
-    from eosp.ray_utils import init_ray
+    from eosp.jobs.ray_init import init_ray
 
     init_ray(ray_cfg.address, ray_cfg.num_cpus)
     Path(cfg.out).mkdir(parents=True, exist_ok=True)

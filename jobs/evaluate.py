@@ -22,9 +22,6 @@ import sys
 import time
 from pathlib import Path
 
-if __package__ in (None, ""):
-    sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 
 from eosp.args import add_config_args, config_from_args, prefixed_config  # noqa: E402
@@ -43,9 +40,9 @@ class SolverWorker:
     def solve(self, shard: str, index: int, solver: str, cfg: EvalConfig, budget: int | None) -> dict:
         import numpy as np
 
-        from instances.schedule import check, from_internal_nodes, write_schedule
-        from shards.io import ShardReader
-        from solvers.base import get_solver
+        from eosp.instances.schedule import check, from_internal_nodes, write_schedule
+        from eosp.shards.io import ShardReader
+        from eosp.solvers.base import get_solver
 
         inst = ShardReader(shard).read(index)
         kwargs = {"mode": cfg.mode, "time_limit": cfg.time_limit}
@@ -71,7 +68,7 @@ class SolverWorker:
 
     def _agent(self, checkpoint: str):
         if checkpoint not in self.agents:
-            from models.checkpoint import load_agent
+            from eosp.models.checkpoint import load_agent
 
             self.agents[checkpoint] = load_agent(checkpoint)
         return self.agents[checkpoint]
@@ -83,11 +80,11 @@ def run(cfg: EvalConfig, ray_cfg: RayConfig) -> "object":
     import ray
     from ray.util.actor_pool import ActorPool
 
-    from envs.sources import expand_shards
+    from eosp.envs.sources import expand_shards
     from eosp.atomic import atomic_path
-    from eosp.ray_utils import init_ray
-    from evaluation.report import markdown
-    from shards.io import ShardReader
+    from eosp.jobs.ray_init import init_ray
+    from eosp.evaluation.report import markdown
+    from eosp.shards.io import ShardReader
 
     if {"policy", "mcts"} & set(cfg.solvers) and not cfg.checkpoint:
         raise SystemExit("--checkpoint is required for the policy and mcts solvers")

@@ -25,9 +25,6 @@ import sys
 import time
 from pathlib import Path
 
-if __package__ in (None, ""):
-    sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 
 from eosp.args import add_config_args, config_from_args  # noqa: E402
@@ -78,7 +75,7 @@ def mlflow_uri(cfg: RunConfig) -> str:
 
 
 def ensure_demo_data(cfg: RunConfig) -> None:
-    from jobs.build_shards import run as build
+    from eosp.jobs.build_shards import run as build
 
     for path, (n, seed) in DEMO_DATA.items():
         if not (Path(path) / "manifest.json").exists():
@@ -93,12 +90,12 @@ def main(argv: list[str] | None = None) -> int:
     import ray
     import torch
 
-    from eosp.ray_utils import init_ray
-    from models.checkpoint import load_agent, save_agent
-    from training.loop import Trainer
-    from training.plots import learning_curve
-    from training.ppo import estimate_value_scale
-    from training.validation import Validator
+    from eosp.jobs.ray_init import init_ray
+    from eosp.models.checkpoint import load_agent, save_agent
+    from eosp.training.loop import Trainer
+    from eosp.training.plots import learning_curve
+    from eosp.training.ppo import estimate_value_scale
+    from eosp.training.validation import Validator
 
     torch.set_num_threads(1)
     init_ray(cfg.ray.address, cfg.ray.num_cpus)
@@ -204,10 +201,13 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def log_agent_model(checkpoint: Path) -> None:
-    """Log the agent as an MLflow pyfunc model built from code (models/mlflow_model.py) and its weights."""
+    """Log the agent as an MLflow pyfunc model built from code (eosp.training.mlflow_model) and its weights."""
+    import importlib.util
+
     import mlflow
 
-    code = Path(__file__).resolve().parents[1] / "models" / "mlflow_model.py"
+    # the file itself is logged (MLflow runs it when loading), never a pickled object
+    code = Path(importlib.util.find_spec("eosp.training.mlflow_model").origin)
     try:
         mlflow.pyfunc.log_model(name="agent", python_model=str(code), artifacts={"agent": str(checkpoint)})
     except Exception as exc:  # logging the model must not lose the run

@@ -24,9 +24,6 @@ import sys
 import tempfile
 from pathlib import Path
 
-if __package__ in (None, ""):
-    sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 
 from eosp.args import add_config_args, config_from_args, prefixed_config  # noqa: E402
@@ -38,10 +35,10 @@ def trial(config: dict) -> None:
     import torch
     from ray import tune
 
-    from models.checkpoint import load_agent, save_agent
-    from training.loop import Trainer
-    from training.ppo import estimate_value_scale
-    from training.validation import Validator
+    from eosp.models.checkpoint import load_agent, save_agent
+    from eosp.training.loop import Trainer
+    from eosp.training.ppo import estimate_value_scale
+    from eosp.training.validation import Validator
 
     torch.set_num_threads(1)
     cfg = from_dict(RunConfig, config["run"])
@@ -83,8 +80,8 @@ def run(cfg: RunConfig, tc: TuneConfig) -> dict:
     from ray.air.integrations.mlflow import MLflowLoggerCallback
     from ray.tune.schedulers import ASHAScheduler
 
-    from eosp.ray_utils import init_ray
-    from training.validation import baseline_values, objective_mode
+    from eosp.jobs.ray_init import init_ray
+    from eosp.training.validation import baseline_values, objective_mode
 
     init_ray(cfg.ray.address, cfg.ray.num_cpus)
     from eosp.config import default_mlflow_uri

@@ -5,4 +5,4 @@ a value per graph; ``batch_from_padded`` turns the environment's padded
 observations into a PyG-style batch without Python loops over nodes.
 """
 
-from models.agent import EOSPAgent, GraphBatch, batch_from_padded  # noqa: F401
+from eosp.models.agent import EOSPAgent, GraphBatch, batch_from_padded  # noqa: F401

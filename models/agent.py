@@ -30,7 +30,7 @@ from torch import nn
 from torch_geometric.nn import GATv2Conv
 
 from eosp.config import ModelConfig
-from envs.observation import N_EDGE_FEATURES, N_NODE_FEATURES
+from eosp.envs.observation import N_EDGE_FEATURES, N_NODE_FEATURES
 
 PRECEDENCE, REVERSE, TO_GLOBAL, FROM_GLOBAL = range(4)
 MASKED = -1e9  # logit of a forbidden action

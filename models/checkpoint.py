@@ -16,7 +16,7 @@ import torch
 from eosp.atomic import atomic_path
 from eosp.config import EnvConfig, ModelConfig, from_dict, to_dict
 from eosp.errors import InputError
-from models.agent import EOSPAgent
+from eosp.models.agent import EOSPAgent
 
 WEIGHTS, CONFIG = "agent.pt", "agent.json"
 

@@ -30,8 +30,8 @@ import pyarrow.parquet as pq
 
 from eosp.atomic import atomic_path
 from eosp.errors import InputError
-from graphs.discrete import DiscreteGraph, first_backward_arc
-from instances.instance import Acquisitions, Instance
+from eosp.graphs.discrete import DiscreteGraph, first_backward_arc
+from eosp.instances.instance import Acquisitions, Instance
 
 SCHEMA_VERSION = 1
 KIND = "eosp-instance-shard"
@@ -207,7 +207,7 @@ def _instance_from_row(path: Path, row: int, t: pa.Table, unpruned: bool) -> Ins
             or np.any(np.diff(node_acq[1:]) < 0):
         raise InputError(path, "nodes not in canonical order (source, then by acquisition)", column="node_acq",
                          row=row)
-    from graphs.discrete import acq_ptr_from_node_acq
+    from eosp.graphs.discrete import acq_ptr_from_node_acq
 
     acq_ptr = acq_ptr_from_node_acq(node_acq, n)
     if np.any(np.diff(acq_ptr) == 0):

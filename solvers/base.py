@@ -8,7 +8,7 @@ from typing import Any, Callable
 
 import numpy as np
 
-from instances.instance import Instance
+from eosp.instances.instance import Instance
 
 
 @dataclass
@@ -31,12 +31,12 @@ def objective_weights(inst: Instance, mode: str) -> np.ndarray:
 
 # name -> "module:function"; each function is solve(inst, *, mode, time_limit, seed, **kw) -> Solution
 REGISTRY: dict[str, str] = {
-    "random": "solvers.random_walk:solve",
-    "policy": "solvers.policy:solve",
-    "mcts": "solvers.mcts:solve",
-    "greedy": "solvers.greedy:solve",
-    "ramp": "solvers.ramp:solve",
-    "exact": "solvers.exact:solve",
+    "random": "eosp.solvers.random_walk:solve",
+    "policy": "eosp.solvers.policy:solve",
+    "mcts": "eosp.solvers.mcts:solve",
+    "greedy": "eosp.solvers.greedy:solve",
+    "ramp": "eosp.solvers.ramp:solve",
+    "exact": "eosp.solvers.exact:solve",
 }
 
 

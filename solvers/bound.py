@@ -41,9 +41,9 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
-from graphs.discrete import DiscreteGraph
-from instances.instance import Instance
-from solvers.base import objective_weights
+from eosp.graphs.discrete import DiscreteGraph
+from eosp.instances.instance import Instance
+from eosp.solvers.base import objective_weights
 
 
 def topological_order(graph: DiscreteGraph) -> np.ndarray:
@@ -186,7 +186,7 @@ def upper_bound(inst: Instance, mode: str = "utility", *, lower: float | None = 
     inst.require_unpruned("the upper bound")
     w = objective_weights(inst, mode)
     if lower is None:
-        from solvers.greedy import solve as greedy
+        from eosp.solvers.greedy import solve as greedy
 
         lower = greedy(inst, mode=mode).value
     lb = lagrangian(inst.pruned(), w, wait=True, lower=lower, iterations=iterations, time_limit=time_limit,

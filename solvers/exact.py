@@ -42,12 +42,12 @@ import time
 
 import numpy as np
 
-from instances.instance import Instance
-from solvers.base import Solution, objective_weights
-from solvers.bound import completion_bound, lagrangian
-from solvers.greedy import solve as greedy
-from solvers.ramp import label_search
-from solvers.ramp import solve as ramp
+from eosp.instances.instance import Instance
+from eosp.solvers.base import Solution, objective_weights
+from eosp.solvers.bound import completion_bound, lagrangian
+from eosp.solvers.greedy import solve as greedy
+from eosp.solvers.ramp import label_search
+from eosp.solvers.ramp import solve as ramp
 
 
 def solve(inst: Instance, *, mode: str = "utility", time_limit: float | None = None, seed: int = 0,

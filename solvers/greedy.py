@@ -37,9 +37,9 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from graphs.discrete import arc_to_acq
-from instances.instance import Instance
-from solvers.base import Solution, objective_weights
+from eosp.graphs.discrete import arc_to_acq
+from eosp.instances.instance import Instance
+from eosp.solvers.base import Solution, objective_weights
 
 
 @numba.njit(cache=True)

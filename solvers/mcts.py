@@ -5,11 +5,11 @@ from __future__ import annotations
 import time
 
 
-from envs.sources import prepare_instance
-from instances.instance import Instance
-from search.mcts import solve as mcts_solve
-from solvers.base import Solution, objective_weights
-from solvers.policy import evaluate_batch, make_env_for, resolve_agent
+from eosp.envs.sources import prepare_instance
+from eosp.instances.instance import Instance
+from eosp.search.mcts import solve as mcts_solve
+from eosp.solvers.base import Solution, objective_weights
+from eosp.solvers.policy import evaluate_batch, make_env_for, resolve_agent
 
 
 def solve(inst: Instance, *, mode: str = "utility", time_limit: float | None = None, seed: int = 0,

@@ -10,12 +10,12 @@ from dataclasses import replace
 import numpy as np
 import torch
 
-from envs.eosp_env import EOSPEnv
-from envs.sources import FixedSource, PreparedInstance, prepare_instance
+from eosp.envs.eosp_env import EOSPEnv
+from eosp.envs.sources import FixedSource, PreparedInstance, prepare_instance
 from eosp.config import EnvConfig
-from instances.instance import Instance
-from models.agent import EOSPAgent, batch_from_padded
-from solvers.base import Solution, objective_weights
+from eosp.instances.instance import Instance
+from eosp.models.agent import EOSPAgent, batch_from_padded
+from eosp.solvers.base import Solution, objective_weights
 
 
 def to_batch(obs: dict[str, np.ndarray]) -> dict[str, torch.Tensor]:
@@ -70,7 +70,7 @@ def resolve_agent(solver: str, checkpoint: str, agent: tuple | None) -> tuple:
         return agent
     if not checkpoint:
         raise ValueError(f"the {solver} solver needs --checkpoint (a directory holding agent.pt and agent.json)")
-    from models.checkpoint import load_agent
+    from eosp.models.checkpoint import load_agent
 
     torch.set_num_threads(1)
     return load_agent(checkpoint)

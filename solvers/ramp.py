@@ -40,10 +40,10 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
-from graphs.discrete import DiscreteGraph
-from instances.instance import Instance
-from solvers.base import Solution, objective_weights
-from solvers.bound import acq_last_time, topological_order
+from eosp.graphs.discrete import DiscreteGraph
+from eosp.instances.instance import Instance
+from eosp.solvers.base import Solution, objective_weights
+from eosp.solvers.bound import acq_last_time, topological_order
 
 STOP_DONE, STOP_GROW, STOP_CHECK = 0, 1, 2  # why _sweep returned
 

@@ -8,8 +8,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from instances.instance import Instance
-from solvers.base import Solution, objective_weights
+from eosp.instances.instance import Instance
+from eosp.solvers.base import Solution, objective_weights
 
 
 def solve(inst: Instance, *, mode: str = "utility", time_limit: float | None = None, seed: int = 0,

@@ -10,8 +10,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from graphs.discrete import DiscreteGraph, acq_ptr_from_node_acq
-from instances.instance import Acquisitions, Instance
+from eosp.graphs.discrete import DiscreteGraph, acq_ptr_from_node_acq
+from eosp.instances.instance import Acquisitions, Instance
 
 
 def transition(base: np.ndarray, i: int, j: int, t_end: float) -> float:

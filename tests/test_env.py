@@ -7,11 +7,11 @@ from gymnasium.utils.env_checker import check_env
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-import envs  # noqa: F401  (registers EOSP-v0)
-from envs.eosp_env import EOSPEnv, InvalidAction
-from envs.sources import FixedSource
+import eosp.envs  # noqa: F401  (registers EOSP-v0)
+from eosp.envs.eosp_env import EOSPEnv, InvalidAction
+from eosp.envs.sources import FixedSource
 from eosp.config import EnvConfig
-from instances.schedule import check
+from eosp.instances.schedule import check
 from tests.conftest import generated
 from tests.synthetic import synthetic_instance
 
@@ -186,7 +186,7 @@ def test_observation_shapes_dtypes_and_edges():
         # every selectable acquisition is flagged
         np.testing.assert_array_equal(obs["x"][:30, 2], obs["action_mask"][:30])
     # the full graph at reset is the continuous graph of the alive part
-    from graphs.continuous import continuous_graph
+    from eosp.graphs.continuous import continuous_graph
 
     env = EOSPEnv(EnvConfig(max_acquisitions=30, obs_edges="full", max_edges=5000), source=FixedSource(inst))
     obs, _ = env.reset(seed=0)
@@ -198,7 +198,7 @@ def test_observation_shapes_dtypes_and_edges():
 def test_shard_source_splits_shards_between_workers(tmp_path):
     from ray.rllib.env.env_context import EnvContext
 
-    from shards.io import write_shard
+    from eosp.shards.io import write_shard
 
     for k in range(4):
         write_shard(tmp_path / f"shard-{k}.parquet", [generated("uniform", 12, 10 + k)])

@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from eosp.config import CLASS_UTILITIES, family_config
-from instances.generator import generate, scenario_of
-from instances.interchange import write_instance
+from eosp.instances.generator import generate, scenario_of
+from eosp.instances.interchange import write_instance
 from tests.conftest import generated
 
 
@@ -72,7 +72,7 @@ def test_pitch_sweeps_through_the_window():
 
 def test_oversubscribed_like_the_paper():
     """Far more candidates than fit: a random feasible schedule keeps well under half of 100."""
-    from solvers.random_walk import solve
+    from eosp.solvers.random_walk import solve
 
     inst = generate(family_config("uniform", 100, 0, graph={"step_s": 4.0}))
     assert 10 < len(solve(inst, seed=0).nodes) < 80

@@ -5,11 +5,11 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from graphs.continuous import continuous_graph
-from graphs.prune import prune
-from instances.generator import scenario_of
-from instances.geometry import rotation_angle_deg
-from instances.slew import slew_times
+from eosp.graphs.continuous import continuous_graph
+from eosp.graphs.prune import prune
+from eosp.instances.generator import scenario_of
+from eosp.sim.geometry import rotation_angle_deg
+from eosp.sim.slew import slew_times
 from tests.conftest import generated
 from tests.synthetic import synthetic_instance
 

@@ -10,9 +10,9 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from eosp.errors import InputError
-from instances.interchange import read_instance, write_instance
-from instances.schedule import Schedule, check, from_internal_nodes, read_schedule, write_schedule
-from solvers.random_walk import solve as random_solve
+from eosp.instances.interchange import read_instance, write_instance
+from eosp.instances.schedule import Schedule, check, from_internal_nodes, read_schedule, write_schedule
+from eosp.solvers.random_walk import solve as random_solve
 from tests.conftest import generated
 from tests.synthetic import synthetic_instance
 
@@ -206,7 +206,7 @@ def test_bad_meta_json(inst_dir):
 
 
 def test_export_leaves_nothing_half_written(tmp_path, monkeypatch):
-    import instances.interchange as ic
+    import eosp.instances.interchange as ic
 
     inst = generated("uniform", 12, 0)
 

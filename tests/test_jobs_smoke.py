@@ -23,7 +23,7 @@ def test_build_shards(tmp_path):
     assert "shard 2/2" in r.stdout
     manifest = json.loads((out / "manifest.json").read_text())
     assert [s["file"] for s in manifest["shards"]] == ["shard-00000.parquet", "shard-00001.parquet"]
-    from shards.io import read_instances
+    from eosp.shards.io import read_instances
 
     insts = read_instances(sorted(out.glob("*.parquet")))
     assert [i.meta["seed"] for i in insts] == [5, 6, 7]
@@ -34,7 +34,7 @@ def test_build_shards(tmp_path):
 def test_evaluate(tmp_path):
     import pandas as pd
 
-    from shards.io import write_shard
+    from eosp.shards.io import write_shard
     from tests.conftest import generated
 
     write_shard(tmp_path / "data" / "shard-0.parquet", [generated("uniform", 12, s) for s in range(3)])

@@ -4,11 +4,11 @@ import numpy as np
 import pytest
 import torch
 
-from envs.sources import prepare_instance
+from eosp.envs.sources import prepare_instance
 from eosp.config import EnvConfig, ModelConfig
-from models.agent import EOSPAgent
-from search.mcts import solve as mcts_solve
-from solvers.policy import evaluate_batch, make_env_for, rollout
+from eosp.models.agent import EOSPAgent
+from eosp.search.mcts import solve as mcts_solve
+from eosp.solvers.policy import evaluate_batch, make_env_for, rollout
 from tests.conftest import generated
 from tests.synthetic import all_paths, synthetic_instance
 
@@ -43,7 +43,7 @@ def test_large_budget_finds_the_optimum_of_a_tiny_instance(agent, seed, batch):
     nodes, ret, _ = run(agent, inst, 400, batch=batch)
     value = inst.acqs.utility[inst.graph.node_acq[nodes]].sum()
     assert value == pytest.approx(best, rel=1e-12) and ret == pytest.approx(best, rel=1e-9)
-    from solvers.exact import solve as exact
+    from eosp.solvers.exact import solve as exact
 
     assert value <= exact(inst, time_limit=30).value * (1 + 1e-12)
 

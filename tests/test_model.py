@@ -4,12 +4,12 @@ import numpy as np
 import pytest
 import torch
 
-from envs.eosp_env import EOSPEnv
-from envs.sources import FixedSource
+from eosp.envs.eosp_env import EOSPEnv
+from eosp.envs.sources import FixedSource
 from eosp.config import EnvConfig, ModelConfig
-from models.agent import MASKED, EOSPAgent, batch_from_padded
-from models.checkpoint import load_agent, save_agent
-from solvers.policy import rollout
+from eosp.models.agent import MASKED, EOSPAgent, batch_from_padded
+from eosp.models.checkpoint import load_agent, save_agent
+from eosp.solvers.policy import rollout
 from tests.conftest import generated
 
 torch.set_num_threads(1)
@@ -98,7 +98,7 @@ def test_node_logits_are_permutation_equivariant(agent):
 
 def test_any_number_of_nodes(agent):
     """Trained for small instances, runs on bigger ones (no size in the weights)."""
-    from envs.sources import prepare_instance
+    from eosp.envs.sources import prepare_instance
 
     for n in (8, 60):
         inst = generated("uniform", n, 3)
@@ -107,7 +107,7 @@ def test_any_number_of_nodes(agent):
 
 
 def test_checkpoint_round_trip_same_actions(tmp_path, agent):
-    from envs.sources import prepare_instance
+    from eosp.envs.sources import prepare_instance
 
     save_agent(agent, tmp_path / "ck", EnvConfig(reward="unitary"))
     back, env_cfg, meta = load_agent(tmp_path / "ck")

@@ -29,7 +29,7 @@ from pathlib import Path
 
 import pytest
 
-from shards.io import write_shard
+from eosp.shards.io import write_shard
 from tests.conftest import generated
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -238,7 +238,7 @@ def test_submitted_job_logs_to_mlflow_and_survives_a_killed_env_runner(platform,
     uri = p.jobs().get_job_info(job).runtime_env["working_dir"]  # gcs://_ray_pkg_HASH.zip
     pkg = (Path(p.state["ray"]["temp_dir"]) / "session_latest" / "runtime_resources" / "working_dir_files"
            / uri.rsplit("/", 1)[1].removesuffix(".zip"))
-    assert (pkg / "jobs" / "train.py").exists() and (pkg / "eosp" / "ray_utils.py").exists()
+    assert (pkg / "jobs" / "train.py").exists() and (pkg / "core" / "config.py").exists()
     for local in (".venv", "data", "runs", "mlruns", "mlflow.db", ".platform", ".git"):
         assert not (pkg / local).exists(), local
 

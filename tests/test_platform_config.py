@@ -374,10 +374,10 @@ def test_job_entry_points_parse_their_arguments(entry_points, capsys):
     """Every job command line is accepted by the job's own parser (the job itself is not run)."""
     from unittest import mock
 
-    import jobs.build_shards
-    import jobs.evaluate
-    import jobs.tune
-    from jobs.train import parse
+    import eosp.jobs.build_shards
+    import eosp.jobs.evaluate
+    import eosp.jobs.tune
+    from eosp.jobs.train import parse
 
     seen = set()
     for where, script, args in entry_points:
@@ -385,17 +385,17 @@ def test_job_entry_points_parse_their_arguments(entry_points, capsys):
             cfg, _ = parse(args)
             assert cfg.train.run_dir.startswith("/shared/") and cfg.train.train_data.startswith("/shared/"), where
         elif script == "build_shards.py":
-            with mock.patch.object(jobs.build_shards, "run", return_value={"shards": [], "wall_seconds": 0.0}) as run:
-                assert jobs.build_shards.main(args) == 0
+            with mock.patch.object(eosp.jobs.build_shards, "run", return_value={"shards": [], "wall_seconds": 0.0}) as run:
+                assert eosp.jobs.build_shards.main(args) == 0
             assert run.call_args.args[0].out.startswith("/shared/data/"), where
         elif script == "tune.py":
-            with mock.patch.object(jobs.tune, "run", return_value={}) as run:
-                assert jobs.tune.main(args) == 0
+            with mock.patch.object(eosp.jobs.tune, "run", return_value={}) as run:
+                assert eosp.jobs.tune.main(args) == 0
             cfg, tc = run.call_args.args
             assert cfg.train.run_dir.startswith("/shared/") and tc.name, where
         elif script == "evaluate.py":
-            with mock.patch.object(jobs.evaluate, "run", return_value=None) as run:
-                assert jobs.evaluate.main(args) == 0
+            with mock.patch.object(eosp.jobs.evaluate, "run", return_value=None) as run:
+                assert eosp.jobs.evaluate.main(args) == 0
             cfg = run.call_args.args[0]
             assert all(d.startswith("/shared/data/") for d in cfg.data) and cfg.out.startswith("/shared/"), where
         else:
@@ -410,7 +410,7 @@ def test_runtime_env_file_excludes_local_state():
     assert set(env) <= {"excludes", "env_vars", "working_dir", "pip", "py_modules"}
     for entry in (".venv/", "data/", "runs/", "mlruns/", "mlflow.db", ".platform/", ".git/"):
         assert entry in env["excludes"]
-    # eosp.ray_utils.init_ray sets these in the driver's runtime env: Ray refuses to merge duplicates
+    # eosp.jobs.ray_init.init_ray sets these in the driver's runtime env: Ray refuses to merge duplicates
     assert set(env.get("env_vars", {})).isdisjoint({"OMP_NUM_THREADS", "MKL_NUM_THREADS"})
 
 
@@ -439,8 +439,8 @@ def test_checkpoints_load_with_weights_only_and_refuse_pickled_code(tmp_path):
 
     from eosp.config import EnvConfig, ModelConfig
     from eosp.errors import InputError
-    from models.agent import EOSPAgent
-    from models.checkpoint import WEIGHTS, load_agent, save_agent
+    from eosp.models.agent import EOSPAgent
+    from eosp.models.checkpoint import WEIGHTS, load_agent, save_agent
 
     agent = EOSPAgent(ModelConfig(hidden_dim=8, n_layers=1, heads=1))
     ck = save_agent(agent, tmp_path / "ck", EnvConfig())

@@ -1,8 +1,8 @@
 """The trajectory plot: PNG and SVG, for generated and for foreign instances."""
 
-from evaluation.plots import plot_trajectories
-from instances.schedule import from_internal_nodes
-from solvers.random_walk import solve
+from eosp.evaluation.plots import plot_trajectories
+from eosp.instances.schedule import from_internal_nodes
+from eosp.solvers.random_walk import solve
 from tests.conftest import generated
 from tests.synthetic import synthetic_instance
 

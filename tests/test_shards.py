@@ -6,7 +6,7 @@ import pyarrow.parquet as pq
 import pytest
 
 from eosp.errors import InputError
-from shards.io import SCHEMA_VERSION, ShardReader, read_instances, write_shard
+from eosp.shards.io import SCHEMA_VERSION, ShardReader, read_instances, write_shard
 from tests.conftest import generated
 from tests.test_interchange import assert_same_instance
 

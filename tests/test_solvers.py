@@ -7,12 +7,12 @@ import numpy as np
 import pytest
 
 from eosp.cli import main as cli_main
-from instances.interchange import write_instance
-from instances.schedule import check, from_internal_nodes, read_schedule
-from solvers import exact, greedy, ramp
-from solvers.base import get_solver, objective_weights
-from solvers.bound import completion_bound, lagrangian, togo_pass, topological_order, upper_bound
-from solvers.ramp import label_search
+from eosp.instances.interchange import write_instance
+from eosp.instances.schedule import check, from_internal_nodes, read_schedule
+from eosp.solvers import exact, greedy, ramp
+from eosp.solvers.base import get_solver, objective_weights
+from eosp.solvers.bound import completion_bound, lagrangian, togo_pass, topological_order, upper_bound
+from eosp.solvers.ramp import label_search
 from tests.conftest import generated
 from tests.synthetic import all_paths, synthetic_instance
 
@@ -230,7 +230,7 @@ def test_cli_solve_through_the_registry(tmp_path, name, capsys):
 def test_exact_at_100_acquisitions(family):
     """Proven optimal at the paper's size in seconds (about 1 s each here)."""
     from eosp.config import family_config
-    from instances.generator import generate
+    from eosp.instances.generator import generate
 
     inst = generate(family_config(family, 100, 0))
     for mode in MODES:

@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from shards.io import write_shard
+from eosp.shards.io import write_shard
 from tests.conftest import generated
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -57,7 +57,7 @@ def test_two_iterations_checkpoint_mlflow_resume_and_solve(tmp_path, data):
 
     # the checkpoint decodes schedules through the CLI
     inst_dir = tmp_path / "inst"
-    from instances.interchange import write_instance
+    from eosp.instances.interchange import write_instance
 
     write_instance(generated("uniform", 12, 100), inst_dir)
     ck = tmp_path / "runs" / "t" / "checkpoints" / "best"

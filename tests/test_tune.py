@@ -5,7 +5,7 @@ import subprocess
 import sys
 from pathlib import Path
 
-from shards.io import write_shard
+from eosp.shards.io import write_shard
 from tests.conftest import generated
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -33,7 +33,7 @@ from ray.rllib.utils.numpy import convert_to_numpy
 from ray.rllib.utils.postprocessing.value_predictions import compute_value_targets
 
 from eosp.config import N_CLASSES
-from envs.observation import NODE_FEATURES
+from eosp.envs.observation import NODE_FEATURES
 
 LEX_EPS = 0.01
 CLASS_SLICE = slice(NODE_FEATURES.index("class_0"), NODE_FEATURES.index("class_0") + N_CLASSES)

@@ -35,7 +35,7 @@ class Trainer:
     """An RLlib PPO algorithm for a RunConfig, with validation and agent extraction."""
 
     def __init__(self, cfg: RunConfig, validator=None):
-        from training.ppo import ppo_config
+        from eosp.training.ppo import ppo_config
 
         self.cfg = cfg
         self.validator = validator
@@ -43,13 +43,13 @@ class Trainer:
         self.steps = 0
 
     def agent(self):
-        from models.checkpoint import agent_from_rllib_weights
+        from eosp.models.checkpoint import agent_from_rllib_weights
 
         return agent_from_rllib_weights(self.algo.learner_group.get_weights()["default_policy"], self.cfg.model)
 
     def load(self, agent) -> None:
         """Start from an agent's weights (resume)."""
-        from models.checkpoint import rllib_weights_from_agent
+        from eosp.models.checkpoint import rllib_weights_from_agent
 
         self.algo.learner_group.set_weights({"default_policy": rllib_weights_from_agent(agent)})
         self.algo.env_runner_group.sync_weights(from_worker_or_learner_group=self.algo.learner_group,

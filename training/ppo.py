@@ -11,8 +11,8 @@ def estimate_value_scale(cfg: RunConfig, episodes: int = 8) -> float:
     """Mean return of random episodes on training instances: the scale of the value targets."""
     import numpy as np
 
-    from envs.eosp_env import EOSPEnv
-    from envs.sources import ShardSource, expand_shards
+    from eosp.envs.eosp_env import EOSPEnv
+    from eosp.envs.sources import ShardSource, expand_shards
 
     env = EOSPEnv(cfg.env, source=ShardSource(expand_shards([cfg.train.train_data]), max_cached=episodes,
                                              prune=cfg.env.prune))
@@ -33,8 +33,8 @@ def ppo_config(cfg: RunConfig):
     from ray.rllib.algorithms.ppo import PPOConfig
     from ray.rllib.core.rl_module.rl_module import RLModuleSpec
 
-    from envs.eosp_env import EOSPEnv
-    from training.rl_module import EOSPTorchRLModule
+    from eosp.envs.eosp_env import EOSPEnv
+    from eosp.training.rl_module import EOSPTorchRLModule
 
     t = cfg.train
     scale = cfg.model.value_scale or 1.0
@@ -43,7 +43,7 @@ def ppo_config(cfg: RunConfig):
     env_config["seed"] = t.seed
     learner = {}
     if cfg.env.reward == "lexicographic":
-        from training.lexicographic import LexicographicPPOLearner
+        from eosp.training.lexicographic import LexicographicPPOLearner
 
         learner = {"learner_class": LexicographicPPOLearner}
     pc = (

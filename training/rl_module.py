@@ -19,7 +19,7 @@ from ray.rllib.core.rl_module.apis.value_function_api import ValueFunctionAPI
 from ray.rllib.core.rl_module.torch.torch_rl_module import TorchRLModule
 
 from eosp.config import ModelConfig, from_dict
-from models.agent import EOSPAgent, batch_from_padded
+from eosp.models.agent import EOSPAgent, batch_from_padded
 
 
 class EOSPTorchRLModule(TorchRLModule, ValueFunctionAPI):

@@ -25,8 +25,8 @@ def objective_mode(env_cfg: EnvConfig) -> str:
 
 
 def _solve_task(shard: str, index: int, solver: str, mode: str, time_limit: float) -> tuple[str, float, float]:
-    from shards.io import ShardReader
-    from solvers.base import get_solver
+    from eosp.shards.io import ShardReader
+    from eosp.solvers.base import get_solver
 
     inst = ShardReader(shard).read(index)
     t0 = time.perf_counter()
@@ -38,8 +38,8 @@ def baseline_values(val_path: str | Path, mode: str, solvers=BASELINES, time_lim
     """{solver: {instance name: value}} for every instance of the data set, cached in baselines.json."""
     import ray
 
-    from envs.sources import expand_shards
-    from shards.io import ShardReader
+    from eosp.envs.sources import expand_shards
+    from eosp.shards.io import ShardReader
 
     shards = expand_shards([str(val_path)])
     cache_file = (Path(val_path) if Path(val_path).is_dir() else Path(val_path).parent) / "baselines.json"
@@ -90,8 +90,8 @@ def compare(policy: np.ndarray, baselines: dict[str, np.ndarray], prefix: str = 
 
 class Validator:
     def __init__(self, val_path: str | Path, env_cfg: EnvConfig, max_instances: int = 0):
-        from envs.sources import expand_shards, prepare_instance
-        from shards.io import read_instances
+        from eosp.envs.sources import expand_shards, prepare_instance
+        from eosp.shards.io import read_instances
 
         self.env_cfg = env_cfg
         self.mode = objective_mode(env_cfg)
@@ -104,12 +104,12 @@ class Validator:
         self.baselines = {s: np.array([base[s][n] for n in self.names]) for s in BASELINES}
 
     def score(self, inst, nodes: np.ndarray) -> float:
-        from solvers.base import objective_weights
+        from eosp.solvers.base import objective_weights
 
         return float(objective_weights(inst, self.mode)[inst.graph.node_acq[nodes]].sum()) if len(nodes) else 0.0
 
     def run(self, agent) -> ValidationResult:
-        from solvers.policy import rollout
+        from eosp.solvers.policy import rollout
 
         values = []
         for p in self.prepared:

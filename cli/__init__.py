@@ -19,10 +19,10 @@ from eosp.errors import InputError
 
 def _load_instance(path: str):
     """An instance from an interchange directory, or `SHARD.parquet#INDEX` from a shard."""
-    from instances.interchange import read_instance
+    from eosp.instances.interchange import read_instance
 
     if "#" in path:
-        from shards.io import ShardReader
+        from eosp.shards.io import ShardReader
 
         file, _, idx = path.rpartition("#")
         return ShardReader(file).read(int(idx))
@@ -30,8 +30,8 @@ def _load_instance(path: str):
 
 
 def cmd_generate(ns: argparse.Namespace) -> int:
-    from instances.generator import generate
-    from instances.interchange import write_instance
+    from eosp.instances.generator import generate
+    from eosp.instances.interchange import write_instance
 
     # the family's settings first, then every flag given
     base = family_config(getattr(ns, "family", "uniform"), 100, 0)
@@ -45,8 +45,8 @@ def cmd_generate(ns: argparse.Namespace) -> int:
 
 
 def cmd_import(ns: argparse.Namespace) -> int:
-    from instances.interchange import read_instance
-    from shards.io import write_shard
+    from eosp.instances.interchange import read_instance
+    from eosp.shards.io import write_shard
 
     insts = [read_instance(d) for d in ns.instance_dirs]
     write_shard(ns.out, insts, include_unpruned=not ns.pruned_only)
@@ -55,8 +55,8 @@ def cmd_import(ns: argparse.Namespace) -> int:
 
 
 def cmd_export(ns: argparse.Namespace) -> int:
-    from instances.interchange import write_instance
-    from shards.io import ShardReader
+    from eosp.instances.interchange import write_instance
+    from eosp.shards.io import ShardReader
 
     reader = ShardReader(ns.shard)
     inst = reader.read(ns.index)
@@ -71,7 +71,7 @@ def cmd_export(ns: argparse.Namespace) -> int:
 
 
 def cmd_info(ns: argparse.Namespace) -> int:
-    from graphs.continuous import continuous_graph
+    from eosp.graphs.continuous import continuous_graph
 
     inst = _load_instance(ns.instance)
     pg = inst.pruned()
@@ -84,8 +84,8 @@ def cmd_info(ns: argparse.Namespace) -> int:
 
 
 def cmd_validate(ns: argparse.Namespace) -> int:
-    from instances.interchange import read_instance
-    from instances.schedule import check, read_schedule
+    from eosp.instances.interchange import read_instance
+    from eosp.instances.schedule import check, read_schedule
 
     inst = read_instance(ns.instance_dir)
     verdict = check(inst, read_schedule(ns.schedule))
@@ -97,8 +97,8 @@ def cmd_validate(ns: argparse.Namespace) -> int:
 
 
 def cmd_solve(ns: argparse.Namespace) -> int:
-    from instances.schedule import check, from_internal_nodes, write_schedule
-    from solvers.base import get_solver
+    from eosp.instances.schedule import check, from_internal_nodes, write_schedule
+    from eosp.solvers.base import get_solver
 
     inst = _load_instance(ns.instance_dir)
     solver = get_solver(ns.solver)
@@ -124,16 +124,16 @@ def cmd_solve(ns: argparse.Namespace) -> int:
 
 
 def cmd_build_shards(ns: argparse.Namespace, rest: list[str]) -> int:
-    from jobs.build_shards import main as build_main
+    from eosp.jobs.build_shards import main as build_main
 
     return build_main(rest)
 
 
 def cmd_plot(ns: argparse.Namespace) -> int:
-    from evaluation.plots import plot_trajectories
-    from instances.schedule import read_schedule
+    from eosp.evaluation.plots import plot_trajectories
+    from eosp.instances.schedule import read_schedule
 
-    from instances.schedule import check
+    from eosp.instances.schedule import check
 
     inst = _load_instance(ns.instance_dir)
     schedules = {Path(s).stem: read_schedule(s) for s in ns.schedules}

@@ -17,15 +17,15 @@ class EOSPPolicyModel(mlflow.pyfunc.PythonModel):
     def load_context(self, context) -> None:
         import torch
 
-        from models.checkpoint import load_agent
+        from eosp.models.checkpoint import load_agent
 
         torch.set_num_threads(1)
         self.agent, self.env_cfg, self.meta = load_agent(context.artifacts["agent"])
 
     def predict(self, context, model_input: pd.DataFrame, params=None) -> pd.DataFrame:
-        from envs.sources import prepare_instance
-        from instances.interchange import read_instance
-        from solvers.policy import rollout
+        from eosp.envs.sources import prepare_instance
+        from eosp.instances.interchange import read_instance
+        from eosp.solvers.policy import rollout
 
         rows = []
         for d in model_input["instance_dir"]:

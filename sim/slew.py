@@ -1,7 +1,7 @@
 """Slew-time models: how long the satellite needs to rotate by an angle.
 
 Both models are functions of the total rotation angle between two attitudes
-(:func:`instances.geometry.rotation_angle_deg`).  They are packed into a flat
+(:func:`eosp.sim.geometry.rotation_angle_deg`).  They are packed into a flat
 float64 array so that the numba graph builder can evaluate them in its hot loop:
 
 * ``piecewise``: ``[0, k, a_0..a_{k-1}, t_0..t_{k-1}]``, linear interpolation of
@@ -54,7 +54,7 @@ def slew_time(angle_deg: float, model: np.ndarray) -> float:
 
 @numba.njit(cache=True)
 def rotation_angle(droll_deg: float, dpitch_deg: float) -> float:
-    """Scalar twin of :func:`instances.geometry.rotation_angle_deg`."""
+    """Scalar twin of :func:`eosp.sim.geometry.rotation_angle_deg`."""
     cr = np.cos(np.deg2rad(droll_deg))
     cp = np.cos(np.deg2rad(dpitch_deg))
     c = (cp + cr + cr * cp - 1.0) * 0.5

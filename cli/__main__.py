@@ -1,0 +1,7 @@
+"""``python -m eosp.cli`` = the ``eosp`` command."""
+
+import sys
+
+from eosp.cli import main
+
+sys.exit(main())
