@@ -228,6 +228,64 @@ class DatasetConfig:
 
 
 @dataclass
+class DemoConfig:
+    """Expert demonstrations: the exact solver's schedules replayed as environment actions."""
+
+    data: tuple[str, ...] = ("data/demo/train",)
+    """Data sets (directories of shards with a manifest) to solve; demos go to <data>/demos/<mode>/."""
+    modes: tuple[str, ...] = ("unitary", "utility")
+    """Objectives solved: 'unitary' (count) and/or 'utility' (sum of utilities; serves the normalized and
+    lexicographic rewards too)."""
+    time_limit: float = 30.0
+    """Seconds of exact search per instance and mode; at the limit the best schedule found is kept with its gap."""
+    action_sets: bool = True
+    """Also label every step with the set of optimal actions (values of all allowed actions by RAMP's beam
+    search on each child state): ties are common and a learner should not be taught one arbitrary choice."""
+    beam: int = 4
+    """Beam of the search that values the allowed actions of a step."""
+    prune: bool = True
+    """Solve in the environment's pruned graph (what the policy plays in); must match the env's prune."""
+
+
+@dataclass
+class ImitationConfig:
+    """Imitation pretraining on expert demonstrations (jobs/pretrain.py)."""
+
+    train_data: tuple[str, ...] = ("data/demo/train",)
+    """Data sets with demos (jobs/build_demos.py) for the objective of --env.reward."""
+    val_data: str = "data/demo/val"
+    """Validation data set (greedy decoding vs Greedy, RAMP and the exact optimum); empty: none."""
+    preset: str = "cpu"
+    """Model preset (MODEL_PRESETS); --model.* flags apply on top."""
+    epochs: int = 10
+    """Passes over the demonstrations (and the states DAgger added)."""
+    time_budget: float = 0.0
+    """Stop after this many seconds of training (0: no limit); the best checkpoint is kept."""
+    batch_size: int = 64
+    lr: float = 1e-3
+    weight_decay: float = 0.0
+    value_coeff: float = 0.5
+    """Weight of the value regression (remaining expert return) next to the action cross-entropy."""
+    grad_clip: float = 1.0
+    dagger_every: int = 0
+    """Every this many epochs, roll out the current policy and label its states with the expert's optimal
+    actions (DAgger); 0: plain behaviour cloning."""
+    dagger_instances: int = 64
+    """Training instances rolled out (sampling from the policy) per DAgger round."""
+    dagger_beam: int = 4
+    """Beam of the search that values the actions of DAgger states."""
+    validate_every: int = 1
+    """Validate every this many epochs (and after the last)."""
+    max_val_instances: int = 0
+    """Validate on the first N instances only (0: all)."""
+    run_dir: str = "runs"
+    run_name: str = ""
+    mlflow_uri: str = ""
+    experiment: str = "eosp-imitation"
+    seed: int = 0
+
+
+@dataclass
 class RayConfig:
     address: str = ""
     """Ray cluster address; empty: the RAY_ADDRESS variable if set (submitted job), else a local Ray."""
@@ -319,6 +377,11 @@ class TrainConfig:
     run_name: str = ""
     """Name of the run; empty: a timestamp.  --resume continues the run of this name."""
     resume: bool = False
+    time_budget: float = 0.0
+    """Make the iteration that starts past this many seconds of training the last one (0: no limit)."""
+    init_checkpoint: str = ""
+    """Start from this agent checkpoint (e.g. an imitation run's checkpoints/best): its model configuration
+    replaces --model.*; empty: random initialization."""
     seed: int = 0
     mlflow_uri: str = ""
     """MLflow tracking URI; empty: sqlite database mlflow.db in the working directory (absolute path)."""
@@ -332,6 +395,16 @@ class RunConfig:
     env: EnvConfig = field(default_factory=EnvConfig)
     model: ModelConfig = field(default_factory=ModelConfig)
     train: TrainConfig = field(default_factory=TrainConfig)
+    ray: RayConfig = field(default_factory=RayConfig)
+
+
+@dataclass
+class PretrainConfig:
+    """Everything an imitation run uses; recorded with every run (jobs/pretrain.py)."""
+
+    env: EnvConfig = field(default_factory=EnvConfig)
+    model: ModelConfig = field(default_factory=ModelConfig)
+    imitation: ImitationConfig = field(default_factory=ImitationConfig)
     ray: RayConfig = field(default_factory=RayConfig)
 
 

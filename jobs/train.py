@@ -123,6 +123,14 @@ def main(argv: list[str] | None = None) -> int:
                                                                  "iterations": t.iterations, "resume": True}})
         t = cfg.train
     run_dir.mkdir(parents=True, exist_ok=True)
+    init = None
+    if t.init_checkpoint and not t.resume:
+        init, init_env, _ = load_agent(t.init_checkpoint)
+        if init_env.reward != cfg.env.reward:
+            print(f"[train] warning: {t.init_checkpoint} was trained with reward {init_env.reward!r}, "
+                  f"this run uses {cfg.env.reward!r}", file=sys.stderr)
+        cfg.model = init.cfg  # the architecture (and value scale) come with the weights
+        print(f"[train] starting from {t.init_checkpoint}", flush=True)
     if cfg.model.value_scale <= 0:
         cfg.model.value_scale = estimate_value_scale(cfg)
         print(f"[train] value scale {cfg.model.value_scale:.3g} (mean return of random episodes)", flush=True)
@@ -152,15 +160,19 @@ def main(argv: list[str] | None = None) -> int:
     if t.resume and (ckpt_dir / "last").exists():
         trainer.load(load_agent(ckpt_dir / "last")[0])
         print(f"[train] resumed {t.run_name} at iteration {start_iter}", flush=True)
+    elif init is not None:
+        trainer.load(init)
 
     t_start = time.perf_counter()
     for it in range(start_iter, t.iterations):
-        last = it + 1 == t.iterations
+        out_of_time = t.time_budget > 0 and time.perf_counter() - t_start > t.time_budget
+        last = it + 1 == t.iterations or out_of_time
         metrics, agent = trainer.train(validate=(it + 1) % t.validate_every == 0 or last)
         if agent is not None and metrics["val/policy_mean"] > best:
             best = metrics["val/policy_mean"]
             save_agent(agent, ckpt_dir / "best", cfg.env, {"iteration": it + 1, "val": metrics})
             save_state(max(start_iter, it + 1 - (it + 1) % t.checkpoint_every))  # `best` is never lost
+        metrics["perf/wall_s"] = time.perf_counter() - t_start
         mlflow.log_metrics(metrics, step=it + 1)
         history.append({"iteration": it + 1, **metrics})
         print(f"[train] iteration {it + 1}/{t.iterations}: return {metrics.get('train/episode_return_mean', 0):.3f}"
@@ -171,6 +183,9 @@ def main(argv: list[str] | None = None) -> int:
             agent = agent or trainer.agent()
             save_agent(agent, ckpt_dir / "last", cfg.env, {"iteration": it + 1})
             save_state(it + 1)
+        if out_of_time:
+            print(f"[train] time budget of {t.time_budget:.0f} s reached", flush=True)
+            break
     wall = time.perf_counter() - t_start
 
     # artifacts: learning curve, the agent as an MLflow model (loaded from code + weights, no pickle)

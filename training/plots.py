@@ -33,3 +33,30 @@ def learning_curve(history: list[dict], out: str | Path) -> Path:
     fig.savefig(out.with_suffix(".svg"))
     plt.close(fig)
     return png
+
+
+def imitation_curve(history: list[dict], out: str | Path) -> Path:
+    """Expert-action accuracy and validation ratios (to the exact optimum, RAMP, Greedy) against wall time."""
+    out = Path(out)
+    t = [h["wall_s"] for h in history]
+    fig, ax = plt.subplots(1, 2, figsize=(10, 3.6))
+    ax[0].plot(t, [h.get("train/accuracy", float("nan")) for h in history], marker=".", color="C0")
+    ax[0].set_xlabel("wall time (s)")
+    ax[0].set_ylabel("training accuracy (argmax optimal)")
+    val = [h for h in history if "val/ratio_to_exact" in h]
+    for key, label, color in (("val/ratio_to_exact", "policy / optimum", "C3"),
+                              ("val/ratio_to_ramp", "policy / RAMP", "C2"),
+                              ("val/ratio_to_greedy", "policy / Greedy", "C1")):
+        if val:
+            ax[1].plot([h["wall_s"] for h in val], [h[key] for h in val], marker="o", label=label, color=color)
+    ax[1].axhline(1.0, color="gray", lw=0.8, ls="--")
+    ax[1].set_xlabel("wall time (s)")
+    ax[1].set_ylabel("validation mean ratio")
+    if val:
+        ax[1].legend()
+    fig.tight_layout()
+    png = out.with_suffix(".png")
+    fig.savefig(png, dpi=120)
+    fig.savefig(out.with_suffix(".svg"))
+    plt.close(fig)
+    return png

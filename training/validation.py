@@ -89,7 +89,8 @@ def compare(policy: np.ndarray, baselines: dict[str, np.ndarray], prefix: str = 
 
 
 class Validator:
-    def __init__(self, val_path: str | Path, env_cfg: EnvConfig, max_instances: int = 0):
+    def __init__(self, val_path: str | Path, env_cfg: EnvConfig, max_instances: int = 0,
+                 baselines: tuple[str, ...] = BASELINES):
         from eosp.envs.sources import expand_shards, prepare_instance
         from eosp.shards.io import read_instances
 
@@ -100,8 +101,8 @@ class Validator:
             insts = insts[:max_instances]
         self.prepared = [prepare_instance(i, env_cfg.prune) for i in insts]
         self.names = [i.name for i in insts]
-        base = baseline_values(val_path, self.mode)
-        self.baselines = {s: np.array([base[s][n] for n in self.names]) for s in BASELINES}
+        base = baseline_values(val_path, self.mode, baselines)
+        self.baselines = {s: np.array([base[s][n] for n in self.names]) for s in baselines}
 
     def score(self, inst, nodes: np.ndarray) -> float:
         from eosp.solvers.base import objective_weights

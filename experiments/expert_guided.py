@@ -1,0 +1,165 @@
+"""Expert-guided training: PPO only, imitation only, imitation + PPO, at equal wall time.
+
+    python experiments/expert_guided.py data                 # the mixed data sets and their demos
+    python experiments/expert_guided.py run --minutes 10     # the comparison (unitary and utility)
+    python experiments/expert_guided.py report               # table of every finished run
+
+Data (``data/expert/``, every set from its own seeds, built by jobs/build_shards.py and
+jobs/build_demos.py): a training mix of families (uniform, clusters, conflict), sizes
+(50-300), time steps (1 s, 2 s) and slew models (piecewise, bang-coast-bang), so that
+nothing learned depends on one generator setting; a validation mix for checkpoint
+choice; unseen test sets per family at 100 acquisitions.  The parts are built in
+``data/expert/parts/NAME/`` and linked into ``train/``, ``val/`` (a data set is a
+directory of shards).
+
+Runs (each given the same wall-time budget on this machine, one at a time):
+``ppo`` (jobs/train.py from scratch), ``imitation`` (jobs/pretrain.py: behaviour
+cloning + DAgger), ``imitation+ppo`` (half the budget each, PPO from the imitation
+checkpoint).  Modes: unitary (reward unitary) and utility (reward normalized).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+PY = sys.executable
+
+# name: (family, acquisitions, instances, seed, extra generator flags)
+TRAIN = {
+    "u100-s1-pw": ("uniform", 100, 48, 100_000, []),
+    "u100-s2-bcb": ("uniform", 100, 48, 110_000, ["--instance.graph.step-s", "2", "--instance.satellite.slew-model",
+                                                  "bang_coast_bang"]),
+    "u50-s2-pw": ("uniform", 50, 32, 120_000, ["--instance.graph.step-s", "2"]),
+    "c100-s1-pw": ("clusters", 100, 32, 130_000, []),
+    "c200-s2-bcb": ("clusters", 200, 12, 140_000, ["--instance.graph.step-s", "2", "--instance.satellite.slew-model",
+                                                   "bang_coast_bang"]),
+    "x100-s2-pw": ("conflict", 100, 32, 150_000, ["--instance.graph.step-s", "2"]),
+    "x100-s1-bcb": ("conflict", 100, 32, 160_000, ["--instance.satellite.slew-model", "bang_coast_bang"]),
+    "u300-s2-pw": ("uniform", 300, 8, 170_000, ["--instance.graph.step-s", "2"]),
+}
+VAL = {
+    "val-u100": ("uniform", 100, 8, 200_000, ["--instance.graph.step-s", "2"]),
+    "val-c100": ("clusters", 100, 4, 210_000, ["--instance.satellite.slew-model", "bang_coast_bang"]),
+    "val-x100": ("conflict", 100, 8, 220_000, []),
+}
+TEST = {
+    "test-u100": ("uniform", 100, 16, 300_000, []),
+    "test-c100": ("clusters", 100, 16, 310_000, ["--instance.graph.step-s", "2"]),
+    "test-x100": ("conflict", 100, 16, 320_000, ["--instance.satellite.slew-model", "bang_coast_bang"]),
+}
+MODES = {"unitary": "unitary", "utility": "normalized"}
+
+
+def sh(args: list[str]) -> None:
+    print("+", " ".join(args), flush=True)
+    subprocess.run(args, check=True, cwd=ROOT)
+
+
+def build(base: Path, sets: dict, link_into: str | None) -> list[Path]:
+    out = []
+    for name, (family, n, count, seed, extra) in sets.items():
+        d = base / "parts" / name
+        if not (d / "manifest.json").exists():
+            sh([PY, "jobs/build_shards.py", "--out", str(d), "--family", family, "--n-acquisitions", str(n),
+                "--n-instances", str(count), "--seed", str(seed), "--per-shard", str(min(8, count)), *extra])
+        out.append(d)
+        if link_into:
+            target = base / link_into
+            target.mkdir(parents=True, exist_ok=True)
+            for shard in sorted(d.glob("shard-*.parquet")):
+                link = target / f"{name}-{shard.name}"
+                if not link.exists():
+                    os.symlink(os.path.relpath(shard, target), link)
+    return out
+
+
+def cmd_data(a) -> None:
+    base = ROOT / a.data
+    build(base, TRAIN, "train")
+    build(base, VAL, "val")
+    build(base, TEST, None)
+    sh([PY, "jobs/build_demos.py", "--data", str(base / "train"), str(base / "val"), "--time-limit", "30"])
+
+
+def budget_args(kind: str, mode: str, seconds: float, run: str, a) -> list[list[str]]:
+    base = ROOT / a.data
+    reward = MODES[mode]
+    common_env = ["--env.reward", reward, "--env.max-acquisitions", "320"]
+    pre = [PY, "jobs/pretrain.py", "--imitation.train-data", str(base / "train"), "--imitation.val-data",
+           str(base / "val"), "--imitation.epochs", "1000", "--imitation.dagger-every", "2",
+           "--imitation.run-name", run if kind == "imitation" else run + "-bc", "--imitation.experiment",
+           "expert-guided", *common_env]
+    ppo = [PY, "jobs/train.py", "--train.train-data", str(base / "train"), "--train.val-data", str(base / "val"),
+           "--train.iterations", "100000", "--train.run-name", run, "--train.experiment", "expert-guided",
+           "--train.validate-every", "2", "--train.checkpoint-every", "2", "--train.time-budget", None, *common_env]
+    if kind == "ppo":
+        ppo[ppo.index(None)] = str(seconds)
+        return [ppo]
+    if kind == "imitation":
+        return [pre + ["--imitation.time-budget", str(seconds)]]
+    half = seconds / 2
+    ppo[ppo.index(None)] = str(half)
+    init = str(ROOT / "runs" / (run + "-bc") / "checkpoints" / "best")
+    return [pre + ["--imitation.time-budget", str(half)], ppo + ["--train.init-checkpoint", init]]
+
+
+def cmd_run(a) -> None:
+    for mode in a.modes:
+        for kind in a.kinds:
+            run = f"eg-{mode}-{kind.replace('+', '-')}"
+            if (ROOT / "runs" / run / "done.json").exists():
+                print(f"[expert_guided] {run} already done", flush=True)
+                continue
+            t0 = time.time()
+            for cmd in budget_args(kind, mode, a.minutes * 60, run, a):
+                sh(cmd)
+            (ROOT / "runs" / run).mkdir(parents=True, exist_ok=True)
+            (ROOT / "runs" / run / "done.json").write_text(json.dumps({"wall_s": time.time() - t0}))
+            for test in a.tests:
+                sh([PY, "jobs/evaluate.py", "--data", str(ROOT / a.data / "parts" / test), "--solvers", "greedy",
+                    "ramp", "exact", "policy", "--checkpoint", str(ROOT / "runs" / run / "checkpoints" / "best"),
+                    "--mode", mode, "--time-limit", "60", "--out", str(ROOT / "runs" / run / f"eval-{test}"),
+                    "--experiment", "expert-guided"])
+
+
+def cmd_report(a) -> None:
+    import pandas as pd
+
+    rows = []
+    for d in sorted((ROOT / "runs").glob("eg-*")):
+        for ev in sorted(d.glob("eval-*/results.parquet")):
+            df = pd.read_parquet(ev)
+            piv = df.pivot_table(index="instance", columns="solver", values="value")
+            if "policy" not in piv or "exact" not in piv:
+                continue
+            rows.append({"run": d.name, "test": ev.parent.name.removeprefix("eval-"),
+                         "policy/exact": (piv["policy"] / piv["exact"]).mean(),
+                         "policy/ramp": (piv["policy"] / piv["ramp"]).mean(),
+                         "policy/greedy": (piv["policy"] / piv["greedy"]).mean(),
+                         "below greedy": int((piv["policy"] < piv["greedy"] * (1 - 1e-9)).sum()),
+                         "at optimum": int((piv["policy"] >= piv["exact"] * (1 - 1e-9)).sum()),
+                         "instances": len(piv)})
+    print(pd.DataFrame(rows).to_markdown(index=False, floatfmt=".4f") if rows else "no finished evaluation")
+
+
+def main() -> None:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("stage", choices=["data", "run", "report"])
+    p.add_argument("--data", default="data/expert")
+    p.add_argument("--minutes", type=float, default=10.0, help="wall-time budget of each run")
+    p.add_argument("--modes", nargs="+", default=["unitary", "utility"], choices=list(MODES))
+    p.add_argument("--kinds", nargs="+", default=["ppo", "imitation", "imitation+ppo"])
+    p.add_argument("--tests", nargs="+", default=list(TEST))
+    a = p.parse_args()
+    {"data": cmd_data, "run": cmd_run, "report": cmd_report}[a.stage](a)
+
+
+if __name__ == "__main__":
+    main()

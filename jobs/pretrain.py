@@ -1,0 +1,142 @@
+"""Imitation pretraining of the agent on the exact solver's demonstrations (then DAgger).
+
+    python jobs/build_demos.py --data data/train data/val
+    python jobs/pretrain.py --imitation.train-data data/train --imitation.val-data data/val \\
+        --env.reward unitary --imitation.epochs 20 --imitation.dagger-every 2
+    python jobs/train.py --train.init-checkpoint runs/NAME/checkpoints/best ...   # PPO fine-tuning
+
+Writes ``<run_dir>/<run_name>/checkpoints/{best,last}`` (the PPO checkpoint format:
+``agent.pt`` weights + ``agent.json``), a learning curve, and one MLflow run with the
+expert-action accuracy, the value error and the validation ratios to the exact
+optimum, RAMP and Greedy (greedy decoding).  Every flag is a field of
+:class:`eosp.config.PretrainConfig` (``--help``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+import time
+from pathlib import Path
+
+os.environ.setdefault("OMP_NUM_THREADS", "1")
+
+from eosp.args import add_config_args, config_from_args  # noqa: E402
+from eosp.config import MODEL_PRESETS, ModelConfig, PretrainConfig, flatten, from_dict, to_dict  # noqa: E402
+from eosp.errors import InputError  # noqa: E402
+
+
+def parse(argv: list[str] | None) -> PretrainConfig:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0],
+                                formatter_class=argparse.RawDescriptionHelpFormatter, epilog=__doc__)
+    add_config_args(p, PretrainConfig)
+    ns = p.parse_args(argv)
+    preset = vars(ns).get("imitation.preset", "cpu")
+    if preset not in MODEL_PRESETS:
+        p.error(f"unknown preset {preset!r}; one of {', '.join(MODEL_PRESETS)}")
+    cfg = config_from_args(PretrainConfig, ns, base=PretrainConfig(model=from_dict(ModelConfig, MODEL_PRESETS[preset])))
+    if cfg.env.reward == "lexicographic":
+        cfg.model.n_values = max(cfg.model.n_values, 7)
+    if not cfg.imitation.run_name:
+        cfg.imitation.run_name = "imitation-" + time.strftime("%Y%m%d-%H%M%S")
+    return cfg
+
+
+def run(cfg: PretrainConfig) -> dict:
+    import mlflow
+    import numpy as np
+    import torch
+
+    from eosp.atomic import atomic_path
+    from eosp.config import default_mlflow_uri
+    from eosp.jobs.ray_init import init_ray
+    from eosp.models.agent import EOSPAgent
+    from eosp.models.checkpoint import save_agent
+    from eosp.training.imitation import DemoData, train_epoch
+    from eosp.training.plots import imitation_curve
+    from eosp.training.validation import Validator
+
+    torch.set_num_threads(1)
+    im = cfg.imitation
+    torch.manual_seed(im.seed)
+    rng = np.random.default_rng(im.seed)
+    init_ray(cfg.ray.address, cfg.ray.num_cpus)
+    t_load = time.perf_counter()
+    data = DemoData(im.train_data, cfg.env, cfg.model.n_values)
+    if cfg.model.value_scale <= 0:
+        cfg.model.value_scale = float(max(1.0, np.mean(data.start_values)))
+    print(f"[pretrain] {len(data.instances)} training instances, {len(data.samples)} expert states "
+          f"({time.perf_counter() - t_load:.1f} s); value scale {cfg.model.value_scale:.3g}", flush=True)
+    validator = None
+    if im.val_data:
+        validator = Validator(im.val_data, cfg.env, im.max_val_instances, baselines=("greedy", "ramp", "exact"))
+    run_dir = Path(im.run_dir) / im.run_name
+    ckpt = run_dir / "checkpoints"
+    run_dir.mkdir(parents=True, exist_ok=True)
+
+    agent = EOSPAgent(cfg.model)
+    opt = torch.optim.Adam(agent.parameters(), lr=im.lr, weight_decay=im.weight_decay)
+    mlflow.set_tracking_uri(default_mlflow_uri(im.mlflow_uri))
+    mlflow.set_experiment(im.experiment)
+    mlflow.start_run(run_name=im.run_name)
+    mlflow.log_params({k: (json.dumps(v) if isinstance(v, (list, tuple)) else v) for k, v in flatten(cfg).items()})
+    mlflow.log_dict(to_dict(cfg), "config.json")
+    mlflow.log_metrics({"data/instances": len(data.instances), "data/expert_states": len(data.samples)}, step=0)
+
+    history, best = [], float("-inf")
+    t0 = time.perf_counter()
+    deadline = t0 + im.time_budget if im.time_budget > 0 else None
+    for epoch in range(1, im.epochs + 1):
+        metrics = train_epoch(agent, opt, data.samples, im.batch_size, im.value_coeff, im.grad_clip, rng, deadline)
+        out_of_time = deadline is not None and time.perf_counter() > deadline
+        last = epoch == im.epochs or out_of_time
+        if validator is not None and (epoch % im.validate_every == 0 or last):
+            metrics.update(validator.run(agent).metrics)
+            if metrics["val/policy_mean"] > best:
+                best = metrics["val/policy_mean"]
+                save_agent(agent, ckpt / "best", cfg.env, {"epoch": epoch, "val": metrics, "source": "imitation"})
+        if im.dagger_every and epoch % im.dagger_every == 0 and not last:
+            metrics.update(data.add_policy_states(agent, im.dagger_instances, im.dagger_beam, rng))
+        metrics["wall_s"] = time.perf_counter() - t0
+        history.append({"epoch": epoch, **metrics})
+        mlflow.log_metrics(metrics, step=epoch)
+        print(f"[pretrain] epoch {epoch}: loss {metrics['train/policy_loss']:.4f} accuracy "
+              f"{metrics['train/accuracy']:.4f} value {metrics['train/value_loss']:.4f}"
+              + (f"  val /optimum {metrics['val/ratio_to_exact']:.4f} /ramp {metrics['val/ratio_to_ramp']:.4f} "
+                 f"/greedy {metrics['val/ratio_to_greedy']:.4f}" if "val/ratio_to_exact" in metrics else "")
+              + (f"  dagger +{metrics['dagger/states_added']:.0f} states" if "dagger/states_added" in metrics else "")
+              + f"  ({metrics['wall_s']:.0f} s)", flush=True)
+        if out_of_time:
+            print(f"[pretrain] time budget of {im.time_budget:.0f} s reached", flush=True)
+            break
+    save_agent(agent, ckpt / "last", cfg.env, {"epoch": history[-1]["epoch"], "source": "imitation"})
+    if validator is None:
+        save_agent(agent, ckpt / "best", cfg.env, {"epoch": history[-1]["epoch"], "source": "imitation"})
+    png = imitation_curve(history, run_dir / "learning_curve")
+    mlflow.log_artifact(str(png))
+    mlflow.log_artifact(str(png.with_suffix(".svg")))
+    with atomic_path(run_dir / "history.json") as tmp:
+        tmp.write_text(json.dumps({"config": to_dict(cfg), "history": history}, indent=1))
+    mlflow.log_metric("perf/train_wall_s", time.perf_counter() - t0)
+    mlflow.end_run()
+    return {"history": history, "checkpoint": str(ckpt / "best"), "run_dir": str(run_dir)}
+
+
+def main(argv: list[str] | None = None) -> int:
+    cfg = parse(argv)
+    try:
+        out = run(cfg)
+    except InputError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    h = out["history"][-1]
+    print(f"[pretrain] done: checkpoints in {Path(out['checkpoint']).parent}"
+          + (f"; last validation: policy / optimum {h['val/ratio_to_exact']:.4f}, / RAMP {h['val/ratio_to_ramp']:.4f}, "
+             f"/ Greedy {h['val/ratio_to_greedy']:.4f}" if "val/ratio_to_exact" in h else ""))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,172 @@
+"""The exact solver as a teacher: residual problems, demos that replay exactly, imitation that learns."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import numpy as np
+import pyarrow.parquet as pq
+import pytest
+
+from eosp.config import EnvConfig, ModelConfig
+from eosp.envs.eosp_env import EOSPEnv
+from eosp.envs.sources import FixedSource, prepare_instance
+from eosp.errors import InputError
+from eosp.shards.io import ShardReader, write_shard
+from eosp.solvers import expert
+from tests.conftest import generated
+from tests.synthetic import synthetic_instance
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def brute_best(env, w) -> float:
+    """Best remaining objective from the env's state, by trying every action sequence (independent of the DP)."""
+    allowed = np.flatnonzero(env.state.mask)
+    best = 0.0
+    for a in allowed:
+        snap = env.snapshot()
+        env.step(int(a))
+        best = max(best, w[a] + brute_best(env, w))
+        env.restore(snap)
+    return best
+
+
+@pytest.mark.parametrize("mode", ["unitary", "utility"])
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_residual_optimum_and_optimal_sets_match_brute_force(mode, seed):
+    inst = synthetic_instance(9, seed)
+    env = EOSPEnv(EnvConfig(max_acquisitions=0), source=FixedSource(inst))
+    env.reset()
+    w = expert.objective(inst, mode)
+    rng = np.random.default_rng(seed)
+    for _ in range(3):  # the initial state and two states further down a random path
+        if not env.state.mask.any():
+            break
+        best = brute_best(env, w)
+        path = expert.optimal_path(expert.state_residual(env), w, unitary=mode == "unitary", time_limit=30)
+        assert path.status == "optimal" and path.value == pytest.approx(best, rel=1e-12)
+        allowed, q = expert.action_values(env, w, beam=64)
+        truth = []
+        for a in allowed:
+            snap = env.snapshot()
+            env.step(int(a))
+            truth.append(w[a] + brute_best(env, w))
+            env.restore(snap)
+        np.testing.assert_allclose(q, truth, rtol=1e-12)
+        assert set(allowed[expert.optimal_set(q, mode == "unitary")]) == set(
+            allowed[np.asarray(truth) >= max(truth) * (1 - 1e-9) - (0.5 if mode == "unitary" else 0)])
+        env.step(int(rng.choice(allowed)))
+
+
+@pytest.fixture(scope="module")
+def demo_shard(tmp_path_factory):
+    from eosp.training.demos import demo_file, solve_shard
+
+    d = tmp_path_factory.mktemp("demos")
+    shard = d / "train" / "shard-00000.parquet"
+    write_shard(shard, [generated("conflict", 20, 1), generated("uniform", 20, 2, 1.0, "bang_coast_bang")])
+    for mode in ("unitary", "utility"):
+        solve_shard(shard, mode, time_limit=30, action_sets=True, beam=4, prune=True, out=demo_file(shard, mode))
+    return shard
+
+
+@pytest.mark.parametrize("mode", ["unitary", "utility"])
+def test_demos_replay_to_the_expert_value_with_allowed_actions(demo_shard, mode):
+    from eosp.solvers.exact import solve as exact
+    from eosp.training.demos import read_demos
+
+    reader = ShardReader(demo_shard)
+    prepared = [prepare_instance(reader.read(k)) for k in range(len(reader))]
+    demos = read_demos(demo_shard, mode, prepared)
+    assert [d.index for d in demos] == [0, 1]
+    for d, p in zip(demos, prepared):
+        env = EOSPEnv(EnvConfig(max_acquisitions=0), source=FixedSource(p))
+        env.reset()
+        w = expert.objective(p.inst, mode)
+        for t, a in enumerate(d.actions):
+            assert env.state.mask[a], (d.name, t, a)
+            assert a in d.optimal[t]
+            assert d.return_to_go[t] == pytest.approx(w[d.actions[t:]].sum(), rel=1e-12)
+            env.step(int(a))
+        got = env.state.value if mode == "utility" else float(env.state.scalars[0])
+        assert got == pytest.approx(d.value, rel=1e-12, abs=0)
+        assert d.status == "optimal" and d.bound == d.value
+        # the environment's graph is pruned: its optimum can only be below the unpruned one (here equal)
+        assert d.value <= exact(p.inst, mode=mode, time_limit=60).value * (1 + 1e-12)
+
+
+def test_demos_of_another_shard_or_with_a_forbidden_action_are_refused(demo_shard, tmp_path):
+    from eosp.training.demos import demo_file, read_demos, replay
+
+    reader = ShardReader(demo_shard)
+    prepared = [prepare_instance(reader.read(k)) for k in range(len(reader))]
+    # another shard: same file name, other instances
+    other = tmp_path / "other" / demo_shard.name
+    write_shard(other, [generated("uniform", 20, 7), generated("uniform", 20, 8)])
+    (other.parent / "demos").symlink_to(demo_shard.parent / "demos")
+    other_prepared = [prepare_instance(ShardReader(other).read(k)) for k in range(2)]
+    with pytest.raises(InputError, match="another graph|is '"):
+        read_demos(other, "unitary", other_prepared)
+    # an action the environment does not allow
+    f = demo_file(demo_shard, "unitary")
+    t = pq.read_table(f)
+    acts = t.column("action").to_pylist()
+    d0 = read_demos(demo_shard, "unitary", prepared)[0]
+    env = EOSPEnv(EnvConfig(max_acquisitions=0), source=FixedSource(prepared[0]))
+    env.reset()
+    bad = int(np.flatnonzero(env.state.mask == 0)[0])
+    d0.actions = np.array([bad] + acts[1:len(d0.actions)], np.int32)
+    with pytest.raises(InputError, match="step 0: action .* is not allowed"):
+        list(replay(env, prepared[0], d0, f))
+    # a corrupt file
+    broken = tmp_path / "broken" / demo_shard.name
+    (broken.parent / "demos" / "unitary").mkdir(parents=True)
+    (broken.parent / "demos" / "unitary" / demo_shard.name).write_bytes(b"not parquet")
+    with pytest.raises(InputError, match="not a readable Parquet file"):
+        read_demos(broken, "unitary", prepared)
+
+
+def test_imitation_learns_the_expert_on_a_tiny_set(demo_shard):
+    import torch
+
+    from eosp.models.agent import EOSPAgent
+    from eosp.solvers.policy import rollout
+    from eosp.training.imitation import DemoData, train_epoch
+
+    torch.manual_seed(0)
+    env_cfg = EnvConfig(reward="unitary", max_acquisitions=32)
+    data = DemoData((str(demo_shard),), env_cfg, 1)
+    agent = EOSPAgent(ModelConfig(hidden_dim=16, n_layers=2, heads=2, value_scale=float(np.mean(data.start_values))))
+    opt = torch.optim.Adam(agent.parameters(), lr=3e-3)
+    rng = np.random.default_rng(0)
+
+    def score():
+        return sum(len(rollout(agent, p, env_cfg)[0]) for _, _, p in data.instances)
+
+    before = score()
+    first = train_epoch(agent, opt, data.samples, 16, 0.5, 1.0, rng)
+    for _ in range(30):
+        last = train_epoch(agent, opt, data.samples, 16, 0.5, 1.0, rng)
+    assert last["train/policy_loss"] < 0.2 * first["train/policy_loss"]
+    assert last["train/accuracy"] > 0.95
+    cloned = score()
+    assert cloned > before
+    # DAgger: the policy's own states, labelled by the expert (in-process without Ray)
+    info = data.add_policy_states(agent, 2, 4, rng)
+    assert info["dagger/states_added"] > 0 and len(data.samples) == info["dagger/dataset_states"]
+    for _ in range(15):
+        train_epoch(agent, opt, data.samples, 16, 0.5, 1.0, rng)
+    assert score() == sum(data.optimal_values) >= cloned
+
+
+def test_build_demos_job_is_resumable_and_refuses_bad_options(demo_shard, capsys):
+    from eosp.jobs.build_demos import main
+
+    # both files exist: nothing to do
+    assert main(["--data", str(demo_shard.parent), "--ray.num-cpus", "1"]) == 0
+    assert "0 (shard, mode) tasks, 2 already done" in capsys.readouterr().out
+    assert main(["--data", str(demo_shard.parent), "--modes", "lexical"]) == 2
+    assert "unknown mode 'lexical'" in capsys.readouterr().err
+    assert main(["--data", str(demo_shard.parent), "--time-limit", "-1"]) == 2

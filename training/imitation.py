@@ -1,0 +1,236 @@
+"""Imitation of the exact solver: behaviour cloning on expert demos, then DAgger.
+
+The learner is the same :class:`eosp.models.agent.EOSPAgent` that PPO trains (same
+observation, same checkpoint format), so an imitation checkpoint serves
+``eosp solve --solver policy|mcts`` and ``jobs/train.py --train.init-checkpoint``.
+
+Loss per state s with expert-optimal action set A*(s) (see :mod:`eosp.solvers.expert`):
+
+* policy: ``-log sum_{a in A*} pi(a | s)``: the probability of choosing *an* optimal
+  action (plain cross-entropy when A* has one element);
+* value: squared error between the value head and the expert's remaining return in
+  the environment's reward units (per class for the lexicographic heads), divided by
+  ``value_scale`` squared like PPO's.
+
+DAgger: behaviour cloning only sees the expert's states; the first mistake of the
+learner leads it to states no demo covers.  Every ``dagger_every`` epochs the current
+policy (sampling) plays training instances and every state it visits is labelled by
+the expert (values of all allowed actions from the residual problem) as parallel
+Ray tasks; the new states join the data set (aggregation).
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from eosp.config import CLASS_UTILITIES, N_CLASSES, EnvConfig
+from eosp.models.agent import EOSPAgent, batch_from_padded
+
+
+@dataclass
+class Sample:
+    """One labelled state, its observation trimmed to the instance (padding added per batch)."""
+
+    x: np.ndarray  # float32 [n, F]
+    edge_index: np.ndarray  # int32 [2, m]
+    edge_attr: np.ndarray  # float32 [m, 2]
+    mask: np.ndarray  # int8 [n]
+    optimal: np.ndarray  # int32: optimal actions
+    value: np.ndarray  # float32 [n_values]: remaining return (NaN: unknown)
+
+
+def objective_mode(env_cfg: EnvConfig) -> str:
+    return "unitary" if env_cfg.reward == "unitary" else "utility"
+
+
+def reward_units(prepared, actions: np.ndarray, env_cfg: EnvConfig, n_values: int) -> np.ndarray:
+    """Remaining return from each step of `actions`, in the environment's reward units: [T, n_values]."""
+    inst = prepared.inst
+    u = inst.acqs.utility[actions]
+    if env_cfg.reward == "lexicographic":
+        c = np.minimum(prepared.priority[actions].astype(np.int64), N_CLASSES - 1)
+        per = np.zeros((actions.shape[0], N_CLASSES))
+        per[np.arange(actions.shape[0]), c] = u / np.asarray(CLASS_UTILITIES)[c]
+        per = per[:, :n_values] if n_values <= N_CLASSES else per
+    else:
+        r = {"unitary": np.ones_like(u), "utility": u}.get(env_cfg.reward, u / prepared.mean_utility)
+        per = r[:, None]
+    return np.cumsum(per[::-1], axis=0)[::-1]
+
+
+def to_units(v_objective: float, prepared, env_cfg: EnvConfig, n_values: int) -> np.ndarray:
+    """A remaining objective value (count or utility) in reward units; NaN where it cannot be split by class."""
+    if env_cfg.reward == "lexicographic":
+        return np.full(n_values, np.nan, np.float32)
+    scale = prepared.mean_utility if env_cfg.reward == "normalized" else 1.0
+    return np.array([v_objective / scale], np.float32)
+
+
+def samples_along(env, prepared, actions: np.ndarray, optimal: list[np.ndarray], values: np.ndarray) -> list[Sample]:
+    """Replay `actions` and record the observation of every state before its action."""
+    obs, _ = env.reset(options={"instance": prepared})
+    n = prepared.inst.n_acq
+    out = []
+    for t, a in enumerate(actions):
+        m = int(obs["n_edges"][0])
+        opt = optimal[t] if len(optimal[t]) else np.array([a], np.int32)
+        out.append(Sample(obs["x"][:n].copy(), obs["edge_index"][:, :m].copy(), obs["edge_attr"][:m].copy(),
+                          obs["action_mask"][:n].copy(), np.asarray(opt, np.int32),
+                          np.asarray(values[t], np.float32)))
+        obs, *_ = env.step(int(a))
+    return out
+
+
+def collate(samples: list[Sample]) -> tuple[dict[str, torch.Tensor], torch.Tensor, torch.Tensor]:
+    """Padded observation batch, optimal-action mask [B, N] and value targets [B, V]."""
+    b = len(samples)
+    n = max(s.x.shape[0] for s in samples)
+    m = max(1, max(s.edge_index.shape[1] for s in samples))
+    f = samples[0].x.shape[1]
+    x = np.zeros((b, n, f), np.float32)
+    ei = np.zeros((b, 2, m), np.int32)
+    ea = np.zeros((b, m, samples[0].edge_attr.shape[1]), np.float32)
+    mask = np.zeros((b, n), np.int8)
+    opt = np.zeros((b, n), bool)
+    for i, s in enumerate(samples):
+        k, e = s.x.shape[0], s.edge_index.shape[1]
+        x[i, :k], ei[i, :, :e], ea[i, :e], mask[i, :k] = s.x, s.edge_index, s.edge_attr, s.mask
+        opt[i, s.optimal] = True
+    obs = {"x": torch.from_numpy(x), "edge_index": torch.from_numpy(ei), "edge_attr": torch.from_numpy(ea),
+           "n_nodes": torch.tensor([[s.x.shape[0]] for s in samples], dtype=torch.int32),
+           "n_edges": torch.tensor([[s.edge_index.shape[1]] for s in samples], dtype=torch.int32),
+           "action_mask": torch.from_numpy(mask)}
+    return obs, torch.from_numpy(opt), torch.from_numpy(np.stack([s.value for s in samples]))
+
+
+def losses(agent: EOSPAgent, obs, opt, target) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """(policy loss, value loss, accuracy of the argmax) of one batch."""
+    gb, valid = batch_from_padded(obs)
+    logits, values = agent(gb)
+    padded = agent.padded_logits(logits, valid)
+    log_z = torch.logsumexp(padded, dim=-1)
+    log_opt = torch.logsumexp(padded.masked_fill(~opt, float("-inf")), dim=-1)
+    policy_loss = (log_z - log_opt).mean()
+    scale = agent.cfg.value_scale or 1.0
+    known = ~torch.isnan(target)
+    diff = torch.where(known, (values - torch.nan_to_num(target)) / scale, torch.zeros_like(values))
+    value_loss = (diff ** 2).sum() / known.sum().clamp(min=1)
+    acc = opt.gather(1, padded.argmax(dim=-1, keepdim=True)).float().mean()
+    return policy_loss, value_loss, acc
+
+
+def label_states(shard: str, index: int, mode: str, actions: list[int], beam: int, prune: bool):
+    """Expert labels of the states along `actions` (a Ray task): optimal sets and best remaining values."""
+    from eosp.config import EnvConfig as _Env
+    from eosp.envs.eosp_env import EOSPEnv
+    from eosp.envs.sources import FixedSource, prepare_instance
+    from eosp.shards.io import ShardReader
+    from eosp.solvers import expert
+
+    prepared = prepare_instance(ShardReader(shard).read(index, unpruned=False), prune)
+    env = EOSPEnv(_Env(max_acquisitions=0, prune=prune), source=FixedSource(prepared))
+    env.reset()
+    w = expert.objective(prepared.inst, mode)
+    sets, best = [], []
+    for a in actions:
+        allowed, q = expert.action_values(env, w, beam)
+        sets.append(allowed[expert.optimal_set(q, mode == "unitary")])
+        best.append(float(q.max()))
+        env.step(int(a))
+    return sets, best
+
+
+class DemoData:
+    """Training instances with their demos, and the labelled states built from them."""
+
+    def __init__(self, paths: tuple[str, ...], env_cfg: EnvConfig, n_values: int):
+        from eosp.envs.eosp_env import EOSPEnv
+        from eosp.envs.sources import FixedSource, expand_shards, prepare_instance
+        from eosp.shards.io import ShardReader
+        from eosp.training.demos import read_demos
+
+        self.env_cfg, self.n_values = env_cfg, n_values
+        self.mode = objective_mode(env_cfg)
+        self.instances: list[tuple[Path, int, object]] = []  # (shard, index, prepared)
+        self.samples: list[Sample] = []
+        self.start_values: list[float] = []
+        self.optimal_values: list[float] = []
+        demos = []
+        for shard in expand_shards(list(paths)):
+            reader = ShardReader(shard)
+            prepared = [prepare_instance(reader.read(k, unpruned=False), env_cfg.prune) for k in range(len(reader))]
+            for d in read_demos(shard, self.mode, prepared):
+                self.instances.append((shard, d.index, prepared[d.index]))
+                self.optimal_values.append(d.value)
+                demos.append(d)
+        if not demos:
+            raise ValueError(f"no demonstrations in {', '.join(paths)}")
+        n_max = max(p.inst.n_acq for _, _, p in self.instances)
+        self.env = EOSPEnv(replace(env_cfg, max_acquisitions=n_max, shards=()), source=FixedSource(self.instances[0][2]))
+        for (_, _, p), d in zip(self.instances, demos):
+            targets = reward_units(p, d.actions, env_cfg, n_values)
+            self.start_values.append(float(targets[0].max()) if len(targets) else 0.0)
+            self.samples += samples_along(self.env, p, d.actions, d.optimal, targets)
+
+    def add_policy_states(self, agent: EOSPAgent, n: int, beam: int, rng: np.random.Generator) -> dict:
+        """One DAgger round: the policy samples episodes on `n` training instances, the expert labels them."""
+        import ray
+
+        from eosp.solvers.policy import rollout
+
+        t0 = time.perf_counter()
+        picks = rng.choice(len(self.instances), size=min(n, len(self.instances)), replace=False)
+        trajectories = []
+        for i in picks:
+            shard, k, p = self.instances[i]
+            nodes, _ = rollout(agent, p, self.env_cfg, sample=True, seed=int(rng.integers(1 << 30)))
+            trajectories.append((i, p.eg.node_acq[nodes].astype(np.int32)))
+        t_roll = time.perf_counter() - t0
+        args = [(str(self.instances[i][0]), self.instances[i][1], self.mode, acts.tolist(), beam, self.env_cfg.prune)
+                for i, acts in trajectories]
+        if ray.is_initialized():  # the labels are the expensive part: one Ray task per episode
+            task = ray.remote(num_cpus=1)(label_states)
+            labels = ray.get([task.remote(*x) for x in args])
+        else:
+            labels = [label_states(*x) for x in args]
+        added, regret = 0, []
+        for (i, acts), (sets, best) in zip(trajectories, labels):
+            p = self.instances[i][2]
+            values = np.stack([to_units(v, p, self.env_cfg, self.n_values) for v in best]) if best else []
+            self.samples += samples_along(self.env, p, acts, sets, values)
+            added += len(acts)
+            w = np.ones(p.inst.n_acq) if self.mode == "unitary" else p.inst.acqs.utility
+            regret.append(float(w[acts].sum()) / max(best[0], 1e-300) if best else 1.0)
+        return {"dagger/states_added": added, "dagger/sampled_ratio_to_expert": float(np.mean(regret)),
+                "dagger/rollout_s": t_roll, "dagger/label_s": time.perf_counter() - t0 - t_roll,
+                "dagger/dataset_states": len(self.samples)}
+
+
+def train_epoch(agent: EOSPAgent, opt: torch.optim.Optimizer, samples: list[Sample], batch_size: int,
+                value_coeff: float, grad_clip: float, rng: np.random.Generator,
+                deadline: float | None = None) -> dict[str, float]:
+    agent.train()
+    order = rng.permutation(len(samples))
+    tot = {"policy_loss": 0.0, "value_loss": 0.0, "accuracy": 0.0}
+    batches = 0
+    for start in range(0, len(order), batch_size):
+        obs, optm, target = collate([samples[i] for i in order[start:start + batch_size]])
+        pl, vl, acc = losses(agent, obs, optm, target)
+        loss = pl + value_coeff * vl
+        opt.zero_grad()
+        loss.backward()
+        torch.nn.utils.clip_grad_norm_(agent.parameters(), grad_clip)
+        opt.step()
+        tot["policy_loss"] += pl.item()
+        tot["value_loss"] += vl.item()
+        tot["accuracy"] += acc.item()
+        batches += 1
+        if deadline is not None and time.perf_counter() > deadline:
+            break
+    agent.eval()
+    return {f"train/{k}": v / max(batches, 1) for k, v in tot.items()} | {"train/batches": batches}
