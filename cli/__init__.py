@@ -1,4 +1,4 @@
-"""The ``eosp`` command: generate, import, export, inspect, solve, validate, plot.
+"""The ``eosp`` command: generate, import, export, inspect, solve, validate, plot, report.
 
 Every command reads user files through the checked readers and prints one clear
 line (exit code 2) on bad input instead of a traceback.
@@ -146,6 +146,28 @@ def cmd_plot(ns: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_report(ns: argparse.Namespace) -> int:
+    from eosp.evaluation.html_report import write_report
+    from eosp.instances.schedule import read_schedule
+
+    inst = _load_instance(ns.instance_dir)
+    schedules = {}
+    for path in ns.schedules:
+        label = Path(path).stem
+        if label in schedules:  # same file name in two folders: tell them apart by the folder
+            label = f"{Path(path).parent.name}/{label}"
+        while label in schedules:
+            label += "'"
+        schedules[label] = read_schedule(path)
+    try:
+        out = write_report(inst, schedules, ns.out, title=ns.title or None)
+    except InputError as exc:  # the label is the file's stem: name the file the user gave
+        path = next((p for p, lab in zip(ns.schedules, schedules) if lab == exc.file), exc.file)
+        raise InputError(path, exc.message) from None
+    print(f"{out}: {len(schedules)} schedule(s) of {inst.name} ({out.stat().st_size / 1e6:.1f} MB)")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="eosp", description=__doc__.splitlines()[0])
     sub = p.add_subparsers(dest="command", required=True)
@@ -199,6 +221,14 @@ def build_parser() -> argparse.ArgumentParser:
     pl.add_argument("schedules", nargs="+")
     pl.add_argument("--out", required=True, help="output path without extension (PNG and SVG are written)")
     pl.set_defaults(func=cmd_plot)
+
+    r = sub.add_parser("report", help="one self-contained HTML page: map, timeline, roll/pitch and a summary "
+                                      "table of schedules of one instance")
+    r.add_argument("instance_dir", help="instance directory (or SHARD#INDEX)")
+    r.add_argument("schedules", nargs="+", help="schedule files (.parquet or .jsonl); infeasible ones are drawn too")
+    r.add_argument("--out", required=True, help="HTML file to write")
+    r.add_argument("--title", default="", help="page title (default: the instance name)")
+    r.set_defaults(func=cmd_report)
     return p
 
 

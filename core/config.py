@@ -427,6 +427,9 @@ class EvalConfig:
     out: str = "runs/eval"
     """Directory of the results: results.parquet, report.md, schedules/."""
     save_schedules: bool = True
+    html_reports: int = 3
+    """Write the HTML report of `eosp report` (map, timeline, roll/pitch, summary of every solver's schedule) for
+    the first N instances, in OUT/reports/, and log them to MLflow; 0 for none."""
     mlflow_uri: str = ""
     experiment: str = "eosp-eval"
 

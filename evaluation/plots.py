@@ -16,6 +16,7 @@ import numpy as np
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
+from eosp.atomic import atomic_path  # noqa: E402
 from eosp.instances.instance import Instance  # noqa: E402
 from eosp.instances.schedule import Schedule, to_internal_nodes  # noqa: E402
 
@@ -85,3 +86,35 @@ def plot_trajectories(inst: Instance, schedules: dict[str, Schedule], out: str |
         fig.savefig(p, dpi=130)
     plt.close(fig)
     return paths
+
+
+def plot_class_counts(results, out: str | Path) -> Path:
+    """Mean number of acquisitions per priority class and solver, one panel per instance size (PNG).
+
+    `results` is the evaluation's table, with one ``class_<c>`` column per priority class.
+    """
+    from eosp.config import CLASS_UTILITIES
+
+    out = Path(out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    classes = [c for c in range(len(CLASS_UTILITIES)) if f"class_{c}" in results.columns]
+    groups = sorted(results["group"].unique())
+    solvers = list(dict.fromkeys(results["solver"]))
+    fig, axes = plt.subplots(1, len(groups), figsize=(max(6.0, 4.5 * len(groups)), 4), squeeze=False)
+    width = 0.8 / max(1, len(solvers))
+    for ax, group in zip(axes[0], groups):
+        sub = results[results["group"] == group]
+        for k, solver in enumerate(solvers):
+            means = [float(sub.loc[sub.solver == solver, f"class_{c}"].mean()) for c in classes]
+            ax.bar(np.arange(len(classes)) + (k - (len(solvers) - 1) / 2) * width, means, width, label=solver,
+                   color=f"C{k}")
+        ax.set_xticks(np.arange(len(classes)), [f"{c}\n({CLASS_UTILITIES[c]:g})" for c in classes], fontsize=8)
+        ax.set_xlabel("priority class (utility)")
+        ax.set_ylabel("acquisitions per instance (mean)")
+        ax.set_title(f"{group} acquisitions, {sub.instance.nunique()} instance(s)")
+    axes[0][0].legend(fontsize=8)
+    fig.tight_layout()
+    with atomic_path(out, suffix=".png") as tmp:
+        fig.savefig(tmp, dpi=110, format="png")
+    plt.close(fig)
+    return out

@@ -10,7 +10,9 @@ Every schedule is checked with the independent checker (``instances.schedule.che
 an infeasible one is a failure of the job.  Outputs in ``--out``: ``results.parquet``
 (one row per instance and solver), ``report.md`` (the paper's table of average
 scores with ratios to Greedy and RAMP, gaps to the proven optimum or the bound, win/
-tie/loss counts), ``schedules/<instance>/<solver>.parquet``; all logged to MLflow.
+tie/loss counts), ``schedules/<instance>/<solver>.parquet``, ``reports/<instance>.html`` (the
+planner's view of ``eosp report`` for the first ``--html-reports`` instances) and
+``class_counts.png`` (acquisitions per priority class and solver); all logged to MLflow.
 """
 
 from __future__ import annotations
@@ -40,6 +42,7 @@ class SolverWorker:
     def solve(self, shard: str, index: int, solver: str, cfg: EvalConfig, budget: int | None) -> dict:
         import numpy as np
 
+        from eosp.config import N_CLASSES
         from eosp.instances.schedule import check, from_internal_nodes, write_schedule
         from eosp.shards.io import ShardReader
         from eosp.solvers.base import get_solver
@@ -60,7 +63,9 @@ class SolverWorker:
             folder = re.sub(r"[^\w.-]", "_", f"{Path(shard).stem}-{index}-{inst.name}")
             write_schedule(sched, Path(cfg.out) / "schedules" / folder / f"{label}.parquet")
         value = float(len(sched)) if cfg.mode == "unitary" else verdict.value
-        return {"instance": f"{Path(shard).stem}#{index}:{inst.name}", "group": inst.n_acq, "solver": label, "value": value,
+        counts = np.bincount(inst.priorities()[sched.acq].astype(np.int64), minlength=N_CLASSES)
+        return {**{f"class_{c}": int(counts[c]) for c in range(N_CLASSES)},
+                "_key": (shard, index), "_schedule": (sched.acq, sched.node, sched.start), "instance": f"{Path(shard).stem}#{index}:{inst.name}", "group": inst.n_acq, "solver": label, "value": value,
                 "utility": verdict.value, "acquisitions": len(sched), "seconds": seconds,
                 "feasible": verdict.feasible, "reason": verdict.reason,
                 "bound": float(sol.info.get("bound", np.nan)), "status": str(sol.info.get("status", "")),
@@ -83,6 +88,7 @@ def run(cfg: EvalConfig, ray_cfg: RayConfig) -> "object":
     from eosp.envs.sources import expand_shards
     from eosp.atomic import atomic_path
     from eosp.jobs.ray_init import init_ray
+    from eosp.evaluation.plots import plot_class_counts
     from eosp.evaluation.report import markdown
     from eosp.shards.io import ShardReader
 
@@ -106,14 +112,20 @@ def run(cfg: EvalConfig, ray_cfg: RayConfig) -> "object":
         if (k + 1) % max(1, len(jobs) // 20) == 0 or k + 1 == len(jobs):
             print(f"[evaluate] {k + 1}/{len(jobs)} done ({time.perf_counter() - t0:.0f} s)", flush=True)
     wall = time.perf_counter() - t0
+    html = write_html_reports(cfg, jobs, rows)
+    for row in rows:
+        del row["_key"], row["_schedule"]
     results = pd.DataFrame(rows).sort_values(["group", "instance", "solver"]).reset_index(drop=True)
     out = Path(cfg.out)
     out.mkdir(parents=True, exist_ok=True)
     with atomic_path(out / "results.parquet", suffix=".parquet") as tmp:
         results.to_parquet(tmp, index=False)
     report = markdown(results, cfg.mode) + f"\nWall time: {wall:.1f} s on {n_workers} workers.\n"
+    if html:
+        report += f"\nHTML reports (map, timeline, roll/pitch): {', '.join(p.name for p in html)} in reports/.\n"
     with atomic_path(out / "report.md") as tmp:
         tmp.write_text(report)
+    counts_png = plot_class_counts(results, out / "class_counts.png")
     mlflow.set_tracking_uri(default_mlflow_uri(cfg.mlflow_uri))
     mlflow.set_experiment(cfg.experiment)
     with mlflow.start_run(run_name=out.name):
@@ -125,8 +137,29 @@ def run(cfg: EvalConfig, ray_cfg: RayConfig) -> "object":
         mlflow.log_metric("wall_s", wall)
         mlflow.log_artifact(str(out / "results.parquet"))
         mlflow.log_artifact(str(out / "report.md"))
+        mlflow.log_artifact(str(counts_png))
+        for p in html:
+            mlflow.log_artifact(str(p), artifact_path="reports")
     print(report)
     return results
+
+
+def write_html_reports(cfg: EvalConfig, jobs: list[tuple], rows: list[dict]) -> list[Path]:
+    """One HTML report per instance, for the first ``cfg.html_reports`` instances of the job list."""
+    from eosp.evaluation.html_report import write_report
+    from eosp.instances.schedule import Schedule
+    from eosp.shards.io import ShardReader
+
+    keys = list(dict.fromkeys((shard, index) for shard, index, _, _ in jobs))[:max(0, cfg.html_reports)]
+    written = []
+    for shard, index in keys:
+        mine = [r for r in rows if r["_key"] == (shard, index)]
+        scheds = {r["solver"]: Schedule(*r["_schedule"]) for r in sorted(mine, key=lambda r: r["solver"])}
+        inst = ShardReader(shard).read(index)
+        folder = re.sub(r"[^\w.-]", "_", f"{Path(shard).stem}-{index}-{inst.name}")
+        written.append(write_report(inst, scheds, Path(cfg.out) / "reports" / f"{folder}.html",
+                                    title=f"{inst.name} ({Path(shard).name} #{index}): {cfg.mode} mode"))
+    return written
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -40,7 +40,7 @@ def test_evaluate(tmp_path):
     write_shard(tmp_path / "data" / "shard-0.parquet", [generated("uniform", 12, s) for s in range(3)])
     r = run_job("evaluate.py", "--data", tmp_path / "data", "--solvers", "greedy", "ramp", "exact",
                 "--time-limit", 30, "--out", tmp_path / "out", "--mlflow-uri", f"sqlite:///{tmp_path / 'm.db'}",
-                "--ray.num-cpus", 2)
+                "--ray.num-cpus", 2, "--html-reports", 2)
     res = pd.read_parquet(tmp_path / "out" / "results.parquet")
     assert len(res) == 9 and res.feasible.all()
     wide = res.pivot(index="instance", columns="solver", values="value")
@@ -49,3 +49,17 @@ def test_evaluate(tmp_path):
     assert "/ Greedy" in report and "| 12 | 3 |" in report
     assert (tmp_path / "out" / "schedules").is_dir()
     assert "Wall time" in r.stdout
+    # per-class counts, HTML reports of the first two instances, all logged to MLflow
+    assert (res[[f"class_{c}" for c in range(7)]].sum(axis=1) == res.acquisitions).all()
+    pages = sorted((tmp_path / "out" / "reports").glob("*.html"))
+    assert len(pages) == 2 and "reports/" in report
+    text = pages[0].read_text()
+    assert text.count("<tr data-schedule=") == 3 and "id='map-section'" in text
+    assert (tmp_path / "out" / "class_counts.png").stat().st_size > 5000
+    import mlflow
+
+    client = mlflow.MlflowClient(f"sqlite:///{tmp_path / 'm.db'}")
+    run = client.search_runs([client.get_experiment_by_name("eosp-eval").experiment_id])[0]
+    names = {a.path for a in client.list_artifacts(run.info.run_id)}
+    assert {"class_counts.png", "report.md", "results.parquet", "reports"} <= names
+    assert len(client.list_artifacts(run.info.run_id, "reports")) == 2

