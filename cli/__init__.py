@@ -109,6 +109,9 @@ def cmd_solve(ns: argparse.Namespace) -> int:
         kwargs["budget"] = ns.budget
     if ns.sample:
         kwargs["sample"] = True
+    for name in ("samples", "beam_width"):
+        if getattr(ns, name) is not None:
+            kwargs[name] = getattr(ns, name)
     t0 = time.perf_counter()
     sol = solver(inst, **kwargs)
     elapsed = time.perf_counter() - t0
@@ -207,9 +210,11 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--mode", default="utility", choices=["utility", "unitary"])
     s.add_argument("--time-limit", type=float, default=None, help="seconds, for the searching solvers")
     s.add_argument("--seed", type=int, default=0)
-    s.add_argument("--checkpoint", default="", help="trained agent (policy, mcts solvers)")
+    s.add_argument("--checkpoint", default="", help="trained agent (policy, mcts solvers); default: the shipped pretrained model of --mode")
     s.add_argument("--budget", type=int, default=None, help="MCTS simulations per decision")
     s.add_argument("--sample", action="store_true", help="policy: sample actions (seeded) instead of argmax")
+    s.add_argument("--samples", type=int, default=None, help="sample solver: episodes per batched round (16)")
+    s.add_argument("--beam-width", type=int, default=None, help="beam solver: partial schedules kept (4)")
     s.set_defaults(func=cmd_solve)
 
     b = sub.add_parser("build-shards", help="generate a data set of Parquet shards with Ray (jobs/build_shards.py)",

@@ -415,13 +415,20 @@ class EvalConfig:
     data: tuple[str, ...] = ("data/demo/val",)
     """Data set directories or shard files; instances are grouped by size in the report."""
     solvers: tuple[str, ...] = ("greedy", "ramp")
-    """Any of: random, greedy, ramp, exact, policy, mcts."""
+    """Any of: random, greedy, ramp, exact, policy, mcts, sample, beam."""
     mode: str = "utility"
     """'utility' or 'unitary' (count acquisitions)."""
     time_limit: float = 60.0
     """Seconds per instance for the searching solvers (ramp, exact)."""
+    search_time: float = 0.0
+    """Seconds of search per instance for the learned searches (sample, beam); 0: no limit (one round of
+    samples, the whole beam)."""
+    samples: int = 16
+    """Episodes per batched round of the sample solver."""
+    beam_width: int = 4
+    """Partial schedules kept by the beam solver."""
     checkpoint: str = ""
-    """Agent checkpoint for the policy and mcts solvers."""
+    """Agent checkpoint for the policy and mcts solvers; empty: the shipped pretrained model of --mode."""
     budgets: tuple[int, ...] = (0, 10, 100, 1000)
     """MCTS simulations per decision (mcts solver only)."""
     out: str = "runs/eval"

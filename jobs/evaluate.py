@@ -49,8 +49,11 @@ class SolverWorker:
 
         inst = ShardReader(shard).read(index)
         kwargs = {"mode": cfg.mode, "time_limit": cfg.time_limit}
-        if solver in ("policy", "mcts"):
-            kwargs["agent"] = self._agent(cfg.checkpoint)
+        if solver in LEARNED:
+            kwargs["agent"] = self._agent(cfg.checkpoint, cfg.mode)
+        if solver in ("sample", "beam"):
+            kwargs["time_limit"] = cfg.search_time or None
+            kwargs.update({"samples": cfg.samples} if solver == "sample" else {"beam_width": cfg.beam_width})
         if solver == "mcts":
             kwargs["budget"] = budget
         t0 = time.perf_counter()
@@ -71,12 +74,17 @@ class SolverWorker:
                 "bound": float(sol.info.get("bound", np.nan)), "status": str(sol.info.get("status", "")),
                 "family": str(inst.meta.get("family", ""))}
 
-    def _agent(self, checkpoint: str):
-        if checkpoint not in self.agents:
-            from eosp.models.checkpoint import load_agent
+    def _agent(self, checkpoint: str, mode: str):
+        """The agent of `checkpoint`, or the shipped model of `mode` (loaded once per worker)."""
+        key = checkpoint or f"pretrained:{mode}"
+        if key not in self.agents:
+            from eosp.solvers.policy import resolve_agent
 
-            self.agents[checkpoint] = load_agent(checkpoint)
-        return self.agents[checkpoint]
+            self.agents[key] = resolve_agent("policy", checkpoint, None, mode)
+        return self.agents[key]
+
+
+LEARNED = ("policy", "mcts", "sample", "beam")
 
 
 def run(cfg: EvalConfig, ray_cfg: RayConfig) -> "object":
@@ -92,8 +100,10 @@ def run(cfg: EvalConfig, ray_cfg: RayConfig) -> "object":
     from eosp.evaluation.report import markdown
     from eosp.shards.io import ShardReader
 
-    if {"policy", "mcts"} & set(cfg.solvers) and not cfg.checkpoint:
-        raise SystemExit("--checkpoint is required for the policy and mcts solvers")
+    if set(LEARNED) & set(cfg.solvers) and not cfg.checkpoint:
+        from eosp.models.pretrained import pretrained_dir
+
+        print(f"[evaluate] policy/mcts: the shipped model {pretrained_dir(cfg.mode)}", flush=True)
     init_ray(ray_cfg.address, ray_cfg.num_cpus)
     jobs = []
     for shard in expand_shards(list(cfg.data)):

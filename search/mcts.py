@@ -29,6 +29,7 @@ With ``num_simulations=0`` the search returns the policy's argmax.
 from __future__ import annotations
 
 import math
+import time
 from dataclasses import dataclass, field
 from typing import Callable
 
@@ -146,16 +147,17 @@ def _descend(env, root: Node, c_puct: float, minmax: MinMax, stats: SearchStats)
 
 
 def search(env, root: Node, evaluate: EvaluateMany, *, num_simulations: int, c_puct: float = 1.25,
-           batch: int = 8, stats: SearchStats | None = None) -> int:
-    """Run `num_simulations` simulations from `root` (the env's current state); return an index into
-    ``root.actions``.  The environment is left in the root's state."""
+           batch: int = 8, stats: SearchStats | None = None, deadline: float | None = None) -> int:
+    """Run `num_simulations` simulations from `root` (the env's current state), fewer if the clock
+    passes `deadline` (``time.perf_counter()``); return an index into ``root.actions``.  The
+    environment is left in the root's state."""
     stats = stats or SearchStats()
     evaluate_nodes([root], evaluate, stats)
     if num_simulations <= 0 or root.terminal or root.actions.size == 1:  # nothing to search
         return int(np.argmax(root.prior)) if root.actions.size else -1
     minmax = MinMax()
     done = 0
-    while done < num_simulations:
+    while done < num_simulations and (deadline is None or time.perf_counter() < deadline):
         descents = []
         for _ in range(min(batch, num_simulations - done)):
             path, leaf = _descend(env, root, c_puct, minmax, stats)
@@ -183,16 +185,40 @@ def search(env, root: Node, evaluate: EvaluateMany, *, num_simulations: int, c_p
 
 
 def solve(env, evaluate: EvaluateMany, *, num_simulations: int, c_puct: float = 1.25, batch: int = 8,
-          reuse_tree: bool = True, seed: int = 0) -> tuple[np.ndarray, float, SearchStats]:
+          reuse_tree: bool = True, seed: int = 0,
+          time_limit: float | None = None) -> tuple[np.ndarray, float, SearchStats]:
     """Play one episode from the env's reset state with MCTS before each decision.
 
+    With `time_limit` (seconds for the whole episode) the search is anytime: the greedy
+    policy's episode is played first (the answer if time runs out), then each decision gets an
+    equal share of the time left over the decisions the greedy episode suggests remain
+    (at most `num_simulations` simulations each).
     Returns the scheduled nodes, the episode's return in reward units, and search statistics.
     """
-    obs, _ = env.reset(seed=seed)
+    t0 = time.perf_counter()
     stats = SearchStats()
+    expected_steps = None
+    if time_limit is not None:
+        obs, _ = env.reset(seed=seed)
+        ret, acts, done = 0.0, [], not obs["action_mask"].any()
+        while not done:
+            logits, _ = evaluate([obs])
+            stats.evaluations += 1
+            allowed = np.flatnonzero(obs["action_mask"])
+            a = int(allowed[np.argmax(logits[0][allowed])])
+            obs, r, done, _, _ = env.step(a)
+            ret, done = ret + r, done or not obs["action_mask"].any()
+            acts.append(a)
+        stats.best_return, stats.best_actions, expected_steps = ret, acts, max(1, len(acts))
+    obs, _ = env.reset(seed=seed)
     root = new_node(env, obs, 0.0, False)
     while not root.terminal:
-        k = search(env, root, evaluate, num_simulations=num_simulations, c_puct=c_puct, batch=batch, stats=stats)
+        deadline = None
+        if time_limit is not None:
+            left = time_limit - (time.perf_counter() - t0)
+            deadline = time.perf_counter() + max(0.0, left) / max(1, expected_steps - len(stats.played))
+        k = search(env, root, evaluate, num_simulations=num_simulations, c_puct=c_puct, batch=batch, stats=stats,
+                   deadline=deadline)
         child = root.children.get(k) if reuse_tree else None
         obs, r, done, _, _ = env.step(int(root.actions[k]))
         if child is None:

@@ -34,6 +34,8 @@ REGISTRY: dict[str, str] = {
     "random": "eosp.solvers.random_walk:solve",
     "policy": "eosp.solvers.policy:solve",
     "mcts": "eosp.solvers.mcts:solve",
+    "sample": "eosp.solvers.sample:solve",
+    "beam": "eosp.solvers.beam:solve",
     "greedy": "eosp.solvers.greedy:solve",
     "ramp": "eosp.solvers.ramp:solve",
     "exact": "eosp.solvers.exact:solve",

@@ -123,6 +123,15 @@ def optimal_path(res: Residual, weights: np.ndarray, *, unitary: bool, time_limi
     return done(nodes, value, min(bound, max(value, frontier)), "time_limit")
 
 
+def beam_path(res: Residual, weights: np.ndarray, beam: int = 4) -> tuple[np.ndarray, float]:
+    """RAMP's beam search on a residual graph: its actions (instance acquisitions) and value."""
+    g = res.graph
+    if g.n_acq == 0 or g.indptr[1] == 0:
+        return np.zeros(0, np.int32), 0.0
+    r = label_search(g, np.asarray(weights, dtype=np.float64)[res.acq_map], beam=beam)
+    return res.acq_map[g.node_acq[r.nodes]].astype(np.int32), float(r.value)
+
+
 def beam_value(res: Residual, weights: np.ndarray, beam: int = 4) -> float:
     """Value of RAMP's beam search on a residual graph (a lower bound of its optimum, usually equal)."""
     if res.graph.n_acq == 0 or res.graph.indptr[1] == 0:

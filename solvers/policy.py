@@ -64,22 +64,24 @@ def rollout(agent: EOSPAgent, prepared: PreparedInstance, env_cfg: EnvConfig, sa
     return env.path(), env.state.value
 
 
-def resolve_agent(solver: str, checkpoint: str, agent: tuple | None) -> tuple:
-    """The (agent, env config, metadata) given, or loaded from `checkpoint`."""
+def resolve_agent(solver: str, checkpoint: str, agent: tuple | None, mode: str = "utility") -> tuple:
+    """The (agent, env config, metadata) given, loaded from `checkpoint`, or the shipped model of `mode`."""
     if agent is not None:
         return agent
+    torch.set_num_threads(1)
     if not checkpoint:
-        raise ValueError(f"the {solver} solver needs --checkpoint (a directory holding agent.pt and agent.json)")
+        from eosp.models.pretrained import load_pretrained
+
+        return load_pretrained(mode)
     from eosp.models.checkpoint import load_agent
 
-    torch.set_num_threads(1)
     return load_agent(checkpoint)
 
 
 def solve(inst: Instance, *, mode: str = "utility", time_limit: float | None = None, seed: int = 0,
           checkpoint: str = "", agent: tuple | None = None, sample: bool = False, **_: object) -> Solution:
     """`agent`: an already loaded (agent, env config, metadata) from models.checkpoint.load_agent."""
-    agent, env_cfg, _ = resolve_agent("policy", checkpoint, agent)
+    agent, env_cfg, _ = resolve_agent("policy", checkpoint, agent, mode)
     prepared = prepare_instance(inst, env_cfg.prune)
     nodes, _ = rollout(agent, prepared, env_cfg, sample=sample, seed=seed)
     w = objective_weights(inst, mode)

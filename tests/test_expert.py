@@ -170,3 +170,46 @@ def test_build_demos_job_is_resumable_and_refuses_bad_options(demo_shard, capsys
     assert main(["--data", str(demo_shard.parent), "--modes", "lexical"]) == 2
     assert "unknown mode 'lexical'" in capsys.readouterr().err
     assert main(["--data", str(demo_shard.parent), "--time-limit", "-1"]) == 2
+
+
+@pytest.mark.parametrize("mode", ["unitary", "utility"])
+def test_shipped_models_solve_without_a_checkpoint(tmp_path, mode):
+    """`eosp solve --solver policy|mcts --mode M` with no --checkpoint uses the shipped model of M."""
+    from eosp.cli import main
+    from eosp.instances.interchange import write_instance
+    from eosp.instances.schedule import check, read_schedule
+    from eosp.models.pretrained import load_pretrained
+
+    agent, env_cfg, meta = load_pretrained(mode)
+    assert (env_cfg.reward == "unitary") == (mode == "unitary") and agent.cfg.n_values == 1
+    inst = generated("clusters", 30, 4)
+    write_instance(inst, tmp_path / "inst")
+    for solver, extra in (("policy", []), ("mcts", ["--budget", "4"])):
+        out = tmp_path / f"{solver}.parquet"
+        assert main(["solve", str(tmp_path / "inst"), "--solver", solver, "--mode", mode, "--out", str(out),
+                     *extra]) == 0
+        assert check(inst, read_schedule(out, inst)).feasible
+
+
+def test_missing_or_corrupt_shipped_model_is_one_line(tmp_path, monkeypatch, capsys):
+    import eosp.models.pretrained as pretrained
+    from eosp.cli import main
+    from eosp.instances.interchange import write_instance
+
+    write_instance(generated("uniform", 12, 0), tmp_path / "inst")
+    monkeypatch.setattr(pretrained, "ROOT", tmp_path / "nowhere")
+    assert main(["solve", str(tmp_path / "inst"), "--solver", "policy", "--mode", "unitary",
+                 "--out", str(tmp_path / "s.parquet")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0 and "shipped pretrained model is missing" in err
+    broken = tmp_path / "broken" / "unitary"
+    broken.mkdir(parents=True)
+    (broken / "agent.json").write_text((pretrained.Path(__file__).parents[1] / "models" / "pretrained" / "unitary"
+                                        / "agent.json").read_text())
+    (broken / "agent.pt").write_bytes(b"\x00garbage")
+    monkeypatch.setattr(pretrained, "ROOT", tmp_path / "broken")
+    assert main(["solve", str(tmp_path / "inst"), "--solver", "policy", "--mode", "unitary",
+                 "--out", str(tmp_path / "s.parquet")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0 and "cannot read the weights" in err
+    assert not (tmp_path / "s.parquet").exists()

@@ -124,8 +124,14 @@ def losses(agent: EOSPAgent, obs, opt, target) -> tuple[torch.Tensor, torch.Tens
     return policy_loss, value_loss, acc
 
 
-def label_states(shard: str, index: int, mode: str, actions: list[int], beam: int, prune: bool):
-    """Expert labels of the states along `actions` (a Ray task): optimal sets and best remaining values."""
+def label_states(shard: str, index: int, mode: str, actions: list[int], beam: int, prune: bool,
+                 sets: bool = True):
+    """Expert labels of the states along `actions` (a Ray task): optimal actions and best remaining values.
+
+    With `sets`, every allowed action is valued (ties kept: unitary mode); without, the first action of
+    the best continuation found by RAMP's beam search (one search per state instead of one per action:
+    utility mode, where ties are rare).
+    """
     from eosp.config import EnvConfig as _Env
     from eosp.envs.eosp_env import EOSPEnv
     from eosp.envs.sources import FixedSource, prepare_instance
@@ -136,13 +142,18 @@ def label_states(shard: str, index: int, mode: str, actions: list[int], beam: in
     env = EOSPEnv(_Env(max_acquisitions=0, prune=prune), source=FixedSource(prepared))
     env.reset()
     w = expert.objective(prepared.inst, mode)
-    sets, best = [], []
+    labels, best = [], []
     for a in actions:
-        allowed, q = expert.action_values(env, w, beam)
-        sets.append(allowed[expert.optimal_set(q, mode == "unitary")])
-        best.append(float(q.max()))
+        if sets:
+            allowed, q = expert.action_values(env, w, beam)
+            labels.append(allowed[expert.optimal_set(q, mode == "unitary")])
+            best.append(float(q.max()))
+        else:
+            path, value = expert.beam_path(expert.state_residual(env), w, beam)
+            labels.append(path[:1])
+            best.append(value)
         env.step(int(a))
-    return sets, best
+    return labels, best
 
 
 class DemoData:
@@ -191,8 +202,8 @@ class DemoData:
             nodes, _ = rollout(agent, p, self.env_cfg, sample=True, seed=int(rng.integers(1 << 30)))
             trajectories.append((i, p.eg.node_acq[nodes].astype(np.int32)))
         t_roll = time.perf_counter() - t0
-        args = [(str(self.instances[i][0]), self.instances[i][1], self.mode, acts.tolist(), beam, self.env_cfg.prune)
-                for i, acts in trajectories]
+        args = [(str(self.instances[i][0]), self.instances[i][1], self.mode, acts.tolist(), beam, self.env_cfg.prune,
+                 self.mode == "unitary") for i, acts in trajectories]
         if ray.is_initialized():  # the labels are the expensive part: one Ray task per episode
             task = ray.remote(num_cpus=1)(label_states)
             labels = ray.get([task.remote(*x) for x in args])

@@ -1,7 +1,9 @@
 """The trained agent as an MLflow pyfunc model, logged "from code" (no pickled Python object).
 
 MLflow loads this file and the artifact ``agent`` (a checkpoint directory:
-``agent.pt`` read with ``weights_only=True`` + ``agent.json``).  ``predict``
+``agent.pt`` read with ``weights_only=True`` + ``agent.json``); logged without that
+artifact, it serves the shipped pretrained model of ``model_config={"mode": ...}``
+(``mlflow.pyfunc.log_model(name=..., python_model=<this file>, model_config={"mode": "unitary"})``).  ``predict``
 takes a DataFrame with a column ``instance_dir`` (interchange instance
 directories) and returns, per instance, the number of acquisitions and the
 utility of the schedule decoded greedily, and the schedule's node ids.
@@ -17,10 +19,12 @@ class EOSPPolicyModel(mlflow.pyfunc.PythonModel):
     def load_context(self, context) -> None:
         import torch
 
-        from eosp.models.checkpoint import load_agent
+        from eosp.solvers.policy import resolve_agent
 
         torch.set_num_threads(1)
-        self.agent, self.env_cfg, self.meta = load_agent(context.artifacts["agent"])
+        # a logged checkpoint, or (model logged without one) the shipped pretrained model of model_config["mode"]
+        mode = (context.model_config or {}).get("mode", "utility")
+        self.agent, self.env_cfg, self.meta = resolve_agent("policy", context.artifacts.get("agent", ""), None, mode)
 
     def predict(self, context, model_input: pd.DataFrame, params=None) -> pd.DataFrame:
         from eosp.envs.sources import prepare_instance
