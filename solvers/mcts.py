@@ -9,7 +9,7 @@ from eosp.envs.sources import prepare_instance
 from eosp.instances.instance import Instance
 from eosp.search.mcts import solve as mcts_solve
 from eosp.solvers.base import Solution, objective_weights
-from eosp.solvers.policy import evaluate_batch, make_env_for, resolve_agent
+from eosp.solvers.policy import evaluate_batch, make_env_for, resolve_agent, value_weights
 
 
 def solve(inst: Instance, *, mode: str = "utility", time_limit: float | None = None, seed: int = 0,
@@ -18,14 +18,13 @@ def solve(inst: Instance, *, mode: str = "utility", time_limit: float | None = N
     if budget is not None and budget < 0:
         raise ValueError(f"budget must be a non-negative number of simulations, got {budget}")
     model, env_cfg, _ = resolve_agent("mcts", checkpoint, agent, mode)
-    if model.cfg.n_values != 1:
-        raise ValueError("MCTS needs a scalar value network; this checkpoint has one value head per priority class "
-                         "(lexicographic reward): use the policy solver, or a checkpoint trained with another reward")
-    env = make_env_for(prepare_instance(inst, env_cfg.prune), env_cfg)
+    prepared = prepare_instance(inst, env_cfg.prune)
+    env = make_env_for(prepared, env_cfg)
+    vw = value_weights(model, prepared)  # lexicographic heads: per-class values weighed by class utilities
     t0 = time.perf_counter()
     if budget is None:  # with a time limit, bounded by it only
         budget = 1_000_000 if time_limit is not None else 100
-    nodes, ret, stats = mcts_solve(env, lambda obss: evaluate_batch(model, obss), num_simulations=int(budget or 0),
+    nodes, ret, stats = mcts_solve(env, lambda obss: evaluate_batch(model, obss, vw), num_simulations=int(budget or 0),
                                    c_puct=c_puct, batch=batch, seed=seed, time_limit=time_limit)
     w = objective_weights(inst, mode)
     value = float(w[inst.graph.node_acq[nodes]].sum()) if len(nodes) else 0.0

@@ -12,7 +12,7 @@ import torch
 
 from eosp.envs.eosp_env import EOSPEnv
 from eosp.envs.sources import FixedSource, PreparedInstance, prepare_instance
-from eosp.config import EnvConfig
+from eosp.config import CLASS_UTILITIES, EnvConfig
 from eosp.instances.instance import Instance
 from eosp.models.agent import EOSPAgent, batch_from_padded
 from eosp.solvers.base import Solution, objective_weights
@@ -31,12 +31,27 @@ def evaluate(agent: EOSPAgent, obs: dict[str, np.ndarray]) -> tuple[np.ndarray, 
 
 
 @torch.no_grad()
-def evaluate_batch(agent: EOSPAgent, obss: list[dict[str, np.ndarray]]) -> tuple[np.ndarray, np.ndarray]:
-    """Logits [B, N] and first value head [B] of several observations of one instance, in one call."""
+def evaluate_batch(agent: EOSPAgent, obss: list[dict[str, np.ndarray]],
+                   value_weights: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Logits [B, N] and scalar values [B] of several observations of one instance, in one call.
+
+    The value is the first head's, or with `value_weights` the heads' weighted sum (a lexicographic
+    model's per-class values turned into the normalized reward's units, see :func:`value_weights`).
+    """
     batch = {k: torch.as_tensor(np.stack([o[k] for o in obss])) for k in obss[0]}
     gb, valid = batch_from_padded(batch)
     logits, values = agent(gb)
-    return agent.padded_logits(logits, valid).numpy(), values[:, 0].numpy()
+    v = values.numpy()
+    return agent.padded_logits(logits, valid).numpy(), (v[:, 0] if value_weights is None else v @ value_weights)
+
+
+def value_weights(agent: EOSPAgent, prepared: PreparedInstance) -> np.ndarray | None:
+    """For a model with one value head per priority class (lexicographic reward): the class utilities over
+    the instance's mean utility, so that searches compare values in the normalized reward's units."""
+    n = agent.cfg.n_values
+    if n == 1:
+        return None
+    return np.asarray(CLASS_UTILITIES[:n], dtype=np.float64) / prepared.mean_utility
 
 
 def make_env_for(prepared: PreparedInstance, env_cfg: EnvConfig) -> EOSPEnv:

@@ -60,3 +60,16 @@ def test_bad_search_sizes_are_refused(agent, tmp_path, capsys):
                  str(tmp_path / "s.parquet")]) == 2
     assert "samples must be at least 1" in capsys.readouterr().err
     assert not (tmp_path / "s.parquet").exists()
+
+
+def test_every_search_takes_a_lexicographic_model():
+    """Per-class value heads are weighed by the class utilities: MCTS no longer refuses them."""
+    torch.manual_seed(4)
+    lex = (EOSPAgent(ModelConfig(hidden_dim=8, n_layers=1, heads=1, n_values=7, value_scale=5.0)),
+           EnvConfig(reward="lexicographic"), {})
+    inst = generated("conflict", 30, 6)
+    policy = get_solver("policy")(inst, mode="utility", agent=lex)
+    for name, kw in (("mcts", {"budget": 8}), ("sample", {"samples": 4}), ("beam", {"beam_width": 2})):
+        sol = get_solver(name)(inst, mode="utility", agent=lex, **kw)
+        assert check(inst, from_internal_nodes(inst, sol.nodes)).feasible
+        assert sol.value >= policy.value * (1 - 1e-12)
