@@ -64,7 +64,7 @@ def _choose(logits: np.ndarray, mask: np.ndarray, rng: np.random.Generator | Non
 
 def rollout_many(env, starts: list[_State], evaluate: EvaluateMany, best: Best, *,
                  rng: np.random.Generator | None = None, temperature: float = 1.0,
-                 greedy_first: bool = False, deadline: float | None = None) -> list[float]:
+                 deadline: float | None = None) -> list[float]:
     """Finish every start state with the policy (greedy, or sampled with `rng`), in lockstep.
 
     Returns each episode's return (states cut by the deadline count as their return so far
@@ -79,7 +79,7 @@ def rollout_many(env, starts: list[_State], evaluate: EvaluateMany, best: Best, 
         best.evaluations += 1
         for j, i in enumerate(todo):
             s = live[i]
-            a = _choose(logits[j], s.obs["action_mask"], None if (greedy_first and i == 0) else rng, temperature)
+            a = _choose(logits[j], s.obs["action_mask"], rng, temperature)
             env.restore(s.snap)
             obs, r, done, _, _ = env.step(a)
             s.obs, s.ret, s.done = obs, s.ret + r, done or not obs["action_mask"].any()
@@ -98,9 +98,8 @@ def root_state(env, seed: int = 0) -> _State:
 
 def sample(env, evaluate: EvaluateMany, *, samples: int = 16, temperature: float = 1.0, seed: int = 0,
            time_limit: float | None = None, max_rounds: int | None = None) -> Best:
-    """Best of K sampled episodes (the first greedy), in rounds of K until the time limit.
-
-    With no time limit, one round (or `max_rounds`).  `samples` >= 1.
+    """Best of K episodes (the first greedy, always finished: the floor), then rounds of K sampled
+    ones until the time limit.  With no time limit, one round (or `max_rounds`).  `samples` >= 1.
     """
     if samples < 1:
         raise ValueError(f"samples must be at least 1, got {samples}")
@@ -112,11 +111,12 @@ def sample(env, evaluate: EvaluateMany, *, samples: int = 16, temperature: float
     if root.done:
         best.offer(0.0, [])
         return best
-    rounds = 0
+    rollout_many(env, [root], evaluate, best)  # the greedy episode, whatever the deadline: the anytime floor
+    rounds, first = 0, samples - 1
     while True:
-        rollout_many(env, [root] * samples, evaluate, best, rng=rng, temperature=temperature,
-                     greedy_first=rounds == 0, deadline=deadline)
-        rounds += 1
+        if first > 0:
+            rollout_many(env, [root] * first, evaluate, best, rng=rng, temperature=temperature, deadline=deadline)
+        rounds, first = rounds + 1, samples
         if deadline is None and rounds >= (max_rounds or 1):
             break
         if deadline is not None and (time.perf_counter() > deadline or (max_rounds and rounds >= max_rounds)):
