@@ -109,6 +109,8 @@ def cmd_solve(ns: argparse.Namespace) -> int:
         kwargs["budget"] = ns.budget
     if ns.sample:
         kwargs["sample"] = True
+    if ns.gumbel:
+        kwargs["gumbel"] = True
     for name in ("samples", "beam_width"):
         if getattr(ns, name) is not None:
             kwargs[name] = getattr(ns, name)
@@ -213,6 +215,7 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--checkpoint", default="", help="trained agent (policy, mcts solvers); default: the shipped pretrained model of --mode")
     s.add_argument("--budget", type=int, default=None, help="MCTS simulations per decision")
     s.add_argument("--sample", action="store_true", help="policy: sample actions (seeded) instead of argmax")
+    s.add_argument("--gumbel", action="store_true", help="mcts: Gumbel root selection with sequential halving")
     s.add_argument("--samples", type=int, default=None, help="sample solver: episodes per batched round (16)")
     s.add_argument("--beam-width", type=int, default=None, help="beam solver: partial schedules kept (4)")
     s.set_defaults(func=cmd_solve)

@@ -22,7 +22,8 @@ function, and returns the action to play; :func:`solve` plays a whole episode.
 * The best complete episode met during the search is remembered; :func:`solve`
   returns it if it beats the episode actually played.
 
-Deterministic: nothing is random, the same inputs give the same schedule.
+Deterministic: nothing is random (Gumbel root selection, :func:`gumbel_search`, draws from a
+generator seeded by ``seed``), the same inputs give the same schedule.
 With ``num_simulations=0`` the search returns the policy's argmax.
 """
 
@@ -126,11 +127,13 @@ def _select(node: Node, c_puct: float, minmax: MinMax) -> int:
     return int(np.argmax(score))  # first maximum: deterministic
 
 
-def _descend(env, root: Node, c_puct: float, minmax: MinMax, stats: SearchStats) -> tuple[list, Node]:
-    """Select down to a new (or terminal, or still pending) node; expand a new one with one env step."""
+def _descend(env, root: Node, c_puct: float, minmax: MinMax, stats: SearchStats,
+             forced: int | None = None) -> tuple[list, Node]:
+    """Select down to a new (or terminal, or still pending) node; expand a new one with one env step.
+    `forced`: the root's action (index) to take first (Gumbel root selection)."""
     node, path = root, []
     while True:
-        k = _select(node, c_puct, minmax)
+        k = forced if forced is not None and node is root else _select(node, c_puct, minmax)
         path.append((node, k))
         child = node.children.get(k)
         if child is None:
@@ -184,9 +187,79 @@ def search(env, root: Node, evaluate: EvaluateMany, *, num_simulations: int, c_p
     return int(best[np.argmax(q[best])])
 
 
+def _backup(path: list, leaf: Node, loss: float, minmax: MinMax, stats: SearchStats) -> None:
+    if leaf.terminal:
+        stats.record(leaf)
+    g = leaf.value
+    for parent, k in reversed(path):
+        g = parent.reward[k] + g
+        parent.value_sum[k] += g - loss
+        minmax.update(parent.value_sum[k] / parent.visits[k])
+    stats.simulations += 1
+
+
+def gumbel_search(env, root: Node, evaluate: EvaluateMany, *, num_simulations: int, c_puct: float = 1.25,
+                  max_considered: int = 16, c_visit: float = 50.0, c_scale: float = 1.0,
+                  rng: np.random.Generator | None = None, stats: SearchStats | None = None,
+                  deadline: float | None = None) -> int:
+    """Root selection by Gumbel-top-k and sequential halving (Danihelka et al., 2022).
+
+    m = min(max_considered, allowed) root actions are drawn without replacement by
+    Gumbel(0) + logit; the simulation budget is split over ceil(log2 m) phases, each
+    giving the remaining candidates equal visits (the root action is forced, PUCT
+    below), after which the better half by g + logit + sigma(q) stays, with
+    sigma(q) = (c_visit + max visits) * c_scale * q normalized to [0, 1] over the tree
+    (per-instance value normalization) and q completed by the root value for an unvisited
+    candidate.  With a few simulations this still improves on the policy: a candidate
+    is only dropped for a worse simulated value.  Returns an index into ``root.actions``.
+    """
+    stats = stats or SearchStats()
+    rng = rng or np.random.default_rng(0)
+    evaluate_nodes([root], evaluate, stats)
+    k_all = root.actions.size
+    if num_simulations <= 0 or root.terminal or k_all <= 1:
+        return int(np.argmax(root.prior)) if k_all else -1
+    logits = np.log(np.maximum(root.prior, 1e-30))
+    g = rng.gumbel(size=k_all)
+    m = min(max_considered, k_all)
+    cands = list(np.argsort(-(g + logits), kind="stable")[:m])
+    minmax = MinMax()
+    phases = max(1, math.ceil(math.log2(m)))
+    left = num_simulations
+
+    def score(idx: list) -> np.ndarray:
+        n = root.visits
+        q = np.where(n > 0, root.value_sum / np.maximum(n, 1), root.value)
+        sigma = (c_visit + n.max()) * c_scale * minmax.norm(q)
+        return (g + logits + sigma)[idx]
+
+    for phase in range(phases):
+        if left <= 0 or len(cands) == 1 or (deadline is not None and time.perf_counter() > deadline):
+            break
+        per = max(1, left // ((phases - phase) * len(cands)))
+        for _ in range(per):
+            descents = []
+            for c in cands:
+                path, leaf = _descend(env, root, c_puct, minmax, stats, forced=int(c))
+                for parent, kk in path:
+                    parent.visits[kk] += 1
+                descents.append((path, leaf))
+            evaluate_nodes([leaf for _, leaf in descents], evaluate, stats)
+            for path, leaf in descents:
+                _backup(path, leaf, 0.0, minmax, stats)
+            left -= len(cands)
+            if deadline is not None and time.perf_counter() > deadline:
+                break
+        keep = max(1, len(cands) // 2)
+        order = np.argsort(-score(cands), kind="stable")[:keep]
+        cands = [cands[i] for i in order]
+    env.restore(root.snapshot)
+    return int(cands[int(np.argmax(score(cands)))])
+
+
 def solve(env, evaluate: EvaluateMany, *, num_simulations: int, c_puct: float = 1.25, batch: int = 8,
-          reuse_tree: bool = True, seed: int = 0,
-          time_limit: float | None = None) -> tuple[np.ndarray, float, SearchStats]:
+          reuse_tree: bool = True, seed: int = 0, time_limit: float | None = None,
+          gumbel: bool = False, max_considered: int = 16) -> tuple[np.ndarray, float, SearchStats]:
     """Play one episode from the env's reset state with MCTS before each decision.
 
     With `time_limit` (seconds for the whole episode) the search is anytime: the greedy
@@ -211,14 +284,19 @@ def solve(env, evaluate: EvaluateMany, *, num_simulations: int, c_puct: float = 
             acts.append(a)
         stats.best_return, stats.best_actions, expected_steps = ret, acts, max(1, len(acts))
     obs, _ = env.reset(seed=seed)
+    rng = np.random.default_rng(seed)
     root = new_node(env, obs, 0.0, False)
     while not root.terminal:
         deadline = None
         if time_limit is not None:
             left = time_limit - (time.perf_counter() - t0)
             deadline = time.perf_counter() + max(0.0, left) / max(1, expected_steps - len(stats.played))
-        k = search(env, root, evaluate, num_simulations=num_simulations, c_puct=c_puct, batch=batch, stats=stats,
-                   deadline=deadline)
+        if gumbel:
+            k = gumbel_search(env, root, evaluate, num_simulations=num_simulations, c_puct=c_puct,
+                              max_considered=max_considered, rng=rng, stats=stats, deadline=deadline)
+        else:
+            k = search(env, root, evaluate, num_simulations=num_simulations, c_puct=c_puct, batch=batch,
+                       stats=stats, deadline=deadline)
         child = root.children.get(k) if reuse_tree else None
         obs, r, done, _, _ = env.step(int(root.actions[k]))
         if child is None:

@@ -14,7 +14,7 @@ from eosp.solvers.policy import evaluate_batch, make_env_for, resolve_agent, val
 
 def solve(inst: Instance, *, mode: str = "utility", time_limit: float | None = None, seed: int = 0,
           checkpoint: str = "", agent: tuple | None = None, budget: int | None = None, c_puct: float = 1.25,
-          batch: int = 8, **_: object) -> Solution:
+          batch: int = 8, gumbel: bool = False, **_: object) -> Solution:
     if budget is not None and budget < 0:
         raise ValueError(f"budget must be a non-negative number of simulations, got {budget}")
     model, env_cfg, _ = resolve_agent("mcts", checkpoint, agent, mode)
@@ -25,7 +25,8 @@ def solve(inst: Instance, *, mode: str = "utility", time_limit: float | None = N
     if budget is None:  # with a time limit, bounded by it only
         budget = 1_000_000 if time_limit is not None else 100
     nodes, ret, stats = mcts_solve(env, lambda obss: evaluate_batch(model, obss, vw), num_simulations=int(budget or 0),
-                                   c_puct=c_puct, batch=batch, seed=seed, time_limit=time_limit)
+                                   c_puct=c_puct, batch=batch, seed=seed, time_limit=time_limit,
+                                   gumbel=gumbel)
     w = objective_weights(inst, mode)
     value = float(w[inst.graph.node_acq[nodes]].sum()) if len(nodes) else 0.0
     return Solution(nodes, value, {"solver": "mcts", "budget": budget, "simulations": stats.simulations,
