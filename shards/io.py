@@ -88,8 +88,9 @@ def _list_array(vals: list, typ: pa.ListType) -> pa.Array:
     lengths = np.array([0 if v is None else len(v) for v in vals], dtype=np.int32)
     offsets = np.zeros(len(vals) + 1, dtype=np.int32)
     np.cumsum(lengths, out=offsets[1:])
-    flat = np.concatenate([np.asarray(v, dtype=np_t) for v in vals if v is not None]) if offsets[-1] else \
-        np.zeros(0, dtype=np_t)
+    present = [np.asarray(v, dtype=np_t).reshape(-1) for v in vals if v is not None]
+    # one instance per row group: its array goes in as it is (no copy of a large arc array)
+    flat = present[0] if len(present) == 1 else np.concatenate(present) if offsets[-1] else np.zeros(0, dtype=np_t)
     mask = np.array([v is None for v in vals])
     return pa.ListArray.from_arrays(pa.array(offsets), pa.array(flat, vt), mask=pa.array(mask) if mask.any() else None)
 
