@@ -57,10 +57,23 @@ def _prune(node_acq, node_time, indptr, dst, acq_ptr, durations):
             v = dst[lo + a]
             finish[a] = node_time[v] + durations[node_acq[v]]
         order = np.argsort(finish[:deg])
+        # the earliest-finishing successor k0 prunes most arcs: find its arc to every j
+        # in one merge of the two sorted rows instead of one binary search per arc
+        vk0 = dst[lo + order[0]]
+        f0 = finish[order[0]] + gap
+        p = indptr[vk0]
+        p_end = indptr[vk0 + 1]
         for a in range(deg):
             v = dst[lo + a]
             j = node_acq[v]
             tj = node_time[v]
+            if f0 <= tj and node_acq[vk0] != j:
+                first = acq_ptr[j]
+                while p < p_end and dst[p] < first:
+                    p += 1
+                if p < p_end and dst[p] < acq_ptr[j + 1] and node_time[dst[p]] <= tj:
+                    keep[lo + a] = False
+                    continue
             insertable = False
             for b in range(deg):
                 kb = order[b]

@@ -13,12 +13,14 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import numba
 import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
 
 from eosp.atomic import atomic_dir
 from eosp.errors import InputError
+from eosp.memory import require_memory
 from eosp.graphs.discrete import DiscreteGraph, acq_ptr_from_node_acq
 from eosp.instances.instance import ATTITUDE_COLUMNS, Acquisitions, Instance
 
@@ -41,8 +43,9 @@ def read_parquet(path: Path) -> pa.Table:
         raise InputError(path, f"not a readable Parquet file (truncated or not Parquet?): {exc}") from None
 
 
-def check_columns(path: Path, table: pa.Table, required: dict[str, str], optional: dict[str, str]) -> None:
-    names = table.column_names
+def check_columns(path: Path, table: pa.Table | pa.Schema, required: dict[str, str],
+                  optional: dict[str, str]) -> None:
+    names = table.column_names if isinstance(table, pa.Table) else table.names
     for name in required:
         if name not in names:
             raise InputError(path, f"missing required column (found: {', '.join(names) or 'none'})", column=name)
@@ -57,11 +60,7 @@ def check_columns(path: Path, table: pa.Table, required: dict[str, str], optiona
 def column(path: Path, table: pa.Table, name: str, kind: str) -> np.ndarray:
     """A column as numpy: 'int' must be an integer type, 'float' a float or integer type; no nulls."""
     col = table.column(name)
-    t = col.type
-    if kind == "int" and not pa.types.is_integer(t):
-        raise InputError(path, f"wrong type {t}, expected an integer type", column=name)
-    if kind == "float" and not (pa.types.is_floating(t) or pa.types.is_integer(t)):
-        raise InputError(path, f"wrong type {t}, expected a floating-point type", column=name)
+    check_type(path, name, col.type, kind)
     if col.null_count:
         row = int(np.flatnonzero(col.is_null().to_numpy(zero_copy_only=False))[0])
         raise InputError(path, "null value", column=name, row=row)
@@ -69,10 +68,202 @@ def column(path: Path, table: pa.Table, name: str, kind: str) -> np.ndarray:
     return arr.astype(np.int64) if kind == "int" else arr.astype(np.float64)
 
 
+def check_type(path: Path, name: str, t: pa.DataType, kind: str) -> None:
+    if kind == "int" and not pa.types.is_integer(t):
+        raise InputError(path, f"wrong type {t}, expected an integer type", column=name)
+    if kind == "float" and not (pa.types.is_floating(t) or pa.types.is_integer(t)):
+        raise InputError(path, f"wrong type {t}, expected a floating-point type", column=name)
+
+
 def _fail_rows(path: Path, bad: np.ndarray, column_name: str, message: str, rows: np.ndarray | None = None) -> None:
     if np.any(bad):
         r = int(np.flatnonzero(bad)[0])
         raise InputError(path, message, column=column_name, row=int(rows[r]) if rows is not None else r)
+
+
+# --------------------------------------------------------------------------- arcs, streamed
+
+# the rules checked on every arc, in the order in which they are reported
+ARC_RULES = (
+    ("src", "dangling node id (not in nodes.parquet)"),
+    ("dst", "dangling node id (not in nodes.parquet)"),
+    ("dst", "arc into the source node 0"),
+    ("dst", "arc between two nodes of the same acquisition"),
+    ("dst", "arc goes back in time (dst time < src time)"),
+    ("dst", "arc starts its destination before the source acquisition ends (time < src time + duration)"),
+)
+BATCH_ROWS = 1 << 20  # arcs decoded at a time
+
+
+@numba.njit(cache=True)
+def _check_batch(src, dst, offset, canon, node_acq, node_time, dur, deg, first_bad):
+    """Check one batch of arcs (file ids) and count the valid ones per canonical source.
+
+    ``first_bad[r]`` keeps the smallest file row breaking rule r (ARC_RULES), so the
+    error reported is the one a whole-file check would report.
+    """
+    big_n = canon.shape[0]
+    for k in range(src.shape[0]):
+        s = src[k]
+        d = dst[k]
+        row = offset + k
+        bad = False
+        if s < 0 or s >= big_n:
+            if row < first_bad[0]:
+                first_bad[0] = row
+            bad = True
+        if d < 0 or d >= big_n:
+            if row < first_bad[1]:
+                first_bad[1] = row
+            bad = True
+        if bad:
+            continue
+        if d == 0 and row < first_bad[2]:
+            first_bad[2] = row
+        cs = canon[s]
+        cd = canon[d]
+        sa = node_acq[cs]
+        if sa == node_acq[cd] and row < first_bad[3]:
+            first_bad[3] = row
+        ts = node_time[cs]
+        td = node_time[cd]
+        if td < ts and row < first_bad[4]:
+            first_bad[4] = row
+        fin = ts + (dur[sa] if sa >= 0 else 0.0)
+        if td < fin - 1e-6 and row < first_bad[5]:
+            first_bad[5] = row
+        deg[cs] += 1
+
+
+@numba.njit(cache=True)
+def _scatter_batch(src, dst, canon, cursor, out):
+    """Place one batch of (already checked) arcs into the CSR rows of their canonical sources."""
+    for k in range(src.shape[0]):
+        cs = canon[src[k]]
+        out[cursor[cs]] = canon[dst[k]]
+        cursor[cs] += 1
+
+
+@numba.njit(cache=True)
+def _sort_rows(indptr, dst, node_acq, dup_src):
+    """Sort every CSR row; flag sources with two arcs to one acquisition. Returns the number flagged."""
+    n_dup = 0
+    for u in range(indptr.shape[0] - 1):
+        lo = indptr[u]
+        hi = indptr[u + 1]
+        if hi - lo > 1:
+            dst[lo:hi].sort()
+            for k in range(lo + 1, hi):
+                if node_acq[dst[k]] == node_acq[dst[k - 1]]:
+                    dup_src[u] = True
+                    n_dup += 1
+                    break
+    return n_dup
+
+
+class _ArcBatches:
+    """The (src, dst) batches of an arcs file, row group by row group, with their file offsets."""
+
+    def __init__(self, path: Path):
+        self.path = path
+        if not path.exists():
+            raise InputError(path, "file not found")
+        try:
+            self.file = pq.ParquetFile(path)
+        except (pa.ArrowException, OSError) as exc:
+            raise InputError(path, f"not a readable Parquet file (truncated or not Parquet?): {exc}") from None
+        schema = self.file.schema_arrow
+        check_columns(path, schema, ARC_COLUMNS, {})
+        for name in ARC_COLUMNS:
+            check_type(path, name, schema.field(name).type, "int")
+        md = self.file.metadata
+        self.n_rows = md.num_rows
+        size = path.stat().st_size
+        for i in range(md.num_row_groups):
+            rg = md.row_group(i)
+            for c in range(rg.num_columns):
+                cc = rg.column(c)
+                start = cc.dictionary_page_offset if cc.has_dictionary_page else cc.data_page_offset
+                if start is not None and start + cc.total_compressed_size > size:
+                    raise InputError(path, f"row group {i} of {md.num_row_groups} is truncated (its data ends "
+                                           f"past the end of the file)", column=cc.path_in_schema)
+
+    def __iter__(self):
+        offset = 0
+        n_groups = self.file.metadata.num_row_groups
+        for i in range(n_groups):
+            try:
+                for batch in self.file.iter_batches(batch_size=BATCH_ROWS, row_groups=[i],
+                                                    columns=list(ARC_COLUMNS), use_threads=False):
+                    cols = []
+                    for name in ARC_COLUMNS:
+                        col = batch.column(name)
+                        if col.null_count:
+                            r = int(np.flatnonzero(col.is_null().to_numpy(zero_copy_only=False))[0])
+                            raise InputError(self.path, "null value", column=name, row=offset + r)
+                        cols.append(col.to_numpy())
+                    yield offset, cols[0], cols[1]
+                    offset += batch.num_rows
+            except (pa.ArrowException, OSError) as exc:
+                raise InputError(self.path, f"row group {i} of {n_groups} unreadable (truncated or corrupt): "
+                                            f"{str(exc).splitlines()[0] if str(exc) else type(exc).__name__}",
+                                 row=offset) from None
+
+
+def read_arcs(path: Path, canon: np.ndarray, node_acq: np.ndarray, node_time: np.ndarray,
+              duration: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The arcs file as canonical CSR (int64 indptr, int32 dst, rows sorted), checked batch by batch.
+
+    Two streaming passes: the first checks every arc and counts the arcs of each
+    source, the second places them; memory is the CSR arrays plus one batch.
+    """
+    batches = _ArcBatches(path)
+    n_arcs = batches.n_rows
+    big_n = canon.shape[0]
+    # the CSR (4 bytes per arc), then pruning (a mask and the kept arcs, at most 5 bytes per arc)
+    require_memory(path, 9 * n_arcs + 48 * big_n + 64 * BATCH_ROWS,
+                   f"reading and pruning {n_arcs:,} arcs")
+    deg = np.zeros(big_n, dtype=np.int64)
+    first_bad = np.full(len(ARC_RULES), np.iinfo(np.int64).max, dtype=np.int64)
+    for offset, src, dst in batches:
+        _check_batch(src, dst, offset, canon, node_acq, node_time, duration, deg, first_bad)
+    for r, (col, message) in enumerate(ARC_RULES):
+        if first_bad[r] != np.iinfo(np.int64).max:
+            raise InputError(path, message, column=col, row=int(first_bad[r]))
+    indptr = np.zeros(big_n + 1, dtype=np.int64)
+    np.cumsum(deg, out=indptr[1:])
+    del deg
+    out = np.empty(n_arcs, dtype=np.int32)
+    cursor = indptr[:-1].copy()
+    for _, src, dst in batches:
+        _scatter_batch(src, dst, canon, cursor, out)
+    if not np.array_equal(cursor, indptr[1:]):  # the file changed between the two passes
+        raise InputError(path, "file changed while being read")
+    del cursor
+    dup_src = np.zeros(big_n, dtype=np.bool_)
+    if _sort_rows(indptr, out, node_acq, dup_src):
+        raise InputError(path, "second arc from the same node to the same acquisition", column="dst",
+                         row=_first_duplicate_row(batches, canon, node_acq, dup_src))
+    return indptr, out
+
+
+def _first_duplicate_row(batches: _ArcBatches, canon: np.ndarray, node_acq: np.ndarray,
+                         dup_src: np.ndarray) -> int:
+    """File row of the first arc repeating an earlier (source, destination acquisition) pair."""
+    rows, keys = [], []
+    n = int(node_acq.max()) + 2
+    for offset, src, dst in batches:
+        cs = canon[src]
+        sel = np.flatnonzero(dup_src[cs])
+        rows.append(offset + sel)
+        keys.append(cs[sel].astype(np.int64) * n + node_acq[canon[dst[sel]]] + 1)
+    row, key = np.concatenate(rows), np.concatenate(keys)
+    seen: set[int] = set()
+    for r, k in zip(row.tolist(), key.tolist()):  # only the arcs of the flagged sources
+        if k in seen:
+            return r
+        seen.add(k)
+    return -1
 
 
 # --------------------------------------------------------------------------- import
@@ -166,22 +357,6 @@ def read_instance(directory: str | Path, name: str | None = None) -> Instance:
         raise InputError(npath, f"acquisition {int(np.flatnonzero(per_acq == 0)[0])} has no node: every "
                                 "acquisition needs at least one candidate start", column="acq")
 
-    apath = d / "arcs.parquet"
-    table = read_parquet(apath)
-    check_columns(apath, table, ARC_COLUMNS, {})
-    src = column(apath, table, "src", "int")
-    dst = column(apath, table, "dst", "int")
-    _fail_rows(apath, (src < 0) | (src >= big_n), "src", "dangling node id (not in nodes.parquet)")
-    _fail_rows(apath, (dst < 0) | (dst >= big_n), "dst", "dangling node id (not in nodes.parquet)")
-    _fail_rows(apath, dst == 0, "dst", "arc into the source node 0")
-    srow, drow = pos[src], pos[dst]
-    s_acq, d_acq = nacq[srow], nacq[drow]
-    _fail_rows(apath, s_acq == d_acq, "dst", "arc between two nodes of the same acquisition")
-    s_fin = ntime[srow] + np.where(s_acq >= 0, acqs.duration[np.maximum(s_acq, 0)], 0.0)
-    _fail_rows(apath, ntime[drow] < ntime[srow], "dst", "arc goes back in time (dst time < src time)")
-    _fail_rows(apath, ntime[drow] < s_fin - TIME_TOL, "dst",
-               "arc starts its destination before the source acquisition ends (time < src time + duration)")
-
     # canonical order: source, then by (acq, time)
     key_acq = np.where(node == 0, -1, nacq)
     perm = np.lexsort((ntime, key_acq))  # file rows in canonical order
@@ -192,18 +367,12 @@ def read_instance(directory: str | Path, name: str | None = None) -> Instance:
     node_acq = nacq[perm].astype(np.int32)
     node_time = ntime[perm]
     node_ids = node[perm].astype(np.int32)
-    s_new, d_new = new_of_row[srow], new_of_row[drow]
-    # two arcs from one node to the same acquisition are invalid
-    key = s_new * (n + 1) + d_acq
-    order = np.argsort(key, kind="stable")
-    dupl = np.zeros(key.shape[0], dtype=bool)
-    dupl[order[1:]] = key[order[1:]] == key[order[:-1]]
-    _fail_rows(apath, dupl, "dst", "second arc from the same node to the same acquisition")
-    order = np.lexsort((d_new, s_new))
-    indptr = np.zeros(big_n + 1, dtype=np.int64)
-    np.cumsum(np.bincount(s_new, minlength=big_n), out=indptr[1:])
-    graph = DiscreteGraph(node_acq=node_acq, node_time=node_time, indptr=indptr,
-                          dst=d_new[order].astype(np.int32), acq_ptr=acq_ptr_from_node_acq(node_acq, n))
+    canon = np.empty(big_n, dtype=np.int32)  # canonical index of each file node id
+    canon[node] = new_of_row
+    del pos, seen, new_of_row, perm, key_acq, a, lo, hi, real
+    acq_ptr = acq_ptr_from_node_acq(node_acq, n)
+    indptr, dst = read_arcs(d / "arcs.parquet", canon, node_acq, node_time, acqs.duration)
+    graph = DiscreteGraph(node_acq=node_acq, node_time=node_time, indptr=indptr, dst=dst, acq_ptr=acq_ptr)
 
     meta: dict = {}
     mpath = d / "meta.json"

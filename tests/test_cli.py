@@ -56,3 +56,16 @@ def test_unknown_solver(tmp_path):
     eosp("generate", inst, "--n-acquisitions", 5, "--seed", 2, "--graph.step-s", 4)
     r = eosp("solve", inst, "--solver", "nope", "--out", tmp_path / "x.parquet", check=False)
     assert r.returncode == 2 and "unknown solver" in r.stderr
+
+
+def test_corrupt_arcs_row_group_is_one_line_exit_2(tmp_path):
+    inst = tmp_path / "inst"
+    eosp("generate", inst, "--n-acquisitions", 8, "--seed", 1, "--graph.step-s", 4)
+    pq.write_table(pq.read_table(inst / "arcs.parquet"), inst / "arcs.parquet", row_group_size=50)
+    cc = pq.ParquetFile(inst / "arcs.parquet").metadata.row_group(1).column(0)
+    raw = bytearray((inst / "arcs.parquet").read_bytes())
+    raw[cc.data_page_offset:cc.data_page_offset + cc.total_compressed_size] = b"\xff" * cc.total_compressed_size
+    (inst / "arcs.parquet").write_bytes(bytes(raw))
+    r = eosp("info", inst, check=False)
+    assert r.returncode == 2 and "Traceback" not in r.stderr
+    assert len(r.stderr.strip().splitlines()) == 1 and "arcs.parquet" in r.stderr and "row group 1" in r.stderr

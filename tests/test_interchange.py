@@ -263,3 +263,106 @@ def test_input_error_survives_pickling():
     cls, args = InputError("x.parquet", "bad value", column="utility", row=4).__reduce__()
     err = cls(*args)
     assert str(err) == "x.parquet: column 'utility', row 4: bad value" and err.row == 4
+
+
+# --------------------------------------------------------------------------- streamed arcs
+
+def _reference_csr(inst_dir):
+    """The arcs as the whole-file reader built them: all arcs in memory, lexsorted (reference)."""
+    nodes = pq.read_table(inst_dir / "nodes.parquet")
+    ids, acq, time = (nodes.column(c).to_numpy() for c in ("node", "acq", "time"))
+    perm = np.lexsort((time, np.where(ids == 0, -1, acq)))
+    canon = np.empty(len(ids), dtype=np.int64)
+    canon[ids[perm]] = np.arange(len(ids))
+    arcs = pq.read_table(inst_dir / "arcs.parquet")
+    s, d = canon[arcs.column("src").to_numpy()], canon[arcs.column("dst").to_numpy()]
+    order = np.lexsort((d, s))
+    indptr = np.zeros(len(ids) + 1, dtype=np.int64)
+    np.cumsum(np.bincount(s, minlength=len(ids)), out=indptr[1:])
+    return indptr, d[order].astype(np.int32)
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_streamed_arcs_equal_whole_file_reading(tmp_path, monkeypatch, seed):
+    """Many row groups, tiny batches, shuffled foreign ids: the same CSR as reading everything at once."""
+    import eosp.instances.interchange as ic
+
+    inst = synthetic_instance(7, seed)
+    d = tmp_path / "inst"
+    _write_foreign(inst, d, seed)
+    pq.write_table(pq.read_table(d / "arcs.parquet"), d / "arcs.parquet", row_group_size=13)
+    assert pq.ParquetFile(d / "arcs.parquet").metadata.num_row_groups > 2
+    monkeypatch.setattr(ic, "BATCH_ROWS", 5)
+    back = read_instance(d)
+    indptr, dst = _reference_csr(d)
+    assert back.graph.indptr.dtype == np.int64 and back.graph.dst.dtype == np.int32
+    np.testing.assert_array_equal(back.graph.indptr, indptr)
+    np.testing.assert_array_equal(back.graph.dst, dst)
+    np.testing.assert_array_equal(back.graph.dst, inst.graph.dst)
+
+
+def test_streamed_error_names_the_file_row_in_a_later_batch(inst_dir, monkeypatch):
+    import eosp.instances.interchange as ic
+
+    arcs = pq.read_table(inst_dir / "arcs.parquet")
+    row = arcs.num_rows - 3
+    pq.write_table(_set(arcs, "src", row, -5), inst_dir / "arcs.parquet", row_group_size=100)
+    monkeypatch.setattr(ic, "BATCH_ROWS", 17)
+    with pytest.raises(InputError, match="dangling") as info:
+        read_instance(inst_dir)
+    assert info.value.row == row and info.value.column == "src"
+
+
+def test_first_rule_broken_is_reported_whatever_the_batch(inst_dir, monkeypatch):
+    """A later row breaking an earlier rule wins over an earlier row breaking a later rule (as before)."""
+    import eosp.instances.interchange as ic
+
+    arcs = pq.read_table(inst_dir / "arcs.parquet")
+    arcs = _set(arcs, "dst", 2, 0)  # arc into the source (rule 3)
+    arcs = _set(arcs, "dst", arcs.num_rows - 1, 10 ** 6)  # dangling (rule 2), in the last batch
+    pq.write_table(arcs, inst_dir / "arcs.parquet", row_group_size=50)
+    monkeypatch.setattr(ic, "BATCH_ROWS", 7)
+    with pytest.raises(InputError, match="dangling") as info:
+        read_instance(inst_dir)
+    assert info.value.row == arcs.num_rows - 1
+
+
+def test_null_arc_is_reported_with_its_row(inst_dir):
+    arcs = pq.read_table(inst_dir / "arcs.parquet")
+    dst = arcs.column("dst").to_pylist()
+    dst[33] = None
+    pq.write_table(pa.table({"src": arcs.column("src"), "dst": pa.array(dst, pa.int32())}),
+                   inst_dir / "arcs.parquet", row_group_size=20)
+    with pytest.raises(InputError, match="null") as info:
+        read_instance(inst_dir)
+    assert info.value.row == 33 and info.value.column == "dst"
+
+
+def test_corrupt_row_group_is_reported_with_its_index(inst_dir):
+    pq.write_table(pq.read_table(inst_dir / "arcs.parquet"), inst_dir / "arcs.parquet", row_group_size=100)
+    md = pq.ParquetFile(inst_dir / "arcs.parquet").metadata
+    assert md.num_row_groups > 3
+    cc = md.row_group(2).column(1)
+    raw = bytearray((inst_dir / "arcs.parquet").read_bytes())
+    raw[cc.data_page_offset:cc.data_page_offset + cc.total_compressed_size] = b"\xff" * cc.total_compressed_size
+    (inst_dir / "arcs.parquet").write_bytes(bytes(raw))
+    with pytest.raises(InputError, match=f"row group 2 of {md.num_row_groups}") as info:
+        read_instance(inst_dir)
+    assert info.value.file.endswith("arcs.parquet") and "\n" not in str(info.value)
+
+
+def test_arcs_too_large_for_memory_fail_before_allocating(inst_dir, monkeypatch):
+    import eosp.memory
+
+    monkeypatch.setattr(eosp.memory, "available_bytes", lambda: 1000)
+    with pytest.raises(InputError, match="too large for the memory available") as info:
+        read_instance(inst_dir)
+    msg = str(info.value)
+    assert "arcs.parquet" in msg and "needs about" in msg and "GiB available" in msg and "\n" not in msg
+
+
+def test_available_memory_is_known_here():
+    from eosp.memory import available_bytes
+
+    have = available_bytes()
+    assert have is None or have > 0

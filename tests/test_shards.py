@@ -74,3 +74,21 @@ def test_corrupted_arcs_name_column_and_row(shard, tmp_path):
     with pytest.raises(InputError) as info:
         ShardReader(p).read(1)
     assert info.value.column == "pruned_dst" and info.value.row == 1 and "dangling" in info.value.message
+
+
+def test_reading_without_unpruned_arcs_skips_them(shard):
+    path, insts = shard
+    back = ShardReader(path).read(1, unpruned=False)
+    assert back.meta["unpruned_arcs"] is False
+    np.testing.assert_array_equal(back.pruned().dst, insts[1].pruned().dst)
+    with pytest.raises(InputError, match="unpruned"):
+        back.require_unpruned("the greedy solver")
+
+
+def test_shard_too_large_for_memory_fails_in_one_line(shard, monkeypatch):
+    import eosp.memory
+
+    monkeypatch.setattr(eosp.memory, "available_bytes", lambda: 1000)
+    with pytest.raises(InputError, match="too large for the memory available") as info:
+        ShardReader(shard[0]).read(0)
+    assert "needs about" in str(info.value) and "\n" not in str(info.value)

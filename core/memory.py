@@ -1,0 +1,64 @@
+"""How much memory a reader may still allocate, checked before a large allocation.
+
+A reader that knows its size up front (Parquet metadata holds the row counts)
+compares what it will need with what the machine (and this process's limits)
+can give, and refuses with one line instead of being killed by the kernel's
+out-of-memory killer half-way.
+"""
+
+from __future__ import annotations
+
+import os
+import resource
+from pathlib import Path
+
+from eosp.errors import InputError
+
+GiB = 1024 ** 3
+
+
+def _meminfo_available() -> int | None:
+    try:
+        for line in Path("/proc/meminfo").read_text().splitlines():
+            if line.startswith("MemAvailable:"):
+                return int(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        pass
+    return None
+
+
+def _cgroup_available() -> int | None:
+    """Room left under a cgroup v2 memory limit (containers), when there is one."""
+    try:
+        limit = Path("/sys/fs/cgroup/memory.max").read_text().strip()
+        if limit == "max":
+            return None
+        return int(limit) - int(Path("/sys/fs/cgroup/memory.current").read_text().strip())
+    except (OSError, ValueError):
+        return None
+
+
+def _address_space_available() -> int | None:
+    """Room left under RLIMIT_AS (e.g. ``prlimit --as``), when it is set."""
+    soft, _ = resource.getrlimit(resource.RLIMIT_AS)
+    if soft == resource.RLIM_INFINITY:
+        return None
+    try:
+        pages = int(Path("/proc/self/statm").read_text().split()[0])
+    except (OSError, ValueError, IndexError):
+        return None
+    return soft - pages * os.sysconf("SC_PAGE_SIZE")
+
+
+def available_bytes() -> int | None:
+    """The least of MemAvailable, the cgroup room and the address-space room (None when unknown)."""
+    vals = [v for v in (_meminfo_available(), _cgroup_available(), _address_space_available()) if v is not None]
+    return min(vals) if vals else None
+
+
+def require_memory(file: object, need: int, what: str) -> None:
+    """Raise a one-line :class:`InputError` when `need` bytes are clearly not available."""
+    have = available_bytes()
+    if have is not None and need > have:
+        raise InputError(file, f"too large for the memory available: {what} needs about {need / GiB:.1f} GiB, "
+                               f"{max(have, 0) / GiB:.1f} GiB available")
