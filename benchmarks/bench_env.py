@@ -49,7 +49,7 @@ def run(n: int, family: str, episodes: int, obs_edges: str, snapshot: bool) -> d
         ep_times.append(time.perf_counter() - t0)
     return {"n": n, "family": family, "prep": t_prep, "episode_ms": 1000 * float(np.mean(ep_times)),
             "episode_ms_max": 1000 * float(np.max(ep_times)), "steps_per_ep": steps / episodes,
-            "steps_per_s": steps / float(np.sum(ep_times)), "nodes": inst.graph.n_nodes,
+            "steps_per_s": steps / float(np.sum(ep_times)), "nodes": inst.n_nodes,
             "pruned_arcs": inst.pruned().n_arcs, "snap_us": 1e6 * t_snap / snaps if snaps else float("nan")}
 
 

@@ -31,7 +31,7 @@ def bench(family: str, n: int, seed: int, step: float) -> dict:
     t0 = time.perf_counter()
     inst = generate(cfg)
     t_gen = time.perf_counter() - t0
-    g = inst.graph
+    g = inst.unpruned()
     t0 = time.perf_counter()
     build_arcs(g.node_acq, g.node_time, inst.node_attitude.astype(np.float64), inst.acqs.duration, g.acq_ptr,
                scenario_of(inst).slew_model, scenario_of(inst).max_slew())
@@ -39,7 +39,7 @@ def bench(family: str, n: int, seed: int, step: float) -> dict:
     t0 = time.perf_counter()
     pg = prune(g, inst.acqs.duration)
     t_prune = time.perf_counter() - t0
-    inst.set_pruned(pg)
+    inst.pruned_graph = pg
     cs, _ = continuous_graph(pg)
     cu, _ = continuous_graph(g)
     with tempfile.TemporaryDirectory() as d:

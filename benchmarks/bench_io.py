@@ -55,7 +55,7 @@ READ_SNIPPET = """
 import sys
 from eosp.instances.interchange import read_instance
 inst = read_instance(sys.argv[1])
-print(inst.graph.n_arcs)
+print(inst.unpruned().n_arcs)
 """
 
 AGENT_SNIPPET = """

@@ -40,8 +40,8 @@ def run_instance(family: str, n: int, seed: int, args: argparse.Namespace) -> li
     _, t_prune = timed(inst.pruned)
     rows = []
     for mode in args.modes:
-        row = {"family": family, "n": n, "seed": seed, "mode": mode, "nodes": inst.graph.n_nodes,
-               "arcs": inst.graph.n_arcs, "pruned_arcs": inst.pruned().n_arcs, "t_generate": t_gen,
+        row = {"family": family, "n": n, "seed": seed, "mode": mode, "nodes": inst.n_nodes,
+               "arcs": inst.unpruned().n_arcs, "pruned_arcs": inst.pruned().n_arcs, "t_generate": t_gen,
                "t_prune": t_prune}
         sols = {}
         sols["greedy"], row["t_greedy"] = timed(greedy.solve, inst, mode=mode)

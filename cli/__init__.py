@@ -39,7 +39,7 @@ def cmd_generate(ns: argparse.Namespace) -> int:
     t0 = time.perf_counter()
     inst = generate(cfg)
     write_instance(inst, ns.out, overwrite=ns.overwrite)
-    print(f"{ns.out}: {inst.n_acq} acquisitions, {inst.graph.n_nodes} nodes, {inst.graph.n_arcs} arcs "
+    print(f"{ns.out}: {inst.n_acq} acquisitions, {inst.n_nodes} nodes, {inst.unpruned().n_arcs} arcs "
           f"({time.perf_counter() - t0:.2f} s)")
     return 0
 
@@ -60,10 +60,9 @@ def cmd_export(ns: argparse.Namespace) -> int:
 
     reader = ShardReader(ns.shard)
     inst = reader.read(ns.index)
-    if not inst.meta.get("unpruned_arcs", True):
+    if inst.unpruned_graph is None:
         raise InputError(ns.shard, "this shard holds only pruned arcs; the interchange format needs the unpruned "
                                    "graph", row=ns.index)
-    inst.meta.pop("unpruned_arcs", None)
     inst.meta.pop("source", None)
     write_instance(inst, ns.out, overwrite=ns.overwrite)
     print(f"{ns.out}: exported {inst.name}")
@@ -76,8 +75,8 @@ def cmd_info(ns: argparse.Namespace) -> int:
     inst = _load_instance(ns.instance)
     pg = inst.pruned()
     cs, _ = continuous_graph(pg)
-    out = {"name": inst.name, "acquisitions": inst.n_acq, "nodes": inst.graph.n_nodes,
-           "arcs_unpruned": inst.graph.n_arcs, "arcs_pruned": pg.n_arcs, "continuous_arcs_pruned": int(cs.size),
+    out = {"name": inst.name, "acquisitions": inst.n_acq, "nodes": inst.n_nodes,
+           "arcs_unpruned": None if inst.unpruned_graph is None else inst.unpruned_graph.n_arcs, "arcs_pruned": pg.n_arcs, "continuous_arcs_pruned": int(cs.size),
            "family": inst.meta.get("family")}
     print(json.dumps(out, indent=1))
     return 0

@@ -80,8 +80,6 @@ class GraphConfig:
 
     step_s: float = 1.0
     """Discretization step of every window W_i = [e_i, l_i - d_i]."""
-    prune: bool = True
-    """Apply the paper's optimality pruning."""
 
 
 @dataclass

@@ -29,7 +29,7 @@ class PreparedInstance:
 
 
 def prepare_instance(inst: Instance, prune: bool = True) -> PreparedInstance:
-    pg = inst.pruned() if prune else inst.graph
+    pg = inst.graph_for(prune)
     prio = inst.priorities()
     return PreparedInstance(inst, prepare(pg, inst.acqs.duration),
                             static_features(inst.acqs.duration, inst.acqs.utility, prio, inst.acqs.attitude),

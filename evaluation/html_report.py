@@ -68,7 +68,7 @@ def foreign_reason(inst: Instance, sched: Schedule) -> str | None:
     this instance at all.  Starts that differ from their node's time in most rows mean
     the same: node ids that happen to exist but belong to another instance.
     """
-    n_acq, g = inst.n_acq, inst.graph
+    n_acq, g = inst.n_acq, inst.node_graph
     inv = np.full(int(max(g.n_nodes, int(inst.node_ids.max()) + 1)), -1, dtype=np.int64)
     inv[inst.node_ids] = np.arange(g.n_nodes)
     off = 0
@@ -164,7 +164,7 @@ def node_attitudes(inst: Instance) -> np.ndarray | None:
             scn = scenario_of(inst)
         except (OSError, ValueError, KeyError, TypeError):
             return None
-        g = inst.graph
+        g = inst.node_graph
         k = g.node_acq[1:]
         att = np.zeros((g.n_nodes, 4))
         att[1:, 0], att[1:, 1] = scn.attitude(inst.acqs.lat[k], inst.acqs.lon[k], g.node_time[1:])
@@ -297,7 +297,7 @@ def _attitude_figure(inst: Instance, views: list[ScheduleView]) -> tuple[object,
         return None
     fig = make_subplots(rows=2, cols=1, shared_xaxes=True, vertical_spacing=0.06,
                         subplot_titles=("roll (deg)", "pitch (deg)"))
-    g = inst.graph
+    g = inst.node_graph
     if att is not None:  # every candidate's attitude over its window, in gray
         xs, ys = [[], []], [[], []]
         for i in range(inst.n_acq):

@@ -30,7 +30,7 @@ def node_rolls(inst: Instance) -> tuple[np.ndarray, np.ndarray] | None:
         from eosp.instances.generator import scenario_of
 
         scn = scenario_of(inst)
-        g = inst.graph
+        g = inst.node_graph
         k = g.node_acq[1:]
         r0, _ = scn.attitude(inst.acqs.lat[k], inst.acqs.lon[k], g.node_time[1:])
         r1, _ = scn.attitude(inst.acqs.lat[k], inst.acqs.lon[k], g.node_time[1:] + inst.acqs.duration[k])
@@ -42,7 +42,7 @@ def plot_trajectories(inst: Instance, schedules: dict[str, Schedule], out: str |
                       title: str | None = None) -> list[Path]:
     out = Path(out)
     out.parent.mkdir(parents=True, exist_ok=True)
-    g, a = inst.graph, inst.acqs
+    g, a = inst.node_graph, inst.acqs
     rolls = node_rolls(inst)
     fig, ax = plt.subplots(figsize=(12, 5))
     if rolls is not None:

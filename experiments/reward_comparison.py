@@ -27,7 +27,7 @@ def per_class(inst, nodes) -> tuple:
 
     from eosp.config import N_CLASSES
 
-    acq = inst.graph.node_acq[nodes] if len(nodes) else np.zeros(0, dtype=int)
+    acq = inst.node_acq[nodes] if len(nodes) else np.zeros(0, dtype=int)
     prio = np.clip(inst.priorities()[acq], 0, N_CLASSES - 1)
     counts = np.bincount(prio, minlength=N_CLASSES)
     util = np.bincount(prio, weights=inst.acqs.utility[acq], minlength=N_CLASSES)

@@ -335,11 +335,9 @@ def generate(cfg: InstanceConfig, name: str | None = None) -> Instance:
         "seed": cfg.seed, "horizon_s": scn.horizon, "day_of_year": scn.day_of_year,
         "max_slew_s": scn.max_slew(), "config": to_dict(cfg),
     }
-    inst = Instance(name=name or f"{cfg.family}-n{cfg.n_acquisitions}-s{cfg.seed}", acqs=acqs, graph=graph,
+    inst = Instance(name=name or f"{cfg.family}-n{cfg.n_acquisitions}-s{cfg.seed}", acqs=acqs, unpruned_graph=graph,
                     node_ids=np.arange(node_acq.size, dtype=np.int32), meta=meta,
                     node_attitude=node_att.astype(np.float32))
-    if not cfg.graph.prune:
-        inst.set_pruned(graph)
     return inst
 
 

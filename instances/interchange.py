@@ -383,7 +383,7 @@ def read_instance(directory: str | Path, name: str | None = None) -> Instance:
             raise InputError(mpath, f"not valid JSON: {exc}") from None
         if not isinstance(meta, dict):
             raise InputError(mpath, "must hold a JSON object")
-    return Instance(name=name or str(meta.get("name", d.name)), acqs=acqs, graph=graph, node_ids=node_ids,
+    return Instance(name=name or str(meta.get("name", d.name)), acqs=acqs, unpruned_graph=graph, node_ids=node_ids,
                     meta=meta)
 
 
@@ -412,7 +412,7 @@ def acquisitions_table(acqs: Acquisitions) -> pa.Table:
 
 def write_instance(inst: Instance, directory: str | Path, overwrite: bool = False) -> Path:
     """Write `inst` as an interchange directory (atomically)."""
-    g = inst.graph
+    g = inst.unpruned("the interchange format")
     ids = inst.node_ids
     with atomic_dir(directory, overwrite=overwrite) as tmp:
         pq.write_table(acquisitions_table(inst.acqs), tmp / "acquisitions.parquet")

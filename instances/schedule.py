@@ -38,14 +38,14 @@ class Schedule:
 def from_internal_nodes(inst: Instance, nodes: np.ndarray | list[int]) -> Schedule:
     """Schedule of a path given as canonical node indices (source excluded)."""
     nodes = np.asarray(nodes, dtype=np.int64)
-    g = inst.graph
+    g = inst.node_graph
     return Schedule(acq=g.node_acq[nodes].astype(np.int32), node=inst.node_ids[nodes].astype(np.int32),
                     start=g.node_time[nodes].astype(np.float64))
 
 
 def to_internal_nodes(inst: Instance, schedule: Schedule) -> np.ndarray:
-    inv = np.empty(inst.graph.n_nodes, dtype=np.int64)
-    inv[inst.node_ids] = np.arange(inst.graph.n_nodes)
+    inv = np.empty(inst.n_nodes, dtype=np.int64)
+    inv[inst.node_ids] = np.arange(inst.n_nodes)
     return inv[schedule.node]
 
 
@@ -118,8 +118,7 @@ class Verdict:
 
 def check(inst: Instance, schedule: Schedule) -> Verdict:
     """Apply the contract's feasibility rules; the value is the float64 sum of the utilities."""
-    inst.require_unpruned("checking a schedule")
-    g = inst.graph
+    g = inst.unpruned("checking a schedule")
     acqs = inst.acqs
     n_acq = len(acqs)
     n_nodes = g.n_nodes

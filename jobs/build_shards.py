@@ -34,7 +34,7 @@ def build_shard(cfg: DatasetConfig, shard: int) -> dict:
     path = Path(cfg.out) / f"shard-{shard:05d}.parquet"
     write_shard(path, insts, include_unpruned=cfg.include_unpruned, extra_meta={"dataset": to_dict(cfg)})
     return {"file": path.name, "instances": [i.name for i in insts], "seconds": round(time.perf_counter() - t0, 3),
-            "nodes": int(sum(i.graph.n_nodes for i in insts)), "arcs": int(sum(i.graph.n_arcs for i in insts)),
+            "nodes": int(sum(i.n_nodes for i in insts)), "arcs": int(sum(i.unpruned().n_arcs for i in insts)),
             "pruned_arcs": int(sum(i.pruned().n_arcs for i in insts)), "bytes": path.stat().st_size}
 
 

@@ -48,13 +48,13 @@ SCHEMA = pa.schema([
     ("pruned_indptr", pa.list_(_I64)), ("pruned_dst", pa.list_(_I32)),
     ("arc_indptr", pa.list_(_I64)), ("arc_dst", pa.list_(_I32)),
 ])
-TRANSIENT_META = ("unpruned_arcs", "source")  # added on read, never stored
+TRANSIENT_META = ("source",)  # added on read, never stored
 
 
 def _row(inst: Instance, include_unpruned: bool) -> dict:
     a = inst.acqs
     pg = inst.pruned()
-    g = inst.graph
+    g = inst.unpruned_graph if include_unpruned else None  # None: not stored (or not known)
 
     def opt(x):
         return None if x is None else np.ascontiguousarray(x).reshape(-1)
@@ -62,12 +62,12 @@ def _row(inst: Instance, include_unpruned: bool) -> dict:
     return {
         "name": inst.name, "meta_json": json.dumps({k: v for k, v in inst.meta.items() if k not in TRANSIENT_META},
                                                    sort_keys=True), "n_acq": inst.n_acq,
-        "n_nodes": g.n_nodes, "duration": a.duration, "vtw_start": a.vtw_start, "vtw_end": a.vtw_end,
+        "n_nodes": inst.n_nodes, "duration": a.duration, "vtw_start": a.vtw_start, "vtw_end": a.vtw_end,
         "utility": a.utility, "priority": opt(a.priority), "lat": opt(a.lat), "lon": opt(a.lon),
-        "attitude": opt(a.attitude), "node_acq": g.node_acq, "node_time": g.node_time,
+        "attitude": opt(a.attitude), "node_acq": inst.node_acq, "node_time": inst.node_time,
         "node_ids": inst.node_ids, "node_attitude": opt(inst.node_attitude),
         "pruned_indptr": pg.indptr, "pruned_dst": pg.dst,
-        "arc_indptr": g.indptr if include_unpruned else None, "arc_dst": g.dst if include_unpruned else None,
+        "arc_indptr": None if g is None else g.indptr, "arc_dst": None if g is None else g.dst,
     }
 
 
@@ -233,24 +233,20 @@ def _instance_from_row(path: Path, row: int, t: pa.Table, unpruned: bool) -> Ins
         raise InputError(path, "an acquisition has no node", column="node_acq", row=row)
     pindptr, pdst = need("pruned_indptr", np.int64), need("pruned_dst", np.int32)
     _check_csr(path, row, "pruned", pindptr, pdst, node_acq, node_time, dur)
+    unpruned_graph = None  # not stored, or not asked for
     if unpruned and "arc_dst" in t.column_names and t.column("arc_indptr").null_count == 0:
         aindptr, adst = need("arc_indptr", np.int64), need("arc_dst", np.int32)
         _check_csr(path, row, "arc", aindptr, adst, node_acq, node_time, dur)
-    else:
-        aindptr, adst = pindptr, pdst  # unpruned arcs not stored: keep the pruned ones in their place
-        unpruned = False
+        unpruned_graph = DiscreteGraph(node_acq, node_time, aindptr, adst, acq_ptr)
     node_att = maybe("node_attitude", np.float32)
     try:
         meta = json.loads(t.column("meta_json")[0].as_py() or "{}")
     except json.JSONDecodeError as exc:
         raise InputError(path, f"not valid JSON: {exc}", column="meta_json", row=row) from None
-    meta["unpruned_arcs"] = bool(unpruned)
     meta["source"] = f"{path}#{row}"
-    inst = Instance(name=t.column("name")[0].as_py(), acqs=acqs,
-                    graph=DiscreteGraph(node_acq, node_time, aindptr, adst, acq_ptr), node_ids=node_ids, meta=meta,
-                    node_attitude=None if node_att is None else node_att.reshape(big_n, 4))
-    inst.set_pruned(DiscreteGraph(node_acq, node_time, pindptr, pdst, acq_ptr))
-    return inst
+    return Instance(name=t.column("name")[0].as_py(), acqs=acqs, unpruned_graph=unpruned_graph, node_ids=node_ids,
+                    meta=meta, node_attitude=None if node_att is None else node_att.reshape(big_n, 4),
+                    pruned_graph=DiscreteGraph(node_acq, node_time, pindptr, pdst, acq_ptr))
 
 
 def _check_csr(path: Path, row: int, prefix: str, indptr: np.ndarray, dst: np.ndarray, node_acq: np.ndarray,

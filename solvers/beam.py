@@ -29,6 +29,6 @@ def solve(inst: Instance, *, mode: str = "utility", time_limit: float | None = N
                 time_limit=time_limit)
     nodes, _ = replay(env, best.actions, seed)
     w = objective_weights(inst, mode)
-    value = float(w[inst.graph.node_acq[nodes]].sum()) if len(nodes) else 0.0
+    value = float(w[inst.node_acq[nodes]].sum()) if len(nodes) else 0.0
     return Solution(nodes, value, {"solver": "beam", "beam_width": beam_width, "episodes": best.episodes,
                                    "evaluations": best.evaluations, "seconds": time.perf_counter() - t0})

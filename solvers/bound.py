@@ -183,7 +183,7 @@ def upper_bound(inst: Instance, mode: str = "utility", *, lower: float | None = 
     Lagrangian on the pruned graph with waiting.  Without `lower`, the greedy
     schedule's value is the subgradient target.  Rounded down in unitary mode.
     """
-    inst.require_unpruned("the upper bound")
+    inst.unpruned("the upper bound")
     w = objective_weights(inst, mode)
     if lower is None:
         from eosp.solvers.greedy import solve as greedy

@@ -52,11 +52,10 @@ from eosp.solvers.ramp import solve as ramp
 
 def solve(inst: Instance, *, mode: str = "utility", time_limit: float | None = None, seed: int = 0,
           lagrangian_iterations: int = 400, max_labels: int = 20_000_000, **_: object) -> Solution:
-    inst.require_unpruned("the exact solver")
     t0 = time.perf_counter()
     unitary = mode == "unitary"
     w = objective_weights(inst, mode)
-    g = inst.graph
+    g = inst.unpruned("the exact solver")
 
     def left() -> float | None:
         return None if time_limit is None else max(0.0, time_limit - (time.perf_counter() - t0))

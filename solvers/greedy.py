@@ -105,7 +105,7 @@ def _greedy(indptr, dst, acq_ptr, node_time, order, last_time):
 
 def insertion_order(inst: Instance, mode: str, order: str | None = None) -> np.ndarray:
     """The order in which acquisitions are considered (see the module docstring)."""
-    g = inst.graph
+    g = inst.node_graph
     n = inst.n_acq
     first = g.node_time[g.acq_ptr[:-1]]
     last = g.node_time[g.acq_ptr[1:] - 1]
@@ -133,8 +133,7 @@ def solve(inst: Instance, *, mode: str = "utility", time_limit: float | None = N
     Replaying the trace (insert each accepted acquisition at its position in a
     list) gives the final sequence: nothing inserted is ever removed.
     """
-    inst.require_unpruned("the greedy solver")
-    g = inst.graph
+    g = inst.unpruned("the greedy solver")
     w = objective_weights(inst, mode)
     seq = insertion_order(inst, mode, order)
     last = g.node_time[g.acq_ptr[1:] - 1].astype(np.float64)

@@ -28,7 +28,7 @@ def solve(inst: Instance, *, mode: str = "utility", time_limit: float | None = N
                                    c_puct=c_puct, batch=batch, seed=seed, time_limit=time_limit,
                                    gumbel=gumbel)
     w = objective_weights(inst, mode)
-    value = float(w[inst.graph.node_acq[nodes]].sum()) if len(nodes) else 0.0
+    value = float(w[inst.node_acq[nodes]].sum()) if len(nodes) else 0.0
     return Solution(nodes, value, {"solver": "mcts", "budget": budget, "simulations": stats.simulations,
                                    "expansions": stats.expansions, "evaluations": stats.evaluations,
                                    "seconds": time.perf_counter() - t0,

@@ -100,5 +100,5 @@ def solve(inst: Instance, *, mode: str = "utility", time_limit: float | None = N
     prepared = prepare_instance(inst, env_cfg.prune)
     nodes, _ = rollout(agent, prepared, env_cfg, sample=sample, seed=seed)
     w = objective_weights(inst, mode)
-    return Solution(nodes, float(w[inst.graph.node_acq[nodes]].sum()) if len(nodes) else 0.0,
+    return Solution(nodes, float(w[inst.node_acq[nodes]].sum()) if len(nodes) else 0.0,
                     {"solver": "policy", "sample": sample})

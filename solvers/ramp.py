@@ -398,7 +398,7 @@ def _path(label: int, par: np.ndarray, lnode: np.ndarray) -> np.ndarray:
 def solve(inst: Instance, *, mode: str = "utility", time_limit: float | None = None, seed: int = 0,
           beam: int = 4, pruned: bool = True, **_: object) -> Solution:
     """RAMP with `beam` labels per node on the pruned (default) or unpruned graph."""
-    g = inst.pruned() if pruned else inst.graph
+    g = inst.graph_for(pruned)
     w = objective_weights(inst, mode)
     res = label_search(g, w, beam=beam, time_limit=time_limit)
     return Solution(res.nodes, res.value, {"solver": "ramp", "beam": beam, "pruned": pruned,

@@ -55,13 +55,13 @@ def synthetic_instance(n: int, seed: int, horizon: float = 400.0, step: float = 
     acqs = Acquisitions(duration=dur, vtw_start=start, vtw_end=end, utility=utility,
                         priority=None, lat=None, lon=None, attitude=None)
     graph = DiscreteGraph(node_acq, node_time, indptr, dst, acq_ptr)
-    return Instance(name=f"synthetic-{n}-{seed}", acqs=acqs, graph=graph,
+    return Instance(name=f"synthetic-{n}-{seed}", acqs=acqs, unpruned_graph=graph,
                     node_ids=np.arange(node_acq.size, dtype=np.int32), meta={"generator": "tests.synthetic"})
 
 
 def all_paths(inst: Instance, graph: DiscreteGraph | None = None):
     """Every path from the source in `graph` (default: unpruned) that uses each acquisition at most once."""
-    g = graph or inst.graph
+    g = graph or inst.unpruned()
 
     def rec(u, used, path):
         yield list(path)

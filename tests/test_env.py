@@ -102,7 +102,7 @@ def test_mask_matches_the_paper_rules_and_every_insertion_is_feasible(n, seed, w
         w = ref.step(a)
         obs, r, done, trunc, info = env.step(a)
         total += r
-        assert info["start"] == inst.graph.node_time[w]
+        assert info["start"] == inst.node_time[w]
         # the schedule so far is feasible for the independent checker (unpruned arcs)
         assert check(inst, env.schedule()).feasible
         assert done == (not ref.mask(n).any()) and not trunc

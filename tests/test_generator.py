@@ -30,7 +30,7 @@ def test_other_seed_other_instance():
 @pytest.mark.parametrize("family", ["uniform", "clusters", "conflict"])
 def test_windows_nodes_and_classes(family):
     inst = generated(family, 20, 3)
-    a, g = inst.acqs, inst.graph
+    a, g = inst.acqs, inst.unpruned()
     assert len(a) == 20
     assert np.all(a.vtw_start >= 0) and np.all(a.vtw_end <= inst.horizon + 1e-9)
     assert np.all(a.vtw_end - a.duration >= a.vtw_start)
@@ -53,7 +53,7 @@ def test_attitudes_within_limits_and_match_geometry():
     assert np.all(np.abs(att[:, :3]) <= 45 + 1e-6) and np.all(np.abs(att[:, 3:]) <= 30 + 1e-6)
     assert np.all(att[:, 0] <= att[:, 2]) and np.all(att[:, 2] <= att[:, 1])
     scn = scenario_of(inst)
-    g = inst.graph
+    g = inst.unpruned()
     lat, lon = inst.acqs.lat[g.node_acq[1:]], inst.acqs.lon[g.node_acq[1:]]
     roll, pitch = scn.attitude(lat, lon, g.node_time[1:])
     np.testing.assert_allclose(roll, inst.node_attitude[1:, 0], atol=1e-3)
@@ -63,7 +63,7 @@ def test_attitudes_within_limits_and_match_geometry():
 def test_pitch_sweeps_through_the_window():
     """Along-track: pitch goes from forward-looking to backward-looking over a window."""
     inst = generated("uniform", 12, 0)
-    g = inst.graph
+    g = inst.unpruned()
     for a in range(3):
         rng = slice(g.acq_ptr[a], g.acq_ptr[a + 1])
         p = inst.node_attitude[rng, 1]
@@ -80,7 +80,7 @@ def test_oversubscribed_like_the_paper():
 
 def test_bang_coast_bang_and_csv_targets(tmp_path):
     inst = generated("uniform", 10, 2, 2.0, "bang_coast_bang")
-    assert inst.graph.n_arcs > 0
+    assert inst.unpruned().n_arcs > 0
     src = generated("uniform", 30, 5)
     csv = tmp_path / "targets.csv"
     csv.write_text("lat,lon\n" + "\n".join(f"{la},{lo}" for la, lo in zip(src.acqs.lat, src.acqs.lon)))
@@ -112,5 +112,5 @@ def test_tle_orbit(tmp_path):
     tle = tmp_path / "sat.tle"
     tle.write_text(f"{l1}\n{l2}\n")
     inst = generate(family_config("uniform", 10, 1, graph={"step_s": 2.0}, orbit={"tle": str(tle)}))
-    assert len(inst.acqs) == 10 and inst.graph.n_arcs > 0
+    assert len(inst.acqs) == 10 and inst.unpruned().n_arcs > 0
     assert 5800 < inst.horizon < 6100

@@ -17,7 +17,7 @@ from tests.synthetic import synthetic_instance
 def _independent_attitudes(inst):
     """Start and end attitudes of every node, recomputed from the geometry."""
     scn = scenario_of(inst)
-    g, a = inst.graph, inst.acqs
+    g, a = inst.unpruned(), inst.acqs
     k = g.node_acq[1:]
     r0, p0 = scn.attitude(a.lat[k], a.lon[k], g.node_time[1:])
     r1, p1 = scn.attitude(a.lat[k], a.lon[k], g.node_time[1:] + a.duration[k])
@@ -27,7 +27,7 @@ def _independent_attitudes(inst):
 
 
 def _feasible(scn, att, inst, u, w):
-    g, d = inst.graph, inst.acqs.duration
+    g, d = inst.unpruned(), inst.acqs.duration
     fin = g.node_time[u] + d[g.node_acq[u]]
     ang = rotation_angle_deg(att[w, 0] - att[u, 2], att[w, 1] - att[u, 3])
     return g.node_time[w] - fin >= slew_times(np.atleast_1d(ang), scn.slew_model)[0] - 1e-6
@@ -37,7 +37,7 @@ def _feasible(scn, att, inst, u, w):
 def test_arcs_respect_simulator_and_are_earliest(slew):
     inst = generated("clusters", 12, 4, 2.0, slew)
     scn, att = _independent_attitudes(inst)
-    g, d = inst.graph, inst.acqs.duration
+    g, d = inst.unpruned(), inst.acqs.duration
     src = g.src()
     real = src > 0
     u, w = src[real], g.dst[real]
@@ -61,7 +61,7 @@ def test_arcs_respect_simulator_and_are_earliest(slew):
 
 
 def test_source_reaches_first_node_of_every_acquisition():
-    g = generated("uniform", 12, 0).graph
+    g = generated("uniform", 12, 0).unpruned()
     np.testing.assert_array_equal(g.dst[g.indptr[0]:g.indptr[1]], g.acq_ptr[:-1])
 
 
@@ -80,7 +80,7 @@ def _insertable(g, d, u, v):
 
 
 def _check_pruning(inst):
-    g, d = inst.graph, inst.acqs.duration
+    g, d = inst.unpruned(), inst.acqs.duration
     p = prune(g, d)
     kept = set(zip(p.src().tolist(), p.dst.tolist()))
     assert kept <= set(zip(g.src().tolist(), g.dst.tolist()))

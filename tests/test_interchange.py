@@ -24,7 +24,7 @@ def assert_same_instance(a, b):
         if x is not None:
             np.testing.assert_array_equal(x, y, err_msg=f)
     for f in ("node_acq", "node_time", "indptr", "dst", "acq_ptr"):
-        np.testing.assert_array_equal(getattr(a.graph, f), getattr(b.graph, f), err_msg=f)
+        np.testing.assert_array_equal(getattr(a.unpruned(), f), getattr(b.unpruned(), f), err_msg=f)
     np.testing.assert_array_equal(a.node_ids, b.node_ids)
 
 
@@ -42,7 +42,7 @@ def test_export_import_export_identical(tmp_path):
 def _write_foreign(inst, d, seed=0):
     """Write an instance the way another tool might: shuffled node ids and rows, int64 ids."""
     rng = np.random.default_rng(seed)
-    g = inst.graph
+    g = inst.unpruned()
     big_n = g.n_nodes
     new_id = np.concatenate([[0], 1 + rng.permutation(big_n - 1)])
     d.mkdir()
@@ -68,7 +68,7 @@ def test_foreign_numbering_and_row_order_is_canonicalized(tmp_path_factory, n, s
     new_id = _write_foreign(inst, d, seed)
     back = read_instance(d)
     for f in ("node_acq", "node_time", "indptr", "dst"):
-        np.testing.assert_array_equal(getattr(inst.graph, f), getattr(back.graph, f))
+        np.testing.assert_array_equal(getattr(inst.unpruned(), f), getattr(back.unpruned(), f))
     np.testing.assert_array_equal(back.node_ids, new_id)
     # a schedule found on the imported instance refers to the file's own node ids and validates
     sol = random_solve(back, seed=seed)
@@ -104,7 +104,7 @@ def test_checker_accepts_walks_and_rejects_broken_ones(n, seed):
         assert not check(inst, rev).feasible
     if len(sched) >= 1:
         # starting earlier than the node reached by the arc is infeasible
-        g = inst.graph
+        g = inst.unpruned()
         last = int(nodes[-1])
         if last - 1 >= g.acq_ptr[g.node_acq[last]]:
             prev_nodes = nodes.copy()
@@ -295,10 +295,10 @@ def test_streamed_arcs_equal_whole_file_reading(tmp_path, monkeypatch, seed):
     monkeypatch.setattr(ic, "BATCH_ROWS", 5)
     back = read_instance(d)
     indptr, dst = _reference_csr(d)
-    assert back.graph.indptr.dtype == np.int64 and back.graph.dst.dtype == np.int32
-    np.testing.assert_array_equal(back.graph.indptr, indptr)
-    np.testing.assert_array_equal(back.graph.dst, dst)
-    np.testing.assert_array_equal(back.graph.dst, inst.graph.dst)
+    assert back.unpruned().indptr.dtype == np.int64 and back.unpruned().dst.dtype == np.int32
+    np.testing.assert_array_equal(back.unpruned().indptr, indptr)
+    np.testing.assert_array_equal(back.unpruned().dst, dst)
+    np.testing.assert_array_equal(back.unpruned().dst, inst.unpruned().dst)
 
 
 def test_streamed_error_names_the_file_row_in_a_later_batch(inst_dir, monkeypatch):

@@ -38,10 +38,10 @@ def test_budget_zero_is_the_policy_argmax(agent):
 @pytest.mark.parametrize("seed,batch", [(1, 1), (2, 8), (3, 1), (4, 8)])
 def test_large_budget_finds_the_optimum_of_a_tiny_instance(agent, seed, batch):
     inst = synthetic_instance(6, seed)
-    best = max(inst.acqs.utility[inst.graph.node_acq[p]].sum() if p else 0.0
+    best = max(inst.acqs.utility[inst.node_acq[p]].sum() if p else 0.0
                for p in all_paths(inst, inst.pruned()))
     nodes, ret, _ = run(agent, inst, 400, batch=batch)
-    value = inst.acqs.utility[inst.graph.node_acq[nodes]].sum()
+    value = inst.acqs.utility[inst.node_acq[nodes]].sum()
     assert value == pytest.approx(best, rel=1e-12) and ret == pytest.approx(best, rel=1e-9)
     from eosp.solvers.exact import solve as exact
 

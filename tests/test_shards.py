@@ -7,6 +7,7 @@ import pytest
 
 from eosp.errors import InputError
 from eosp.shards.io import SCHEMA_VERSION, ShardReader, read_instances, write_shard
+from eosp.solvers.greedy import solve as greedy
 from tests.conftest import generated
 from tests.test_interchange import assert_same_instance
 
@@ -33,8 +34,13 @@ def test_pruned_only_shard(tmp_path):
     inst = generated("uniform", 12, 0)
     path = write_shard(tmp_path / "p.parquet", [inst], include_unpruned=False)
     back = ShardReader(path).read(0)
-    assert back.meta["unpruned_arcs"] is False
+    assert back.unpruned_graph is None
     np.testing.assert_array_equal(back.pruned().dst, inst.pruned().dst)
+    np.testing.assert_array_equal(back.node_acq, inst.node_acq)
+    # written again asking for the unpruned arcs: the pruned ones never stand in for them
+    again = ShardReader(write_shard(tmp_path / "q.parquet", [back], include_unpruned=True)).read(0)
+    assert again.unpruned_graph is None
+    np.testing.assert_array_equal(again.pruned().dst, inst.pruned().dst)
 
 
 def test_truncated_shard(shard, tmp_path):
@@ -79,10 +85,12 @@ def test_corrupted_arcs_name_column_and_row(shard, tmp_path):
 def test_reading_without_unpruned_arcs_skips_them(shard):
     path, insts = shard
     back = ShardReader(path).read(1, unpruned=False)
-    assert back.meta["unpruned_arcs"] is False
+    assert back.unpruned_graph is None
     np.testing.assert_array_equal(back.pruned().dst, insts[1].pruned().dst)
+    with pytest.raises(InputError, match="the greedy solver needs the unpruned arcs"):
+        back.unpruned("the greedy solver")
     with pytest.raises(InputError, match="unpruned"):
-        back.require_unpruned("the greedy solver")
+        greedy(back)
 
 
 def test_shard_too_large_for_memory_fails_in_one_line(shard, monkeypatch):

@@ -35,7 +35,7 @@ def tiny_instance(family, n, seed):
 def brute_force(inst, mode):
     """Best value over every path of the unpruned graph that repeats no acquisition."""
     w = objective_weights(inst, mode)
-    return max(math.fsum(w[inst.graph.node_acq[p]].tolist()) for p in all_paths(inst))
+    return max(math.fsum(w[inst.node_acq[p]].tolist()) for p in all_paths(inst))
 
 
 def assert_valid(inst, sol, mode):
@@ -43,8 +43,8 @@ def assert_valid(inst, sol, mode):
     verdict = check(inst, from_internal_nodes(inst, sol.nodes))
     assert verdict.feasible, verdict.reason
     w = objective_weights(inst, mode)
-    assert sol.value == pytest.approx(math.fsum(w[inst.graph.node_acq[sol.nodes]].tolist()), rel=1e-12, abs=1e-12)
-    g = inst.graph
+    assert sol.value == pytest.approx(math.fsum(w[inst.node_acq[sol.nodes]].tolist()), rel=1e-12, abs=1e-12)
+    g = inst.unpruned()
     for u, v in zip(np.concatenate([[0], sol.nodes[:-1]]), sol.nodes):  # consecutive nodes are arcs
         assert g.successor(int(u), int(g.node_acq[v])) == v
 
@@ -69,7 +69,7 @@ def test_unbounded_label_search_is_exact(n, seed):
     """With no beam the label DP on the unpruned graph is the exact optimum, without any bound."""
     inst = synthetic_instance(n, seed)
     for mode in MODES:
-        res = label_search(inst.graph, objective_weights(inst, mode), beam=0)
+        res = label_search(inst.unpruned(), objective_weights(inst, mode), beam=0)
         assert res.complete
         assert res.value == pytest.approx(brute_force(inst, mode), rel=1e-12)
 
@@ -84,7 +84,7 @@ def test_pruned_graph_with_waiting_bounds_the_unpruned_relaxation(family, n, see
     for _ in range(5):
         cost = w * (1.0 - rng.uniform(0, 1, w.size))
         out = []
-        for g, wait in ((inst.pruned(), True), (inst.graph, True), (inst.graph, False)):
+        for g, wait in ((inst.pruned(), True), (inst.unpruned(), True), (inst.unpruned(), False)):
             togo = np.zeros(g.n_nodes)
             nxt = np.zeros(g.n_nodes, np.int32)
             out.append(togo_pass(topological_order(g), g.indptr, g.dst, g.node_acq, cost, togo, nxt, wait))
@@ -122,7 +122,7 @@ def test_greedy_never_removes_an_acquisition(family, n, seed, mode):
             assert 0 <= pos <= len(seq)
             seq.insert(pos, acq)
     # replaying the insertions gives the final sequence: nothing was ever removed
-    assert seq == inst.graph.node_acq[sol.nodes].tolist()
+    assert seq == inst.node_acq[sol.nodes].tolist()
     assert_valid(inst, sol, mode)
 
 
@@ -142,7 +142,7 @@ def test_greedy_postpones_but_keeps(family, n, seed):
     """Replaying the trace: every intermediate sequence is feasible, keeps all the
     acquisitions before it, and some insertion moves an acquisition already placed."""
     inst = generated(family, n, seed, 2.0)
-    g = inst.graph
+    g = inst.unpruned()
     seq: list[int] = []
     starts: dict[int, float] = {}
     moved = 0
@@ -185,7 +185,7 @@ def test_interrupted_label_search_bounds_the_optimum(n, seed):
         cb = completion_bound(lb, inst.pruned())
         stopped = 0
         for cap in (12, 16, 20, 24):
-            res = label_search(inst.graph, w, beam=0, lam=lb.lam, cbound=cb, max_labels=cap, on_limit="stop")
+            res = label_search(inst.unpruned(), w, beam=0, lam=lb.lam, cbound=cb, max_labels=cap, on_limit="stop")
             stopped += not res.complete
             assert max(res.value, res.frontier_bound) >= best * (1 - 1e-12)
         assert stopped
@@ -250,7 +250,7 @@ def test_exact_agrees_with_an_arc_flow_mip(family, n, seed):
     from scipy.optimize import Bounds, LinearConstraint, milp
 
     inst = generated(family, n, seed, 2.0)
-    g = inst.graph
+    g = inst.unpruned()
     src, dst = g.src(), g.dst.astype(np.int64)
     arcs = np.arange(g.n_arcs)
     for mode in MODES:

@@ -72,7 +72,7 @@ def solve_shard(shard: str | Path, mode: str, *, time_limit: float, action_sets:
     sigs, stats = [], {"instances": 0, "steps": 0, "optimal": 0, "max_gap": 0.0, "solve_s": 0.0}
     env = None
     for k in range(len(reader)):
-        prepared = prepare_instance(reader.read(k, unpruned=False), prune)
+        prepared = prepare_instance(reader.read(k, unpruned=not prune), prune)
         sigs.append(graph_signature(prepared))
         if env is None or prepared.inst.n_acq > env.n_max:
             env = EOSPEnv(EnvConfig(max_acquisitions=0, prune=prune), source=_Fixed(prepared))

@@ -138,7 +138,7 @@ def label_states(shard: str, index: int, mode: str, actions: list[int], beam: in
     from eosp.shards.io import ShardReader
     from eosp.solvers import expert
 
-    prepared = prepare_instance(ShardReader(shard).read(index, unpruned=False), prune)
+    prepared = prepare_instance(ShardReader(shard).read(index, unpruned=not prune), prune)
     env = EOSPEnv(_Env(max_acquisitions=0, prune=prune), source=FixedSource(prepared))
     env.reset()
     w = expert.objective(prepared.inst, mode)
@@ -174,7 +174,7 @@ class DemoData:
         demos = []
         for shard in expand_shards(list(paths)):
             reader = ShardReader(shard)
-            prepared = [prepare_instance(reader.read(k, unpruned=False), env_cfg.prune) for k in range(len(reader))]
+            prepared = [prepare_instance(reader.read(k, unpruned=not env_cfg.prune), env_cfg.prune) for k in range(len(reader))]
             for d in read_demos(shard, self.mode, prepared):
                 self.instances.append((shard, d.index, prepared[d.index]))
                 self.optimal_values.append(d.value)

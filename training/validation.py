@@ -107,7 +107,7 @@ class Validator:
     def score(self, inst, nodes: np.ndarray) -> float:
         from eosp.solvers.base import objective_weights
 
-        return float(objective_weights(inst, self.mode)[inst.graph.node_acq[nodes]].sum()) if len(nodes) else 0.0
+        return float(objective_weights(inst, self.mode)[inst.node_acq[nodes]].sum()) if len(nodes) else 0.0
 
     def run(self, agent) -> ValidationResult:
         from eosp.solvers.policy import rollout
