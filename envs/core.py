@@ -1,13 +1,8 @@
 """Array state and numba kernels of the EOSP MDP (the environment's hot loop).
 
-State of an episode (all numpy arrays, copied for a snapshot):
-
-* ``alive``  uint8 [N]: node still in the current discrete graph and not scheduled;
-* ``alive_count`` int32 [n]: alive nodes per acquisition (0 = removed or scheduled);
-* ``first_alive`` int32 [n]: lower bound of the first alive node of each
-  acquisition (nodes only ever die, so it only moves forward);
-* ``path`` int32 [n]: scheduled nodes in order, ``scalars`` int64 [3]: path
-  length, last node, time-order position of the last node.
+The kernels take two NamedTuples of arrays (numba passes them as typed tuples):
+:class:`EnvGraph`, the instance's arrays prepared once, and :class:`Episode`,
+the state of an episode, updated in place (copied for a snapshot).
 
 A step applies the paper's update to the chosen node w = (a, t):
 (1) the other arcs out of the last node go (implicit: only arcs out of alive
@@ -22,7 +17,7 @@ one read of an alive flag per later node and step.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from typing import NamedTuple
 
 import numba
 import numpy as np
@@ -30,22 +25,46 @@ import numpy as np
 from eosp.graphs.discrete import DiscreteGraph, arc_to_acq
 
 
-@dataclass
-class EnvGraph:
+class EnvGraph(NamedTuple):
     """Per-instance arrays prepared once (cached per instance by the sources)."""
 
-    node_acq: np.ndarray
-    node_time: np.ndarray
+    node_acq: np.ndarray  # int32 [N], -1 for the source
+    node_time: np.ndarray  # float64 [N]
     node_finish: np.ndarray  # time + duration (the source: its time)
-    indptr: np.ndarray
+    indptr: np.ndarray  # CSR arcs of the environment's graph
     dst: np.ndarray
-    acq_ptr: np.ndarray
+    acq_ptr: np.ndarray  # nodes of acquisition a: acq_ptr[a] .. acq_ptr[a + 1] - 1
     rindptr: np.ndarray  # reverse CSR: predecessors of each node, latest first
     rsrc: np.ndarray
     order: np.ndarray  # nodes by time
     pos: np.ndarray  # position of each node in `order`
     init_alive: np.ndarray  # uint8 [N]: nodes reachable from the source
     init_count: np.ndarray  # int32 [n]
+
+
+class Episode(NamedTuple):
+    """The state of an episode: arrays the kernels update in place (one-element arrays for the scalars)."""
+
+    alive: np.ndarray  # uint8 [N]: node still in the current discrete graph and not scheduled
+    alive_count: np.ndarray  # int32 [n]: alive nodes per acquisition (0 = removed or scheduled)
+    first_alive: np.ndarray  # int32 [n]: lower bound of the first alive node of each acquisition
+    #                          (nodes only ever die, so it only moves forward)
+    path: np.ndarray  # int32 [n]: scheduled nodes in order
+    n_scheduled: np.ndarray  # int64 [1]: length of the path
+    last: np.ndarray  # int64 [1]: last scheduled node (0, the source, at the start)
+    last_pos: np.ndarray  # int64 [1]: position of the last node in the time order
+    scheduled: np.ndarray  # float32 [n]: 1 for a scheduled acquisition
+    mask: np.ndarray  # int8 [n]: 1 for an allowed action
+
+    @classmethod
+    def start(cls, eg: EnvGraph) -> Episode:
+        n = eg.acq_ptr.shape[0] - 1
+        return cls(eg.init_alive.copy(), eg.init_count.copy(), eg.acq_ptr[:-1].astype(np.int32),
+                   np.zeros(n, dtype=np.int32), np.zeros(1, dtype=np.int64), np.zeros(1, dtype=np.int64),
+                   np.zeros(1, dtype=np.int64), np.zeros(n, dtype=np.float32), np.zeros(n, dtype=np.int8))
+
+    def copy(self) -> Episode:
+        return Episode._make([a.copy() for a in self])
 
 
 @numba.njit(cache=True)
@@ -76,24 +95,23 @@ def prepare(graph: DiscreteGraph, durations: np.ndarray) -> EnvGraph:
     rindptr, rsrc = _reverse(big_n, graph.indptr, graph.dst, order)
     pos = np.empty(big_n, dtype=np.int32)
     pos[order] = np.arange(big_n, dtype=np.int32)
-    eg = EnvGraph(graph.node_acq, graph.node_time, finish, graph.indptr, graph.dst, graph.acq_ptr, rindptr, rsrc,
-                  order, pos, np.empty(0, np.uint8), np.empty(0, np.int32))
     alive = np.ones(big_n, dtype=np.uint8)
     alive[0] = 0
     count = np.diff(graph.acq_ptr).astype(np.int32)
-    sweep(eg.node_acq, eg.rindptr, eg.rsrc, eg.order, alive, count, 0, 0)
-    eg.init_alive = alive
-    eg.init_count = count
+    eg = EnvGraph(graph.node_acq, graph.node_time, finish, graph.indptr, graph.dst, graph.acq_ptr, rindptr, rsrc,
+                  order, pos, alive, count)
+    sweep(eg, alive, count, 0, 0)  # fills init_alive and init_count (the same arrays)
     return eg
 
 
 @numba.njit(cache=True)
-def sweep(node_acq, rindptr, rsrc, order, alive, alive_count, root_pos, prev_pos):
+def sweep(g, alive, alive_count, root_pos, prev_pos):
     """Kill every alive node not reachable from the node at time-order position `root_pos`.
 
     Alive nodes between `prev_pos` (the previous root) and `root_pos` are before
     the root in time, hence unreachable.
     """
+    order, node_acq, rindptr, rsrc = g.order, g.node_acq, g.rindptr, g.rsrc
     root = order[root_pos]
     for p in range(prev_pos, root_pos):
         v = order[p]
@@ -116,51 +134,56 @@ def sweep(node_acq, rindptr, rsrc, order, alive, alive_count, root_pos, prev_pos
 
 
 @numba.njit(cache=True)
-def target_node(indptr, dst, acq_ptr, alive, last, action):
-    """The alive node of acquisition `action` that the last node has an arc to, or -1."""
-    w = arc_to_acq(indptr, dst, acq_ptr, last, action)
+def target_node(g, alive, last, action):
+    """The alive node of acquisition `action` that the node `last` has an arc to, or -1."""
+    w = arc_to_acq(g.indptr, g.dst, g.acq_ptr, last, action)
     if w < 0 or not alive[w]:
         return -1
     return w
 
 
 @numba.njit(cache=True)
-def apply_action(node_acq, indptr, dst, acq_ptr, rindptr, rsrc, order, pos, alive, alive_count, path, scalars,
-                 action):
-    """Schedule `action` after the last node; returns the new node, or -1 (state unchanged) if not allowed."""
-    n_acq = acq_ptr.shape[0] - 1
+def apply_action(g, ep, action):
+    """Schedule `action` after the last node; returns the new node, or -1 (state unchanged) if not allowed.
+
+    Updates the graph part of the episode (alive, alive_count, path, n_scheduled, last, last_pos), not
+    its `scheduled` and `mask` (the environment's).
+    """
+    n_acq = g.acq_ptr.shape[0] - 1
     if action < 0 or action >= n_acq:
         return -1
-    last = scalars[1]
-    w = target_node(indptr, dst, acq_ptr, alive, last, action)
+    w = target_node(g, ep.alive, ep.last[0], action)
     if w < 0:
         return -1
-    for v in range(acq_ptr[action], acq_ptr[action + 1]):  # (2) the other nodes of the acquisition
-        alive[v] = 0
-    alive_count[action] = 0
-    sweep(node_acq, rindptr, rsrc, order, alive, alive_count, pos[w], scalars[2])  # (3) unreachable nodes
-    path[scalars[0]] = w
-    scalars[0] += 1
-    scalars[1] = w
-    scalars[2] = pos[w]
+    for v in range(g.acq_ptr[action], g.acq_ptr[action + 1]):  # (2) the other nodes of the acquisition
+        ep.alive[v] = 0
+    ep.alive_count[action] = 0
+    sweep(g, ep.alive, ep.alive_count, g.pos[w], ep.last_pos[0])  # (3) unreachable nodes
+    ep.path[ep.n_scheduled[0]] = w
+    ep.n_scheduled[0] += 1
+    ep.last[0] = w
+    ep.last_pos[0] = g.pos[w]
     return w
 
 
 @numba.njit(cache=True)
-def action_mask(indptr, dst, node_acq, alive, last, n_acq, out):
-    """out[j] = 1 when the last node has an arc to an alive node of j."""
+def action_mask(g, ep):
+    """ep.mask[j] = 1 when the last node has an arc to an alive node of j; returns the number of such arcs."""
+    out, alive, last = ep.mask, ep.alive, ep.last[0]
     out[:] = 0
     cnt = 0
-    for a in range(indptr[last], indptr[last + 1]):
-        v = dst[a]
+    for a in range(g.indptr[last], g.indptr[last + 1]):
+        v = g.dst[a]
         if alive[v]:
-            out[node_acq[v]] = 1
+            out[g.node_acq[v]] = 1
             cnt += 1
     return cnt
 
 
 @numba.njit(cache=True)
-def advance_first_alive(acq_ptr, alive, alive_count, first_alive):
+def advance_first_alive(g, ep):
+    """Move every ep.first_alive[i] to the first alive node of acquisition i (acq_ptr[i + 1] when none)."""
+    acq_ptr, alive, alive_count, first_alive = g.acq_ptr, ep.alive, ep.alive_count, ep.first_alive
     for i in range(acq_ptr.shape[0] - 1):
         if alive_count[i] == 0:
             first_alive[i] = acq_ptr[i + 1]
@@ -169,3 +192,22 @@ def advance_first_alive(acq_ptr, alive, alive_count, first_alive):
         while v < acq_ptr[i + 1] and not alive[v]:
             v += 1
         first_alive[i] = v
+
+
+@numba.njit(cache=True)
+def step(g, ep, action):
+    """One environment step in one kernel call: :func:`apply_action`, mark it scheduled, then the new mask
+    and first alive nodes.  Returns the new node, or -1 (state unchanged) if `action` is not allowed."""
+    w = apply_action(g, ep, action)
+    if w >= 0:
+        ep.scheduled[action] = 1.0
+        action_mask(g, ep)
+        advance_first_alive(g, ep)
+    return w
+
+
+@numba.njit(cache=True)
+def start(g, ep):
+    """The mask and first alive nodes of a fresh episode (:meth:`Episode.start`)."""
+    action_mask(g, ep)
+    advance_first_alive(g, ep)

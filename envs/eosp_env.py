@@ -52,7 +52,7 @@ import gymnasium as gym
 import numpy as np
 
 from eosp.envs import core
-from eosp.envs.observation import N_EDGE_FEATURES, N_NODE_FEATURES, build_observation
+from eosp.envs.observation import N_EDGE_FEATURES, N_NODE_FEATURES, build_observation, step_and_observe_fields
 from eosp.envs.sources import FixedSource, PreparedInstance, ShardSource, expand_shards, owned_shards, prepare_instance
 from eosp.config import CLASS_UTILITIES, N_CLASSES, EnvConfig, from_dict
 from eosp.instances.instance import Instance
@@ -84,16 +84,10 @@ class MaskedDiscrete(gym.spaces.Discrete):
 
 @dataclass
 class Snapshot:
-    """Everything that changes during an episode (a few small arrays)."""
+    """Everything that changes during an episode (a few small arrays, :class:`eosp.envs.core.Episode`)."""
 
     prepared: PreparedInstance
-    alive: np.ndarray
-    alive_count: np.ndarray
-    first_alive: np.ndarray
-    path: np.ndarray
-    scalars: np.ndarray
-    scheduled: np.ndarray
-    mask: np.ndarray
+    ep: core.Episode
     value: float
 
 
@@ -167,57 +161,53 @@ class EOSPEnv(gym.Env):
                 raise ValueError(f"instance has {prepared.inst.n_acq} acquisitions > max_acquisitions={self.n_max}")
         else:
             prepared = self.source.sample(self.np_random)
-        eg = prepared.eg
-        n = prepared.inst.n_acq
-        self.state = Snapshot(prepared=prepared, alive=eg.init_alive.copy(), alive_count=eg.init_count.copy(),
-                              first_alive=eg.acq_ptr[:-1].astype(np.int32), path=np.zeros(n, dtype=np.int32),
-                              scalars=np.zeros(3, dtype=np.int64), scheduled=np.zeros(n, dtype=np.float32),
-                              mask=np.zeros(n, dtype=np.int8), value=0.0)
-        self._update_mask()
-        return self._observation(), {"instance": prepared.inst.name, "n_acquisitions": n}
+        self.state = Snapshot(prepared=prepared, ep=core.Episode.start(prepared.eg), value=0.0)
+        core.start(prepared.eg, self.state.ep)
+        self._publish_mask()
+        bufs = self._buffers()
+        m = build_observation(prepared.eg, self.state.ep, prepared.cand, self.cfg.max_out_degree,
+                              self.cfg.last_edges_cap, self.cfg.obs_edges == "full", *bufs)
+        return self._observation(bufs, m), {"instance": prepared.inst.name, "n_acquisitions": prepared.inst.n_acq}
 
     def step(self, action):
         s = self.state
         if s is None:
             raise RuntimeError("call reset() before step()")
-        eg = s.prepared.eg
+        eg, ep = s.prepared.eg, s.ep
         a = int(action)
         n = s.prepared.inst.n_acq
-        if not 0 <= a < n or not s.mask[a]:
+        if not 0 <= a < n or not ep.mask[a]:
             why = "out of range" if not 0 <= a < n else "masked (no arc from the last scheduled node to it)"
-            raise InvalidAction(f"action {a} is not allowed: {why}; allowed: {np.flatnonzero(s.mask).tolist()}")
-        w = core.apply_action(eg.node_acq, eg.indptr, eg.dst, eg.acq_ptr, eg.rindptr, eg.rsrc, eg.order, eg.pos,
-                              s.alive, s.alive_count, s.path, s.scalars, a)
+            raise InvalidAction(f"action {a} is not allowed: {why}; allowed: {np.flatnonzero(ep.mask).tolist()}")
+        bufs = self._buffers()
+        w, m = step_and_observe_fields(tuple(eg), tuple(ep), tuple(s.prepared.cand), a, self.cfg.max_out_degree,
+                                       self.cfg.last_edges_cap, self.cfg.obs_edges == "full", *bufs)
         assert w >= 0
-        s.scheduled[a] = 1.0
         u = float(s.prepared.inst.acqs.utility[a])
         s.value += u
-        self._update_mask()
-        terminated = not s.mask.any()
-        info = {"value": s.value, "n_scheduled": int(s.scalars[0]), "start": float(eg.node_time[w])}
+        self._publish_mask()
+        terminated = not ep.mask.any()
+        info = {"value": s.value, "n_scheduled": int(ep.n_scheduled[0]), "start": float(eg.node_time[w])}
         r = self._reward(a, u, info)
-        return self._observation(), r, terminated, False, info
+        return self._observation(bufs, m), r, terminated, False, info
 
     # ------------------------------------------------------------------ search support
     def snapshot(self) -> Snapshot:
         """A copy of the episode state (a few arrays): cheap enough for tree search."""
         s = self.state
-        return Snapshot(s.prepared, s.alive.copy(), s.alive_count.copy(), s.first_alive.copy(), s.path.copy(),
-                        s.scalars.copy(), s.scheduled.copy(), s.mask.copy(), s.value)
+        return Snapshot(s.prepared, s.ep.copy(), s.value)
 
     def restore(self, snap: Snapshot) -> None:
-        self.state = Snapshot(snap.prepared, snap.alive.copy(), snap.alive_count.copy(), snap.first_alive.copy(),
-                              snap.path.copy(), snap.scalars.copy(), snap.scheduled.copy(), snap.mask.copy(),
-                              snap.value)
-        self._mask_padded = self._padded_mask()
-        self.action_space.current_mask = self._mask_padded
+        self.state = Snapshot(snap.prepared, snap.ep.copy(), snap.value)
+        self._publish_mask()
 
     def action_mask(self) -> np.ndarray:
-        return self.state.mask.copy()
+        return self.state.ep.mask.copy()
 
     def path(self) -> np.ndarray:
         """Scheduled nodes (canonical indices of the instance) in order."""
-        return self.state.path[: self.state.scalars[0]].copy()
+        ep = self.state.ep
+        return ep.path[: ep.n_scheduled[0]].copy()
 
     def schedule(self):
         from eosp.instances.schedule import from_internal_nodes
@@ -229,17 +219,12 @@ class EOSPEnv(gym.Env):
         return self.state.prepared.inst
 
     # ------------------------------------------------------------------ internals
-    def _update_mask(self) -> None:
-        s = self.state
-        eg = s.prepared.eg
-        core.action_mask(eg.indptr, eg.dst, eg.node_acq, s.alive, s.scalars[1], s.mask.shape[0], s.mask)
-        self._mask_padded = self._padded_mask()
+    def _publish_mask(self) -> None:
+        """The current mask (computed by the kernels), padded, for the observation and the action space."""
+        mask = self.state.ep.mask
+        self._mask_padded = np.zeros(self.n_max, dtype=np.int8)
+        self._mask_padded[: mask.shape[0]] = mask
         self.action_space.current_mask = self._mask_padded
-
-    def _padded_mask(self) -> np.ndarray:
-        out = np.zeros(self.n_max, dtype=np.int8)
-        out[: self.state.mask.shape[0]] = self.state.mask
-        return out
 
     def _reward(self, a: int, u: float, info: dict) -> float:
         mode = self.cfg.reward
@@ -255,18 +240,13 @@ class EOSPEnv(gym.Env):
             info["reward_vector"] = vec
         return r
 
-    def _observation(self) -> dict[str, np.ndarray]:
-        s = self.state
-        eg = s.prepared.eg
-        inst = s.prepared.inst
-        a = inst.acqs
-        core.advance_first_alive(eg.acq_ptr, s.alive, s.alive_count, s.first_alive)
-        x = np.zeros((self.n_max, N_NODE_FEATURES), dtype=np.float32)
-        ei = np.zeros((2, self.e_max), dtype=np.int32)
-        ea = np.zeros((self.e_max, N_EDGE_FEATURES), dtype=np.float32)
-        m = build_observation(eg.node_acq, eg.node_time, eg.node_finish, eg.indptr, eg.dst, eg.acq_ptr, a.vtw_start,
-                              a.vtw_end, a.duration, s.prepared.static, s.alive, s.alive_count, s.first_alive,
-                              s.scheduled, int(s.scalars[1]), s.mask, self.cfg.max_out_degree,
-                              self.cfg.last_edges_cap, self.cfg.obs_edges == "full", x, ei, ea)
-        return {"x": x, "edge_index": ei, "edge_attr": ea, "n_nodes": np.array([inst.n_acq], dtype=np.int32),
+    def _buffers(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Zeroed x, edge_index, edge_attr of an observation (the kernels fill them)."""
+        return (np.zeros((self.n_max, N_NODE_FEATURES), dtype=np.float32), np.zeros((2, self.e_max), dtype=np.int32),
+                np.zeros((self.e_max, N_EDGE_FEATURES), dtype=np.float32))
+
+    def _observation(self, bufs: tuple[np.ndarray, np.ndarray, np.ndarray], m: int) -> dict[str, np.ndarray]:
+        x, ei, ea = bufs
+        return {"x": x, "edge_index": ei, "edge_attr": ea,
+                "n_nodes": np.array([self.state.prepared.inst.n_acq], dtype=np.int32),
                 "n_edges": np.array([m], dtype=np.int32), "action_mask": self._mask_padded.copy()}

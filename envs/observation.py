@@ -22,10 +22,13 @@ of the source node) and a flag for edges out of the last scheduled node.
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numba
 import numpy as np
 
 from eosp.config import CLASS_UTILITIES, N_CLASSES
+from eosp.envs.core import EnvGraph, Episode, step
 
 TIME_SCALE = 300.0
 NODE_FEATURES = (
@@ -38,7 +41,33 @@ NODE_FEATURES = (
 N_NODE_FEATURES = len(NODE_FEATURES)
 N_EDGE_FEATURES = 2
 N_STATIC = 3 + N_CLASSES + 6  # duration, log_utility, utility_share, classes, 6 attitude stats
-assert N_NODE_FEATURES == 9 + N_STATIC
+# column of each state-dependent feature (module constants: numba compiles them in)
+SCHEDULED = NODE_FEATURES.index("scheduled")
+REMOVED = NODE_FEATURES.index("removed")
+SELECTABLE = NODE_FEATURES.index("selectable")
+LAST = NODE_FEATURES.index("last")
+WINDOW_START = NODE_FEATURES.index("window_start")
+WINDOW_END = NODE_FEATURES.index("window_end")
+LATEST_START = NODE_FEATURES.index("latest_start")
+EARLIEST_START = NODE_FEATURES.index("earliest_start")
+ALIVE_FRACTION = NODE_FEATURES.index("alive_fraction")
+STATIC = NODE_FEATURES.index("duration")  # first of the N_STATIC columns of static_features, in their order
+assert STATIC == 9 and N_NODE_FEATURES == STATIC + N_STATIC
+
+
+class Candidates(NamedTuple):
+    """The acquisitions' arrays the observation reads, prepared once per instance."""
+
+    vtw_start: np.ndarray  # float64 [n]
+    vtw_end: np.ndarray  # float64 [n]
+    duration: np.ndarray  # float64 [n]
+    static: np.ndarray  # float32 [n, N_STATIC]: static_features
+
+
+def candidates(acqs, priority: np.ndarray) -> Candidates:
+    """:class:`Candidates` of an instance's acquisitions (eosp.instances.instance.Acquisitions)."""
+    return Candidates(acqs.vtw_start, acqs.vtw_end, acqs.duration,
+                      static_features(acqs.duration, acqs.utility, priority, acqs.attitude))
 
 
 def static_features(duration: np.ndarray, utility: np.ndarray, priority: np.ndarray,
@@ -61,35 +90,43 @@ def _clip(x):
 
 
 @numba.njit(cache=True)
-def build_observation(node_acq, node_time, node_finish, indptr, dst, acq_ptr, vtw_start, vtw_end, duration,
-                      static, alive, alive_count, first_alive, scheduled, last, mask, k_out, k_last_cap, full,
-                      x, edge_index, edge_attr):
-    """Fill x [N_max, F], edge_index [2, E_max], edge_attr [E_max, 2]; returns the number of edges."""
+def build_observation(g, ep, cand, k_out, k_last_cap, full, x, edge_index, edge_attr):
+    """Fill x [N_max, F], edge_index [2, E_max], edge_attr [E_max, 2]; returns the number of edges.
+
+    `g`: eosp.envs.core.EnvGraph, `ep`: eosp.envs.core.Episode (with first_alive advanced),
+    `cand`: :class:`Candidates`.
+    """
+    node_acq, node_time, node_finish, indptr, dst, acq_ptr = g.node_acq, g.node_time, g.node_finish, g.indptr, \
+        g.dst, g.acq_ptr
+    alive, alive_count, first_alive, scheduled, mask = ep.alive, ep.alive_count, ep.first_alive, ep.scheduled, \
+        ep.mask
+    static = cand.static
+    last = ep.last[0]
     n = acq_ptr.shape[0] - 1
     e_max = edge_index.shape[1]
     t_now = node_finish[last]
     last_acq = node_acq[last]
     for i in range(n):
         total = acq_ptr[i + 1] - acq_ptr[i]
-        x[i, 0] = scheduled[i]
-        x[i, 1] = 1.0 if (alive_count[i] == 0 and scheduled[i] == 0) else 0.0
-        x[i, 2] = mask[i]
-        x[i, 3] = 1.0 if i == last_acq else 0.0
-        x[i, 4] = _clip((vtw_start[i] - t_now) / TIME_SCALE)
-        x[i, 5] = _clip((vtw_end[i] - t_now) / TIME_SCALE)
-        x[i, 6] = _clip((vtw_end[i] - duration[i] - t_now) / TIME_SCALE)
+        x[i, SCHEDULED] = scheduled[i]
+        x[i, REMOVED] = 1.0 if (alive_count[i] == 0 and scheduled[i] == 0) else 0.0
+        x[i, SELECTABLE] = mask[i]
+        x[i, LAST] = 1.0 if i == last_acq else 0.0
+        x[i, WINDOW_START] = _clip((cand.vtw_start[i] - t_now) / TIME_SCALE)
+        x[i, WINDOW_END] = _clip((cand.vtw_end[i] - t_now) / TIME_SCALE)
+        x[i, LATEST_START] = _clip((cand.vtw_end[i] - cand.duration[i] - t_now) / TIME_SCALE)
         if alive_count[i] > 0:
-            x[i, 7] = _clip((node_time[first_alive[i]] - t_now) / TIME_SCALE)
+            x[i, EARLIEST_START] = _clip((node_time[first_alive[i]] - t_now) / TIME_SCALE)
         else:
-            x[i, 7] = 0.0
-        x[i, 8] = alive_count[i] / total if total > 0 else 0.0
+            x[i, EARLIEST_START] = 0.0
+        x[i, ALIVE_FRACTION] = alive_count[i] / total if total > 0 else 0.0
         for f in range(static.shape[1]):
-            x[i, 9 + f] = static[i, f]
+            x[i, STATIC + f] = static[i, f]
     # selectable: the earliest start is the node reached from the last one
     for a in range(indptr[last], indptr[last + 1]):
         v = dst[a]
         if alive[v]:
-            x[node_acq[v], 7] = _clip((node_time[v] - t_now) / TIME_SCALE)
+            x[node_acq[v], EARLIEST_START] = _clip((node_time[v] - t_now) / TIME_SCALE)
 
     m = 0
     # every allowed action gets its edge from the last node, whatever the instance size
@@ -97,8 +134,8 @@ def build_observation(node_acq, node_time, node_finish, indptr, dst, acq_ptr, vt
     if k_last_cap > 0:
         k_last = min(k_last, k_last_cap)
     if last_acq >= 0:
-        m = _edges_from(last, last_acq, 1.0, k_last, node_acq, node_time, node_finish, indptr, dst, alive,
-                        edge_index, edge_attr, m, e_max)
+        m = _edges_from(node_acq, node_time, node_finish, indptr, dst, alive, last, last_acq, 1.0, k_last,
+                        edge_index, edge_attr, m)
     if full:
         stamp = np.full(n, -1, dtype=np.int64)
         for i in range(n):
@@ -120,15 +157,42 @@ def build_observation(node_acq, node_time, node_finish, indptr, dst, acq_ptr, vt
         for i in range(n):
             if alive_count[i] == 0:
                 continue
-            m = _edges_from(first_alive[i], i, 0.0, k_out, node_acq, node_time, node_finish, indptr, dst, alive,
-                            edge_index, edge_attr, m, e_max)
+            m = _edges_from(node_acq, node_time, node_finish, indptr, dst, alive, first_alive[i], i, 0.0, k_out,
+                            edge_index, edge_attr, m)
     return m
 
 
 @numba.njit(cache=True)
-def _edges_from(u, i, flag, k, node_acq, node_time, node_finish, indptr, dst, alive, edge_index, edge_attr, m,
-                e_max):
-    """Append the (at most k) arcs out of node u to alive nodes reaching the earliest start times."""
+def step_and_observe(g, ep, cand, action, k_out, k_last_cap, full, x, edge_index, edge_attr):
+    """eosp.envs.core.step, then :func:`build_observation` of the new state: one kernel call per environment
+    step (each call unpacks the tuples again).  Returns (new node, number of edges); (-1, 0) and the state
+    unchanged if `action` is not allowed."""
+    w = step(g, ep, action)
+    if w < 0:
+        return w, 0
+    return w, build_observation(g, ep, cand, k_out, k_last_cap, full, x, edge_index, edge_attr)
+
+
+@numba.njit(cache=True)
+def step_and_observe_fields(g_fields, ep_fields, cand_fields, action, k_out, k_last_cap, full, x, edge_index,
+                            edge_attr):
+    """:func:`step_and_observe` called with ``tuple(g), tuple(ep), tuple(cand)``: the environment's hot path.
+
+    Numba's dispatcher types a plain tuple of arrays about twice as fast as a NamedTuple (measured 1.2 vs
+    2.1 us for 12 arrays: a third of a small instance's step); the NamedTuples are rebuilt here, for free.
+    """
+    return step_and_observe(EnvGraph(*g_fields), Episode(*ep_fields), Candidates(*cand_fields), action, k_out,
+                            k_last_cap, full, x, edge_index, edge_attr)
+
+
+@numba.njit(cache=True)
+def _edges_from(node_acq, node_time, node_finish, indptr, dst, alive, u, i, flag, k, edge_index, edge_attr, m):
+    """Append edges from acquisition i: the (at most k) arcs out of its node u to alive nodes reaching the
+    earliest start times; returns the new number of edges.
+
+    Called once per acquisition: it takes the few arrays it reads, not the EnvGraph tuple, whose every
+    array a call would reference-count (measured: +70% on build_observation)."""
+    e_max = edge_index.shape[1]
     best_t = np.full(k, np.inf)
     best_v = np.full(k, -1, dtype=np.int64)
     for a in range(indptr[u], indptr[u + 1]):

@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from eosp.envs.core import EnvGraph, prepare
-from eosp.envs.observation import static_features
+from eosp.envs.observation import Candidates, candidates
 from eosp.instances.instance import Instance
 
 
@@ -23,7 +23,7 @@ from eosp.instances.instance import Instance
 class PreparedInstance:
     inst: Instance
     eg: EnvGraph
-    static: np.ndarray  # float32 [n, N_STATIC]
+    cand: Candidates  # the acquisitions' arrays of the observation
     priority: np.ndarray  # int8 [n]
     mean_utility: float
 
@@ -32,7 +32,7 @@ def prepare_instance(inst: Instance, prune: bool = True) -> PreparedInstance:
     pg = inst.graph_for(prune)
     prio = inst.priorities()
     return PreparedInstance(inst, prepare(pg, inst.acqs.duration),
-                            static_features(inst.acqs.duration, inst.acqs.utility, prio, inst.acqs.attitude),
+                            candidates(inst.acqs, prio),
                             prio, float(np.mean(inst.acqs.utility)))
 
 

@@ -30,7 +30,7 @@ from torch import nn
 from torch_geometric.nn import GATv2Conv
 
 from eosp.config import ModelConfig
-from eosp.envs.observation import N_EDGE_FEATURES, N_NODE_FEATURES
+from eosp.envs.observation import LAST, N_EDGE_FEATURES, N_NODE_FEATURES, REMOVED, SCHEDULED
 
 PRECEDENCE, REVERSE, TO_GLOBAL, FROM_GLOBAL = range(4)
 MASKED = -1e9  # logit of a forbidden action
@@ -67,7 +67,7 @@ def batch_from_padded(obs: dict[str, torch.Tensor]) -> tuple[GraphBatch, torch.T
     m = obs["n_edges"].reshape(b).long()
     dev = x.device
     in_range = torch.arange(n_max, device=dev)[None, :] < n[:, None]
-    active = (x[..., 1] == 0) & ((x[..., 0] == 0) | (x[..., 3] == 1))  # not removed; not scheduled unless last
+    active = (x[..., REMOVED] == 0) & ((x[..., SCHEDULED] == 0) | (x[..., LAST] == 1))  # not removed; not scheduled unless last
     node_valid = in_range & active
     slot_to_node = torch.cumsum(node_valid.reshape(-1).long(), 0) - 1  # flattened slot -> node index
     e_max = obs["edge_index"].shape[-1]

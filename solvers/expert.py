@@ -149,7 +149,7 @@ def objective(inst, mode: str) -> np.ndarray:
 def state_residual(env) -> Residual:
     """The residual problem of an :class:`eosp.envs.eosp_env.EOSPEnv`'s current state."""
     s = env.state
-    return residual(s.prepared.eg, s.alive, int(s.scalars[1]))
+    return residual(s.prepared.eg, s.ep.alive, int(s.ep.last[0]))
 
 
 def child_residual(env, action: int) -> Residual:
@@ -157,18 +157,16 @@ def child_residual(env, action: int) -> Residual:
     from eosp.envs import core
 
     s = env.state
-    eg = s.prepared.eg
-    alive, count, path, scalars = s.alive.copy(), s.alive_count.copy(), s.path.copy(), s.scalars.copy()
-    w = core.apply_action(eg.node_acq, eg.indptr, eg.dst, eg.acq_ptr, eg.rindptr, eg.rsrc, eg.order, eg.pos,
-                          alive, count, path, scalars, int(action))
+    child = s.ep.copy()
+    w = core.apply_action(s.prepared.eg, child, int(action))
     if w < 0:
         raise ValueError(f"action {action} is not allowed in this state")
-    return residual(eg, alive, int(w))
+    return residual(s.prepared.eg, child.alive, int(w))
 
 
 def action_values(env, weights: np.ndarray, beam: int = 4) -> tuple[np.ndarray, np.ndarray]:
     """Allowed actions and their values Q(s, a) = w_a + (beam search value of the child's residual)."""
-    allowed = np.flatnonzero(env.state.mask).astype(np.int32)
+    allowed = np.flatnonzero(env.state.ep.mask).astype(np.int32)
     q = np.array([weights[a] + beam_value(child_residual(env, int(a)), weights, beam) for a in allowed])
     return allowed, q
 

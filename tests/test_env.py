@@ -10,6 +10,7 @@ from hypothesis import strategies as st
 import eosp.envs  # noqa: F401  (registers EOSP-v0)
 from eosp.envs.eosp_env import EOSPEnv, InvalidAction
 from eosp.envs.sources import FixedSource
+from eosp.envs.observation import SELECTABLE
 from eosp.config import EnvConfig
 from eosp.instances.schedule import check
 from tests.conftest import generated
@@ -95,7 +96,7 @@ def test_mask_matches_the_paper_rules_and_every_insertion_is_feasible(n, seed, w
         mask = obs["action_mask"][:n]
         # never hides a feasible successor the graph still has, never allows one it does not have
         np.testing.assert_array_equal(mask, ref.mask(n))
-        assert np.array_equal(env.state.alive.nonzero()[0], np.array(sorted(ref.alive), dtype=np.int64))
+        assert np.array_equal(env.state.ep.alive.nonzero()[0], np.array(sorted(ref.alive), dtype=np.int64))
         if not mask.any():
             break
         a = int(rng.choice(np.flatnonzero(mask)))
@@ -144,8 +145,8 @@ def test_invalid_action_raises_and_leaves_state_unchanged():
         with pytest.raises(InvalidAction, match="not allowed"):
             env.step(bad)
     after = env.snapshot()
-    for f in ("alive", "alive_count", "path", "scalars", "mask"):
-        np.testing.assert_array_equal(getattr(before, f), getattr(after, f))
+    for f in before.ep._fields:  # every array of the episode state
+        np.testing.assert_array_equal(getattr(before.ep, f), getattr(after.ep, f), err_msg=f)
 
 
 def test_snapshot_restore_replays_identically():
@@ -184,14 +185,14 @@ def test_observation_shapes_dtypes_and_edges():
         assert np.all(src < 30) and np.all(dst < 30) and np.all(src != dst)
         assert np.all(obs["x"][30:] == 0)
         # every selectable acquisition is flagged
-        np.testing.assert_array_equal(obs["x"][:30, 2], obs["action_mask"][:30])
+        np.testing.assert_array_equal(obs["x"][:30, SELECTABLE], obs["action_mask"][:30])
     # the full graph at reset is the continuous graph of the alive part
     from eosp.graphs.continuous import continuous_graph
 
     env = EOSPEnv(EnvConfig(max_acquisitions=30, obs_edges="full", max_edges=5000), source=FixedSource(inst))
     obs, _ = env.reset(seed=0)
     m = int(obs["n_edges"][0])
-    s, t = continuous_graph(inst.pruned(), env.state.alive.astype(bool))
+    s, t = continuous_graph(inst.pruned(), env.state.ep.alive.astype(bool))
     assert set(zip(*obs["edge_index"][:, :m].tolist())) == set(zip(s.tolist(), t.tolist()))
 
 

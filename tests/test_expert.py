@@ -23,7 +23,7 @@ ROOT = Path(__file__).resolve().parents[1]
 
 def brute_best(env, w) -> float:
     """Best remaining objective from the env's state, by trying every action sequence (independent of the DP)."""
-    allowed = np.flatnonzero(env.state.mask)
+    allowed = np.flatnonzero(env.state.ep.mask)
     best = 0.0
     for a in allowed:
         snap = env.snapshot()
@@ -42,7 +42,7 @@ def test_residual_optimum_and_optimal_sets_match_brute_force(mode, seed):
     w = expert.objective(inst, mode)
     rng = np.random.default_rng(seed)
     for _ in range(3):  # the initial state and two states further down a random path
-        if not env.state.mask.any():
+        if not env.state.ep.mask.any():
             break
         best = brute_best(env, w)
         path = expert.optimal_path(expert.state_residual(env), w, unitary=mode == "unitary", time_limit=30)
@@ -86,11 +86,11 @@ def test_demos_replay_to_the_expert_value_with_allowed_actions(demo_shard, mode)
         env.reset()
         w = expert.objective(p.inst, mode)
         for t, a in enumerate(d.actions):
-            assert env.state.mask[a], (d.name, t, a)
+            assert env.state.ep.mask[a], (d.name, t, a)
             assert a in d.optimal[t]
             assert d.return_to_go[t] == pytest.approx(w[d.actions[t:]].sum(), rel=1e-12)
             env.step(int(a))
-        got = env.state.value if mode == "utility" else float(env.state.scalars[0])
+        got = env.state.value if mode == "utility" else float(env.state.ep.n_scheduled[0])
         assert got == pytest.approx(d.value, rel=1e-12, abs=0)
         assert d.status == "optimal" and d.bound == d.value
         # the environment's graph is pruned: its optimum can only be below the unpruned one (here equal)
@@ -116,7 +116,7 @@ def test_demos_of_another_shard_or_with_a_forbidden_action_are_refused(demo_shar
     d0 = read_demos(demo_shard, "unitary", prepared)[0]
     env = EOSPEnv(EnvConfig(max_acquisitions=0), source=FixedSource(prepared[0]))
     env.reset()
-    bad = int(np.flatnonzero(env.state.mask == 0)[0])
+    bad = int(np.flatnonzero(env.state.ep.mask == 0)[0])
     d0.actions = np.array([bad] + acts[1:len(d0.actions)], np.int32)
     with pytest.raises(InputError, match="step 0: action .* is not allowed"):
         list(replay(env, prepared[0], d0, f))

@@ -84,7 +84,7 @@ def solve_shard(shard: str | Path, mode: str, *, time_limit: float, action_sets:
         togo = np.cumsum(rewards[::-1])[::-1] if rewards.size else rewards
         for step, a in enumerate(path.actions):
             opt: list[int] = []
-            n_allowed = int(env.state.mask.sum())
+            n_allowed = int(env.state.ep.mask.sum())
             if action_sets:
                 allowed, q = expert.action_values(env, w, beam)
                 q[allowed == a] = np.maximum(q[allowed == a], togo[step])  # the expert's value is exact
@@ -212,8 +212,8 @@ def replay(env, prepared, demo: Demo, path: Path | None = None):
     obs, _ = env.reset(options={"instance": prepared})
     for t, a in enumerate(demo.actions):
         yield obs, t
-        if not env.state.mask[a]:
+        if not env.state.ep.mask[a]:
             raise InputError(path or demo.shard, f"instance {demo.index} step {t}: action {int(a)} is not allowed "
                                                  f"by the environment (allowed: "
-                                                 f"{np.flatnonzero(env.state.mask).tolist()})", column="action")
+                                                 f"{np.flatnonzero(env.state.ep.mask).tolist()})", column="action")
         obs, *_ = env.step(int(a))
