@@ -10,16 +10,14 @@ and reported separately.  Prints a Markdown table.
 from __future__ import annotations
 
 import argparse
-import sys
 import time
-from pathlib import Path
 
-import numpy as np  # noqa: E402
+import numpy as np
 
-from eosp.envs.eosp_env import EOSPEnv  # noqa: E402
-from eosp.envs.sources import FixedSource  # noqa: E402
-from eosp.config import EnvConfig, family_config  # noqa: E402
-from eosp.instances.generator import generate  # noqa: E402
+from eosp.envs.eosp_env import EOSPEnv
+from eosp.envs.sources import FixedSource
+from eosp.config import EnvConfig, family_config
+from eosp.instances.generator import generate
 
 
 def run(n: int, family: str, episodes: int, obs_edges: str, snapshot: bool) -> dict:

@@ -11,19 +11,18 @@ from __future__ import annotations
 
 import argparse
 import os
-import sys
 import tempfile
 import time
 from pathlib import Path
 
-import numpy as np  # noqa: E402
+import numpy as np
 
-from eosp.config import family_config  # noqa: E402
-from eosp.graphs.build import build_arcs  # noqa: E402
-from eosp.graphs.continuous import continuous_graph  # noqa: E402
-from eosp.graphs.prune import prune  # noqa: E402
-from eosp.instances.generator import generate, scenario_of  # noqa: E402
-from eosp.shards.io import write_shard  # noqa: E402
+from eosp.config import family_config
+from eosp.graphs.build import build_arcs
+from eosp.graphs.continuous import continuous_graph
+from eosp.graphs.prune import prune
+from eosp.instances.generator import generate, scenario_of
+from eosp.shards.io import write_shard
 
 
 def bench(family: str, n: int, seed: int, step: float) -> dict:

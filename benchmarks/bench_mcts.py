@@ -11,17 +11,15 @@ thread-minutes per instance for MCTS(100)).
 from __future__ import annotations
 
 import argparse
-import sys
 import time
-from pathlib import Path
 
-import torch  # noqa: E402
+import torch
 
-from eosp.envs.sources import prepare_instance  # noqa: E402
-from eosp.config import MODEL_PRESETS, EnvConfig, ModelConfig, family_config  # noqa: E402
-from eosp.instances.generator import generate  # noqa: E402
-from eosp.models.agent import EOSPAgent  # noqa: E402
-from eosp.solvers.mcts import solve  # noqa: E402
+from eosp.envs.sources import prepare_instance
+from eosp.config import MODEL_PRESETS, EnvConfig, ModelConfig, family_config
+from eosp.instances.generator import generate
+from eosp.models.agent import EOSPAgent
+from eosp.solvers.mcts import solve
 
 
 def main() -> None:

@@ -15,16 +15,15 @@ from __future__ import annotations
 
 import argparse
 import json
-import sys
 import time
 from pathlib import Path
 
-import numpy as np  # noqa: E402
+import numpy as np
 
-from eosp.config import family_config  # noqa: E402
-from eosp.instances.generator import generate  # noqa: E402
-from eosp.instances.schedule import check, from_internal_nodes  # noqa: E402
-from eosp.solvers import exact, greedy, ramp  # noqa: E402
+from eosp.config import family_config
+from eosp.instances.generator import generate
+from eosp.instances.schedule import check, from_internal_nodes
+from eosp.solvers import exact, greedy, ramp
 
 MODES = ("utility", "unitary")
 

@@ -224,6 +224,8 @@ def log_agent_model(checkpoint: Path) -> None:
     # the file itself is logged (MLflow runs it when loading), never a pickled object
     code = Path(importlib.util.find_spec("eosp.training.mlflow_model").origin)
     try:
+        # a progress bar for copying two small local files is noise in a job's log
+        os.environ.setdefault("MLFLOW_ENABLE_ARTIFACTS_PROGRESS_BAR", "false")
         mlflow.pyfunc.log_model(name="agent", python_model=str(code), artifacts={"agent": str(checkpoint)})
     except Exception as exc:  # logging the model must not lose the run
         print(f"[train] warning: could not log the MLflow model: {exc}", file=sys.stderr)

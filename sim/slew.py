@@ -52,19 +52,6 @@ def slew_time(angle_deg: float, model: np.ndarray) -> float:
     return angle_deg / rate + rate / accel + settle
 
 
-@numba.njit(cache=True)
-def rotation_angle(droll_deg: float, dpitch_deg: float) -> float:
-    """Scalar twin of :func:`eosp.sim.geometry.rotation_angle_deg`."""
-    cr = np.cos(np.deg2rad(droll_deg))
-    cp = np.cos(np.deg2rad(dpitch_deg))
-    c = (cp + cr + cr * cp - 1.0) * 0.5
-    if c > 1.0:
-        c = 1.0
-    elif c < -1.0:
-        c = -1.0
-    return np.rad2deg(np.arccos(c))
-
-
 def slew_times(angles_deg: np.ndarray, model: np.ndarray) -> np.ndarray:
     """Vectorized slew time (plain numpy, independent of the numba kernel; used by checks)."""
     angles_deg = np.asarray(angles_deg, dtype=np.float64)

@@ -167,15 +167,6 @@ def lagrangian(graph: DiscreteGraph, weights: np.ndarray, *, wait: bool, lower: 
     return LagrangianBound(best, best_lam, togo, it, time.perf_counter() - t0)
 
 
-def longest_path_bound(graph: DiscreteGraph, weights: np.ndarray, *, wait: bool) -> float:
-    """The bound ignoring "at most once" entirely (lam = 0): cheap but weak."""
-    order = topological_order(graph)
-    togo = np.zeros(graph.n_nodes, dtype=np.float64)
-    nxt = np.full(graph.n_nodes, -1, dtype=np.int32)
-    return float(togo_pass(order, graph.indptr, graph.dst, graph.node_acq,
-                           np.asarray(weights, dtype=np.float64), togo, nxt, wait))
-
-
 def upper_bound(inst: Instance, mode: str = "utility", *, lower: float | None = None, iterations: int = 300,
                 time_limit: float | None = None) -> float:
     """An upper bound of the value of every schedule (path of the unpruned graph), at any size.

@@ -34,7 +34,10 @@ def ppo_config(cfg: RunConfig):
     from ray.rllib.core.rl_module.rl_module import RLModuleSpec
 
     from eosp.envs.eosp_env import EOSPEnv
-    from eosp.training.rl_module import EOSPTorchRLModule
+    from eosp.training.rl_module import EOSPTorchRLModule, drop_log_message
+
+    # RLlib announces the new API stack to every PPO user (it is the default, and what this project uses)
+    drop_log_message("ray.rllib.algorithms.algorithm_config", "on the new API stack! This is the new default")
 
     t = cfg.train
     scale = cfg.model.value_scale or 1.0
@@ -60,7 +63,7 @@ def ppo_config(cfg: RunConfig):
                   entropy_coeff=t.entropy_coeff, vf_loss_coeff=t.vf_loss_coeff / scale**2, vf_clip_param=1e12,
                   grad_clip=t.grad_clip, use_kl_loss=False)
         .fault_tolerance(restart_failed_env_runners=True)
-        .debugging(seed=t.seed, log_level="WARN")
+        .debugging(seed=t.seed, log_level="WARN", log_sys_usage=False)  # perf/*: our own, training/loop.py
         .reporting(metrics_num_episodes_for_smoothing=20)
     )
     return pc

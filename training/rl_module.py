@@ -10,6 +10,7 @@ the global node.  ``_forward_train`` returns the value through
 
 from __future__ import annotations
 
+import logging
 from dataclasses import fields
 from typing import Any
 
@@ -20,6 +21,21 @@ from ray.rllib.core.rl_module.torch.torch_rl_module import TorchRLModule
 
 from eosp.config import ModelConfig, from_dict
 from eosp.models.agent import EOSPAgent, batch_from_padded
+
+
+def drop_log_message(logger: str, text: str) -> None:
+    """Drop the records of `logger` that contain `text` (once per process, for messages known harmless)."""
+    log = logging.getLogger(logger)
+    if not any(getattr(f, "eosp_text", None) == text for f in log.filters):
+        f = logging.Filter()
+        f.eosp_text = text
+        f.filter = lambda record: text not in record.getMessage()
+        log.addFilter(f)
+
+
+# RLlib's RLModule.__init__ itself builds the deprecated RLModuleConfig (kept for old custom models), which
+# warns in every process that builds a module, whatever the caller does (ray 2.5x): nothing to fix on our side.
+drop_log_message("ray._common.deprecation", "RLModule(config=[RLModuleConfig object])")
 
 
 class EOSPTorchRLModule(TorchRLModule, ValueFunctionAPI):
