@@ -242,7 +242,11 @@ class DemoConfig:
     """Also label every step with the set of optimal actions (values of all allowed actions by RAMP's beam
     search on each child state): ties are common and a learner should not be taught one arbitrary choice."""
     beam: int = 4
-    """Beam of the search that values the allowed actions of a step."""
+    """Beam of the search that values the allowed actions of a step (a lower bound of each value: a smaller
+    beam can only miss optimal actions, never add a wrong one; 1 is about twice as fast as 4)."""
+    sets_max_acquisitions: int = 0
+    """Label action sets only on instances of at most this many acquisitions (the cost grows about with the
+    square of the size); larger ones keep the expert's action alone.  0: all."""
     prune: bool = True
     """Solve in the environment's pruned graph (what the policy plays in); must match the env's prune."""
 
@@ -266,6 +270,13 @@ class ImitationConfig:
     weight_decay: float = 0.0
     value_coeff: float = 0.5
     """Weight of the value regression (remaining expert return) next to the action cross-entropy."""
+    regret_coeff: float = 0.0
+    """Weight of the expected regret under the policy, sum_a pi(a|s) (Q*(s) - Q(s,a)) / optimum, on states whose
+    demos carry the values of all actions (jobs/build_demos.py --action-sets): it weighs each decision by what
+    it costs, which the cross-entropy does not (utility mode: a top-class decision against a class-6 one)."""
+    set_tolerance: float = 0.0
+    """With action values: actions whose regret / optimum is at most this count as optimal (e.g. 1e-6 makes
+    choices that differ by less than a millionth of the schedule's value ties)."""
     grad_clip: float = 1.0
     dagger_every: int = 0
     """Every this many epochs, roll out the current policy and label its states with the expert's optimal

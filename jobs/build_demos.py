@@ -42,14 +42,15 @@ def run(cfg: DemoConfig, ray_cfg: RayConfig) -> dict:
     for data in cfg.data:
         for shard in dataset_shards(data):
             for mode in cfg.modes:
-                if is_complete(demo_file(Path(shard), mode), mode):
+                if is_complete(demo_file(Path(shard), mode), mode, cfg.action_sets):
                     skipped += 1
                 else:
                     jobs.append((Path(shard), mode))
     init_ray(ray_cfg.address, ray_cfg.num_cpus)
     task = ray.remote(num_cpus=1)(solve_shard)
     pending = {task.remote(str(s), m, time_limit=cfg.time_limit, action_sets=cfg.action_sets, beam=cfg.beam,
-                           prune=cfg.prune, out=str(demo_file(s, m))): (s, m) for s, m in jobs}
+                           prune=cfg.prune, out=str(demo_file(s, m)),
+                           sets_max_acquisitions=cfg.sets_max_acquisitions): (s, m) for s, m in jobs}
     print(f"[build_demos] {len(jobs)} (shard, mode) tasks, {skipped} already done", flush=True)
     done: list[dict] = []
     t0 = time.perf_counter()
