@@ -64,11 +64,11 @@ def check_output_file(dest: str | os.PathLike, suffixes: Sequence[str] = (),
     an existing file is only replaced when ``owned(path)`` says this tool wrote it.
     """
     dest = Path(dest)
+    if dest.is_dir():
+        raise InputError(dest, f"is a directory: give the path of the {what} to write")
     if suffixes and dest.suffix.lower() not in suffixes:
         raise InputError(dest, f"unknown extension {dest.suffix or '(none)'!r} for a {what}: use "
                                + " or ".join(suffixes))
-    if dest.is_dir():
-        raise InputError(dest, f"is a directory: give the path of the {what} to write")
     if dest.exists() and not dest.is_file():
         raise InputError(dest, "exists and is not a regular file")
     if dest.exists() and owned is not None and not owned(dest):

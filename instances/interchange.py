@@ -101,7 +101,9 @@ def read_acquisitions(path: Path) -> tuple[Acquisitions, np.ndarray]:
             _fail_rows(path, ~np.isfinite(cols[name]), name, "NaN or infinite value")
     _fail_rows(path, cols["duration"] <= 0, "duration", "duration must be > 0")
     _fail_rows(path, cols["utility"] <= 0, "utility", "utility must be > 0")
-    _fail_rows(path, ~np.isfinite(np.cumsum(cols["utility"])), "utility",
+    with np.errstate(over="ignore"):
+        running = np.cumsum(cols["utility"])
+    _fail_rows(path, ~np.isfinite(running), "utility",
                "the utilities add up past the largest float (1.8e308): scale them down")
     _fail_rows(path, cols["vtw_end"] < cols["vtw_start"], "vtw_end", "window ends before it starts")
     _fail_rows(path, cols["vtw_end"] - cols["duration"] < cols["vtw_start"] - TIME_TOL, "duration",

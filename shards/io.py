@@ -258,7 +258,9 @@ def _check_values(path: Path, row: int, acqs: Acquisitions, node_time: np.ndarra
     if np.any(acqs.duration <= 0) or np.any(acqs.utility <= 0):
         raise InputError(path, "durations and utilities must be > 0", column="utility" if np.any(acqs.utility <= 0)
                          else "duration", row=row)
-    if not np.isfinite(np.sum(acqs.utility)):
+    with np.errstate(over="ignore"):
+        total = np.sum(acqs.utility)
+    if not np.isfinite(total):
         raise InputError(path, "the utilities add up past the largest float (1.8e308)", column="utility", row=row)
     if node_ids.size and (node_ids.min() < 0 or np.unique(node_ids).size != node_ids.size):
         raise InputError(path, "node ids must be distinct and >= 0", column="node_ids", row=row)
