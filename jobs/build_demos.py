@@ -80,6 +80,10 @@ def main(argv: list[str] | None = None) -> int:
     add_config_args(p, RayConfig, prefix="ray.")
     ns = p.parse_args(argv)
     cfg = config_from_args(DemoConfig, ns)
+    from eosp.jobs.preflight import require_findable
+
+    for data in cfg.data:  # the demos are written under <data>/demos/
+        require_findable(data, "--data")
     try:
         out = run(cfg, prefixed_config(RayConfig, ns, "ray."))
     except InputError as exc:

@@ -127,6 +127,10 @@ def run(cfg: PretrainConfig) -> dict:
 
 def main(argv: list[str] | None = None) -> int:
     cfg = parse(argv)
+    from eosp.jobs.preflight import check_mlflow, require_findable
+
+    require_findable(cfg.imitation.run_dir, "--imitation.run-dir")
+    check_mlflow(cfg.imitation.mlflow_uri, "--imitation.mlflow-uri")
     try:
         out = run(cfg)
     except InputError as exc:
