@@ -65,7 +65,7 @@ def solve_shard(shard: str | Path, mode: str, *, time_limit: float, action_sets:
     """Solve every instance of a shard in `mode`, replay it in the environment, write the demos file."""
     from eosp.config import EnvConfig
     from eosp.envs.eosp_env import EOSPEnv
-    from eosp.envs.sources import prepare_instance
+    from eosp.envs.sources import FixedSource, prepare_instance
     from eosp.shards.io import ShardReader
     from eosp.solvers import expert
 
@@ -79,7 +79,7 @@ def solve_shard(shard: str | Path, mode: str, *, time_limit: float, action_sets:
         prepared = prepare_instance(reader.read(k, unpruned=False), prune)
         sigs.append(graph_signature(prepared))
         if env is None or prepared.inst.n_acq > env.n_max:
-            env = EOSPEnv(EnvConfig(max_acquisitions=0, prune=prune), source=_Fixed(prepared))
+            env = EOSPEnv(EnvConfig(max_acquisitions=0, prune=prune), source=FixedSource(prepared))
         env.reset(options={"instance": prepared})
         w = expert.objective(prepared.inst, mode)
         path = expert.optimal_path(expert.state_residual(env), w, unitary=unitary, time_limit=time_limit)
@@ -120,19 +120,6 @@ def solve_shard(shard: str | Path, mode: str, *, time_limit: float, action_sets:
     with atomic_path(out) as tmp:
         pq.write_table(table.replace_schema_metadata(meta), tmp)
     return {"file": out.name, "shard": Path(shard).name, **stats, "seconds": round(time.perf_counter() - t0, 3)}
-
-
-class _Fixed:
-    """A one-instance source for an environment that is always reset with an explicit instance."""
-
-    def __init__(self, prepared):
-        self.prepared = prepared
-
-    def max_acquisitions(self) -> int:
-        return self.prepared.inst.n_acq
-
-    def sample(self, rng):
-        return self.prepared
 
 
 @dataclass
