@@ -68,7 +68,7 @@ def run(cfg: DemoConfig, ray_cfg: RayConfig) -> dict:
             d = Path(data) / "demos" / m
             entries = [x for x in done if x["data"] == str(Path(data)) and x["mode"] == m]
             manifest = {"config": to_dict(cfg), "mode": m, "written_this_run": entries,
-                        "files": sorted(p.name for p in d.glob("shard-*.parquet"))}
+                        "files": sorted(p.name for p in d.glob("*.parquet"))}
             with atomic_path(d / "manifest.json") as tmp:
                 tmp.write_text(json.dumps(manifest, indent=1))
     return {"tasks": done, "skipped": skipped, "wall_seconds": round(wall, 3)}
