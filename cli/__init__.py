@@ -8,12 +8,13 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 import time
 from pathlib import Path
 
 from eosp.args import add_config_args, config_from_args
-from eosp.config import InstanceConfig, family_config
+from eosp.config import InstanceConfig, SolveConfig, family_config
 from eosp.errors import InputError
 
 
@@ -25,14 +26,17 @@ def _load_instance(path: str):
         from eosp.shards.io import ShardReader
 
         file, _, idx = path.rpartition("#")
+        if not idx.isdigit():
+            raise InputError(path, f"expected SHARD.parquet#INDEX with INDEX a number >= 0, got {idx!r}")
         return ShardReader(file).read(int(idx))
     return read_instance(path)
 
 
 def cmd_generate(ns: argparse.Namespace) -> int:
     from eosp.instances.generator import generate
-    from eosp.instances.interchange import write_instance
+    from eosp.instances.interchange import check_instance_out, write_instance
 
+    check_instance_out(ns.out, overwrite=ns.overwrite)
     # the family's settings first, then every flag given
     base = family_config(getattr(ns, "family", "uniform"), 100, 0)
     cfg = config_from_args(InstanceConfig, ns, base=base)
@@ -46,18 +50,27 @@ def cmd_generate(ns: argparse.Namespace) -> int:
 
 def cmd_import(ns: argparse.Namespace) -> int:
     from eosp.instances.interchange import read_instance
-    from eosp.shards.io import write_shard
+    from eosp.shards.io import check_shard_out, write_shard
 
-    insts = [read_instance(d) for d in ns.instance_dirs]
+    check_shard_out(ns.out)
+    insts, first = [], {}
+    for d in ns.instance_dirs:
+        inst = read_instance(d)
+        if inst.name in first:  # a shard's instances are told apart by their names
+            raise InputError(d, f"instance name {inst.name!r} already given by {first[inst.name]}: a shard holds "
+                                "distinct instances (rename one in its meta.json)")
+        first[inst.name] = d
+        insts.append(inst)
     write_shard(ns.out, insts, include_unpruned=not ns.pruned_only)
     print(f"{ns.out}: {len(insts)} instance(s)")
     return 0
 
 
 def cmd_export(ns: argparse.Namespace) -> int:
-    from eosp.instances.interchange import write_instance
+    from eosp.instances.interchange import check_instance_out, write_instance
     from eosp.shards.io import ShardReader
 
+    check_instance_out(ns.out, overwrite=ns.overwrite)
     reader = ShardReader(ns.shard)
     inst = reader.read(ns.index)
     if inst.unpruned_graph is None:
@@ -96,16 +109,20 @@ def cmd_validate(ns: argparse.Namespace) -> int:
 
 
 def cmd_solve(ns: argparse.Namespace) -> int:
-    from eosp.instances.schedule import check, from_internal_nodes, write_schedule
+    from eosp.instances.schedule import check, check_schedule_out, from_internal_nodes, write_schedule
     from eosp.solvers.base import get_solver
 
+    cfg = config_from_args(SolveConfig, ns)
+    check_schedule_out(ns.out)
+    if ns.checkpoint and not Path(ns.checkpoint).exists():
+        raise InputError(ns.checkpoint, "checkpoint not found")
     inst = _load_instance(ns.instance_dir)
     solver = get_solver(ns.solver)
-    kwargs = {"mode": ns.mode, "time_limit": ns.time_limit, "seed": ns.seed}
+    kwargs = {"mode": cfg.mode, "time_limit": cfg.time_limit or None, "seed": cfg.seed}
     if ns.checkpoint:
         kwargs["checkpoint"] = ns.checkpoint
-    if ns.budget is not None:
-        kwargs["budget"] = ns.budget
+    if cfg.budget:
+        kwargs["budget"] = cfg.budget
     if ns.sample:
         kwargs["sample"] = True
     if ns.gumbel:
@@ -139,6 +156,10 @@ def cmd_plot(ns: argparse.Namespace) -> int:
 
     from eosp.instances.schedule import check
 
+    from eosp.atomic import check_output_file
+
+    for ext in (".png", ".svg"):
+        check_output_file(Path(ns.out).with_suffix(ext), what="plot")
     inst = _load_instance(ns.instance_dir)
     schedules = {Path(s).stem: read_schedule(s) for s in ns.schedules}
     for name, sched in zip(ns.schedules, schedules.values()):
@@ -152,8 +173,10 @@ def cmd_plot(ns: argparse.Namespace) -> int:
 
 def cmd_report(ns: argparse.Namespace) -> int:
     from eosp.evaluation.html_report import write_report
+    from eosp.atomic import check_output_file
     from eosp.instances.schedule import read_schedule
 
+    check_output_file(ns.out, (".html", ".htm"), what="HTML report")
     inst = _load_instance(ns.instance_dir)
     schedules = {}
     for path in ns.schedules:
@@ -208,11 +231,8 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("instance_dir", help="instance directory (or SHARD#INDEX)")
     s.add_argument("--solver", required=True)
     s.add_argument("--out", required=True, help="schedule file (.parquet, or .jsonl)")
-    s.add_argument("--mode", default="utility", choices=["utility", "unitary"])
-    s.add_argument("--time-limit", type=float, default=None, help="seconds, for the searching solvers")
-    s.add_argument("--seed", type=int, default=0)
-    s.add_argument("--checkpoint", default="", help="trained agent (policy, mcts solvers); default: the shipped pretrained model of --mode")
-    s.add_argument("--budget", type=int, default=None, help="MCTS simulations per decision")
+    add_config_args(s, SolveConfig)
+    s.add_argument("--checkpoint", default="", help="trained agent (policy, mcts, sample, beam solvers); default: the shipped pretrained model of --mode")
     s.add_argument("--sample", action="store_true", help="policy: sample actions (seeded) instead of argmax")
     s.add_argument("--gumbel", action="store_true", help="mcts: Gumbel root selection with sequential halving")
     s.add_argument("--samples", type=int, default=None, help="sample solver: episodes per batched round (16)")
@@ -248,6 +268,15 @@ def main(argv: list[str] | None = None) -> int:
     try:
         return ns.func(ns)
     except (InputError, FileExistsError, ValueError, IndexError) as exc:
+        print(f"eosp {ns.command}: error: {exc}", file=sys.stderr)
+        return 2
+    except BrokenPipeError:  # `eosp info X | head`: the reader left; stop quietly, as other tools do
+        try:
+            os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        except (OSError, ValueError):  # no real file descriptor (captured output)
+            pass
+        return 141
+    except OSError as exc:  # the system refused a path of the user's (permission, disk full, ...)
         print(f"eosp {ns.command}: error: {exc}", file=sys.stderr)
         return 2
 

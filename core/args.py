@@ -41,6 +41,22 @@ def _parse_bool(text: str) -> bool:
     raise argparse.ArgumentTypeError(f"expected true/false, got {text!r}")
 
 
+def _checked(cls: type, name: str, conv: Any) -> Any:
+    """An argparse type: `conv`, then the field's own checks (finite, range, choices: config.check_value)."""
+    from eosp.config import check_value
+
+    def parse(text: str) -> Any:
+        value = conv(text)
+        try:
+            check_value(cls, name, value)
+        except ValueError as exc:
+            raise argparse.ArgumentTypeError(str(exc).partition(": ")[2]) from None
+        return value
+
+    parse.__name__ = getattr(conv, "__name__", "value")  # argparse names the type in its messages
+    return parse
+
+
 def add_config_args(parser: argparse.ArgumentParser, cls: type, prefix: str = "",
                     defaults: Any | None = None) -> None:
     hints = typing.get_type_hints(cls)
@@ -61,11 +77,11 @@ def add_config_args(parser: argparse.ArgumentParser, cls: type, prefix: str = ""
                                 help=help_text)
         elif origin is tuple:
             elem = typing.get_args(hint)[0]
-            parser.add_argument(flag, dest=name, type=elem, nargs="+", default=argparse.SUPPRESS, help=help_text,
-                                metavar=elem.__name__.upper())
+            parser.add_argument(flag, dest=name, type=_checked(cls, f.name, elem), nargs="+",
+                                default=argparse.SUPPRESS, help=help_text, metavar=elem.__name__.upper())
         elif hint in (int, float, str):
-            parser.add_argument(flag, dest=name, type=hint, default=argparse.SUPPRESS, help=help_text,
-                                metavar=hint.__name__.upper())
+            parser.add_argument(flag, dest=name, type=_checked(cls, f.name, hint), default=argparse.SUPPRESS,
+                                help=help_text, metavar=hint.__name__.upper())
         else:
             parser.add_argument(flag, dest=name, type=str, default=argparse.SUPPRESS, help=help_text)
 

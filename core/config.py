@@ -9,8 +9,23 @@ a parameter such as ``hidden_dim`` goes from the command line
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field, fields, is_dataclass
+from dataclasses import Field, dataclass, field, fields, is_dataclass
 from typing import Any
+
+def ranged(default: Any, lo: float | None = None, hi: float | None = None, *, lo_open: bool = False) -> Any:
+    """A numeric field whose values (every element, for a tuple) must lie in [lo, hi] ((lo, hi] with
+    `lo_open`); every float field must besides be finite.  Checked by :func:`check_value` wherever a
+    value is set: command-line flags, :func:`apply_overrides`, :func:`from_dict`."""
+    meta = {"range": (lo, hi, lo_open)}
+    if isinstance(default, tuple):
+        return field(default_factory=lambda: default, metadata=meta)
+    return field(default=default, metadata=meta)
+
+
+def choice(default: str, *options: str) -> Any:
+    """A string field restricted to `options`."""
+    return field(default=default, metadata={"choices": options})
+
 
 # The seven priority classes of the paper, highest first (priority 0 = highest,
 # as in the interchange format).
@@ -86,7 +101,7 @@ class GraphConfig:
 class InstanceConfig:
     """One generated instance: everything needed to reproduce it bit for bit."""
 
-    n_acquisitions: int = 100
+    n_acquisitions: int = ranged(100, 1)
     seed: int = 0
     family: str = "uniform"
     """Generator family (uniform, clusters, conflict): its settings apply before other flags."""
@@ -130,8 +145,34 @@ def apply_overrides(cfg: Any, overrides: dict[str, Any]) -> Any:
         elif is_dataclass(current) and isinstance(value, dict):
             apply_overrides(current, value)
         else:
-            setattr(cfg, head, _coerce(type(cfg).__name__, head, current, value))
+            setattr(cfg, head, check_value(type(cfg), head, _coerce(type(cfg).__name__, head, current, value)))
     return cfg
+
+
+def _field(cls: type, name: str) -> Field:
+    return next(f for f in fields(cls) if f.name == name)
+
+
+def check_value(cls: type, name: str, value: Any) -> Any:
+    """`value` if field `name` of `cls` accepts it: floats finite, numbers in the field's range
+    (:func:`ranged`), strings among its choices (:func:`choice`); else a one-line ValueError."""
+    f = _field(cls, name)
+    items = value if isinstance(value, tuple) else (value,)
+    for v in items:
+        if isinstance(v, float) and v != v or isinstance(v, float) and v in (float("inf"), float("-inf")):
+            raise ValueError(f"{cls.__name__}.{name}: must be a finite number, got {v!r}")
+    if "range" in f.metadata:
+        lo, hi, lo_open = f.metadata["range"]
+        for v in items:
+            if isinstance(v, bool) or not isinstance(v, (int, float)):
+                continue
+            if lo is not None and (v <= lo if lo_open else v < lo) or hi is not None and v > hi:
+                where = (f"> {lo:g}" if lo_open else f">= {lo:g}") if hi is None else \
+                    f"in {'(' if lo_open else '['}{lo:g}, {hi:g}]"
+                raise ValueError(f"{cls.__name__}.{name}: must be {where}, got {v!r}")
+    if "choices" in f.metadata and value not in f.metadata["choices"]:
+        raise ValueError(f"{cls.__name__}.{name}: must be one of {', '.join(f.metadata['choices'])}, got {value!r}")
+    return value
 
 
 def default_mlflow_uri(uri: str = "") -> str:
@@ -213,9 +254,9 @@ class DatasetConfig:
     """Directory of the data set (shards and manifest.json)."""
     family: str = "uniform"
     """Generator family (see eosp.config.FAMILIES)."""
-    n_acquisitions: int = 100
-    n_instances: int = 16
-    per_shard: int = 8
+    n_acquisitions: int = ranged(100, 1)
+    n_instances: int = ranged(16, 1)
+    per_shard: int = ranged(8, 1)
     seed: int = 0
     """Instance k of the data set uses seed + k: data sets with distant seeds do not overlap."""
     include_unpruned: bool = True
@@ -234,13 +275,17 @@ class DemoConfig:
     modes: tuple[str, ...] = ("unitary", "utility")
     """Objectives solved: 'unitary' (count) and/or 'utility' (sum of utilities; serves the normalized and
     lexicographic rewards too)."""
-    time_limit: float = 30.0
+    time_limit: float = ranged(30.0, 0, lo_open=True)
     """Seconds of exact search per instance and mode; at the limit the best schedule found is kept with its gap."""
     action_sets: bool = True
     """Also label every step with the set of optimal actions (values of all allowed actions by RAMP's beam
     search on each child state): ties are common and a learner should not be taught one arbitrary choice."""
-    beam: int = 4
-    """Beam of the search that values the allowed actions of a step."""
+    beam: int = ranged(4, 1)
+    """Beam of the search that values the allowed actions of a step (a lower bound of each value: a smaller
+    beam can only miss optimal actions, never add a wrong one; 1 is about twice as fast as 4)."""
+    sets_max_acquisitions: int = ranged(0, 0)
+    """Label action sets only on instances of at most this many acquisitions (the cost grows about with the
+    square of the size); larger ones keep the expert's action alone.  0: all."""
     prune: bool = True
     """Solve in the environment's pruned graph (what the policy plays in); must match the env's prune."""
 
@@ -255,15 +300,22 @@ class ImitationConfig:
     """Validation data set (greedy decoding vs Greedy, RAMP and the exact optimum); empty: none."""
     preset: str = "cpu"
     """Model preset (MODEL_PRESETS); --model.* flags apply on top."""
-    epochs: int = 10
+    epochs: int = ranged(10, 1)
     """Passes over the demonstrations (and the states DAgger added)."""
-    time_budget: float = 0.0
+    time_budget: float = ranged(0.0, 0)
     """Stop after this many seconds of training (0: no limit); the best checkpoint is kept."""
-    batch_size: int = 64
-    lr: float = 1e-3
+    batch_size: int = ranged(64, 1)
+    lr: float = ranged(1e-3, 0, lo_open=True)
     weight_decay: float = 0.0
     value_coeff: float = 0.5
     """Weight of the value regression (remaining expert return) next to the action cross-entropy."""
+    regret_coeff: float = 0.0
+    """Weight of the expected regret under the policy, sum_a pi(a|s) (Q*(s) - Q(s,a)) / optimum, on states whose
+    demos carry the values of all actions (jobs/build_demos.py --action-sets): it weighs each decision by what
+    it costs, which the cross-entropy does not (utility mode: a top-class decision against a class-6 one)."""
+    set_tolerance: float = 0.0
+    """With action values: actions whose regret / optimum is at most this count as optimal (e.g. 1e-6 makes
+    choices that differ by less than a millionth of the schedule's value ties)."""
     grad_clip: float = 1.0
     dagger_every: int = 0
     """Every this many epochs, roll out the current policy and label its states with the expert's optimal
@@ -287,7 +339,7 @@ class ImitationConfig:
 class RayConfig:
     address: str = ""
     """Ray cluster address; empty: the RAY_ADDRESS variable if set (submitted job), else a local Ray."""
-    num_cpus: int = 2
+    num_cpus: int = ranged(2, 1)
     """CPUs of the local Ray (ignored on a cluster)."""
 
 
@@ -349,18 +401,18 @@ class TrainConfig:
     """Shard directory (or file) of the training instances."""
     val_data: str = "data/demo/val"
     """Held-out shards for periodic validation (greedy decoding); empty to skip."""
-    iterations: int = 10
+    iterations: int = ranged(10, 1)
     preset: str = "cpu"
     """Model preset applied before --model.* flags: 'cpu' or 'reference' (the paper's 64 x 10)."""
     num_env_runners: int = 1
     """Rollout workers; each owns its envs over its own subset of the shards."""
     num_envs_per_env_runner: int = 2
-    train_batch_size: int = 512
+    train_batch_size: int = ranged(512, 1)
     """Environment steps collected per iteration."""
-    minibatch_size: int = 128
-    num_epochs: int = 4
-    lr: float = 3e-4
-    gamma: float = 1.0
+    minibatch_size: int = ranged(128, 1)
+    num_epochs: int = ranged(4, 1)
+    lr: float = ranged(3e-4, 0, lo_open=True)
+    gamma: float = ranged(1.0, 0, 1)
     """Undiscounted, as in the paper."""
     gae_lambda: float = 0.95
     clip_param: float = 0.2
@@ -375,7 +427,7 @@ class TrainConfig:
     run_name: str = ""
     """Name of the run; empty: a timestamp.  --resume continues the run of this name."""
     resume: bool = False
-    time_budget: float = 0.0
+    time_budget: float = ranged(0.0, 0)
     """Make the iteration that starts past this many seconds of training the last one (0: no limit)."""
     init_checkpoint: str = ""
     """Start from this agent checkpoint (e.g. an imitation run's checkpoints/best): its model configuration
@@ -414,9 +466,9 @@ class EvalConfig:
     """Data set directories or shard files; instances are grouped by size in the report."""
     solvers: tuple[str, ...] = ("greedy", "ramp")
     """Any of: random, greedy, ramp, exact, policy, mcts, sample, beam."""
-    mode: str = "utility"
+    mode: str = choice("utility", "utility", "unitary")
     """'utility' or 'unitary' (count acquisitions)."""
-    time_limit: float = 60.0
+    time_limit: float = ranged(60.0, 0, lo_open=True)
     """Seconds per instance for the searching solvers (ramp, exact)."""
     search_time: float = 0.0
     """Seconds of search per instance for the learned searches (sample, beam); 0: no limit (one round of
@@ -426,13 +478,13 @@ class EvalConfig:
     beam_width: int = 4
     """Partial schedules kept by the beam solver."""
     checkpoint: str = ""
-    """Agent checkpoint for the policy and mcts solvers; empty: the shipped pretrained model of --mode."""
-    budgets: tuple[int, ...] = (0, 10, 100, 1000)
+    """Agent checkpoint for the policy, mcts, sample and beam solvers; empty: the shipped pretrained model of --mode."""
+    budgets: tuple[int, ...] = ranged((0, 10, 100, 1000), 0)
     """MCTS simulations per decision (mcts solver only)."""
     out: str = "runs/eval"
     """Directory of the results: results.parquet, report.md, schedules/."""
     save_schedules: bool = True
-    html_reports: int = 3
+    html_reports: int = ranged(3, 0)
     """Write the HTML report of `eosp report` (map, timeline, roll/pitch, summary of every solver's schedule) for
     the first N instances, in OUT/reports/, and log them to MLflow; 0 for none."""
     mlflow_uri: str = ""
@@ -448,10 +500,23 @@ class TuneConfig:
     hidden_dims: tuple[int, ...] = (16, 32)
     n_layers: tuple[int, ...] = (2, 3)
     lrs: tuple[float, ...] = (1e-3,)
-    num_samples: int = 1
+    num_samples: int = ranged(1, 1)
     """Repeats of the grid (with different seeds)."""
     metric: str = "val/policy_mean"
     """Reported metric the scheduler and the best-trial choice maximize."""
     grace_period: int = 2
     """ASHA: iterations every trial runs before it can be stopped."""
-    cpus_per_trial: int = 1
+    cpus_per_trial: int = ranged(1, 1)
+
+
+@dataclass
+class SolveConfig:
+    """Options of ``eosp solve`` shared by the solvers."""
+
+    mode: str = choice("utility", "utility", "unitary")
+    """'utility' (sum of utilities) or 'unitary' (count acquisitions)."""
+    time_limit: float = ranged(0.0, 0)
+    """Seconds for the searching solvers (ramp, exact, mcts); 0: no limit."""
+    seed: int = ranged(0, 0)
+    budget: int = ranged(0, 0)
+    """MCTS simulations per decision; 0: the solver's default."""

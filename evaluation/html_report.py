@@ -26,7 +26,6 @@ from __future__ import annotations
 import functools
 import html
 import math
-import os
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -447,8 +446,5 @@ def write_report(inst: Instance, schedules: dict[str, Schedule], out: str | Path
     text = build_report(inst, schedules, title)
     out = Path(out)
     with atomic_path(out, suffix=".html") as tmp:
-        tmp.write_text(text, encoding="utf-8")
-        umask = os.umask(0)
-        os.umask(umask)
-        os.chmod(tmp, 0o666 & ~umask)  # a page to share: the usual permissions, not the temporary file's 0600
+        tmp.write_text(text, encoding="utf-8")  # atomic_path gives it the usual permissions (umask)
     return out

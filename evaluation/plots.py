@@ -83,7 +83,8 @@ def plot_trajectories(inst: Instance, schedules: dict[str, Schedule], out: str |
     fig.tight_layout()
     paths = [out.with_suffix(".png"), out.with_suffix(".svg")]
     for p in paths:
-        fig.savefig(p, dpi=130)
+        with atomic_path(p, suffix=p.suffix) as tmp:
+            fig.savefig(tmp, dpi=130, format=p.suffix[1:])
     plt.close(fig)
     return paths
 

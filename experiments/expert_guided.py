@@ -85,7 +85,10 @@ def cmd_data(a) -> None:
     build(base, TRAIN, "train")
     build(base, VAL, "val")
     build(base, TEST, None)
-    sh([PY, "jobs/build_demos.py", "--data", str(base / "train"), str(base / "val"), "--time-limit", "30"])
+    sets = ["--action-sets", "true", "--beam", "1", "--time-limit", "30"]
+    sh([PY, "jobs/build_demos.py", "--data", str(base / "train"), str(base / "val"), "--modes", "unitary", *sets])
+    sh([PY, "jobs/build_demos.py", "--data", str(base / "train"), str(base / "val"), "--modes", "utility", *sets,
+        "--sets-max-acquisitions", "150"])
 
 
 def budget_args(kind: str, mode: str, seconds: float, run: str, a) -> list[list[str]]:

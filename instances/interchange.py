@@ -18,7 +18,7 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
 
-from eosp.atomic import atomic_dir
+from eosp.atomic import atomic_dir, check_output_dir
 from eosp.errors import InputError
 from eosp.memory import require_memory
 from eosp.graphs.discrete import DiscreteGraph, acq_ptr_from_node_acq
@@ -37,6 +37,8 @@ ARC_COLUMNS = {"src": "int", "dst": "int"}
 def read_parquet(path: Path) -> pa.Table:
     if not path.exists():
         raise InputError(path, "file not found")
+    if path.is_dir():
+        raise InputError(path, "is a directory, expected a Parquet file")
     try:
         return pq.read_table(path)
     except (pa.ArrowException, OSError) as exc:
@@ -244,6 +246,12 @@ def read_arcs(path: Path, canon: np.ndarray, node_acq: np.ndarray, node_time: np
     if _sort_rows(indptr, out, node_acq, dup_src):
         raise InputError(path, "second arc from the same node to the same acquisition", column="dst",
                          row=_first_duplicate_row(batches, canon, node_acq, dup_src))
+    n_acq = int(node_acq.max()) + 1 if node_acq.size else 0
+    from_source = np.zeros(n_acq, dtype=bool)
+    from_source[node_acq[out[indptr[0]:indptr[1]]]] = True
+    if not from_source.all():
+        raise InputError(path, f"no arc from the source (node 0) to acquisition {int(np.flatnonzero(~from_source)[0])}:"
+                               " the format requires one to the earliest node of every acquisition", column="src")
     return indptr, out
 
 
@@ -290,6 +298,10 @@ def read_acquisitions(path: Path) -> tuple[Acquisitions, np.ndarray]:
             _fail_rows(path, ~np.isfinite(cols[name]), name, "NaN or infinite value")
     _fail_rows(path, cols["duration"] <= 0, "duration", "duration must be > 0")
     _fail_rows(path, cols["utility"] <= 0, "utility", "utility must be > 0")
+    with np.errstate(over="ignore"):
+        running = np.cumsum(cols["utility"])
+    _fail_rows(path, ~np.isfinite(running), "utility",
+               "the utilities add up past the largest float (1.8e308): scale them down")
     _fail_rows(path, cols["vtw_end"] < cols["vtw_start"], "vtw_end", "window ends before it starts")
     _fail_rows(path, cols["vtw_end"] - cols["duration"] < cols["vtw_start"] - TIME_TOL, "duration",
                "window [vtw_start, vtw_end] is shorter than the duration")
@@ -410,11 +422,29 @@ def acquisitions_table(acqs: Acquisitions) -> pa.Table:
     return pa.table(cols)
 
 
+INSTANCE_FILES = ("acquisitions.parquet", "nodes.parquet", "arcs.parquet", "meta.json")
+
+
+def is_instance_dir(directory: str | Path) -> bool:
+    """Whether `directory` looks written by :func:`write_instance`: its four files and nothing else."""
+    d = Path(directory)
+    try:
+        names = {p.name for p in d.iterdir()}
+    except OSError:
+        return False
+    return names == set(INSTANCE_FILES) and all((d / f).is_file() for f in INSTANCE_FILES)
+
+
+def check_instance_out(directory: str | Path, overwrite: bool = False) -> Path:
+    """Refuse, before any work, an output directory that :func:`write_instance` must not write."""
+    return check_output_dir(directory, overwrite=overwrite, owned=is_instance_dir, what="instance directory")
+
+
 def write_instance(inst: Instance, directory: str | Path, overwrite: bool = False) -> Path:
-    """Write `inst` as an interchange directory (atomically)."""
+    """Write `inst` as an interchange directory (atomically); `overwrite` replaces only an instance directory."""
     g = inst.unpruned("the interchange format")
     ids = inst.node_ids
-    with atomic_dir(directory, overwrite=overwrite) as tmp:
+    with atomic_dir(directory, overwrite=overwrite, owned=is_instance_dir) as tmp:
         pq.write_table(acquisitions_table(inst.acqs), tmp / "acquisitions.parquet")
         pq.write_table(pa.table({"node": pa.array(ids, pa.int32()), "acq": pa.array(g.node_acq, pa.int32()),
                                  "time": pa.array(g.node_time, pa.float64())}), tmp / "nodes.parquet")

@@ -17,7 +17,7 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
 
-from eosp.atomic import atomic_path
+from eosp.atomic import atomic_path, check_output_file
 from eosp.errors import InputError
 from eosp.instances.instance import Instance
 from eosp.instances.interchange import TIME_TOL, check_columns, column, read_parquet
@@ -53,9 +53,17 @@ def value(inst: Instance, schedule: Schedule) -> float:
     return math.fsum(inst.acqs.utility[schedule.acq].tolist())
 
 
+SCHEDULE_SUFFIXES = (".parquet", ".jsonl", ".json")
+
+
+def check_schedule_out(path: str | Path) -> Path:
+    """Refuse, before any work, a schedule output path that is a directory or has an unknown extension."""
+    return check_output_file(path, SCHEDULE_SUFFIXES, what="schedule file")
+
+
 def write_schedule(schedule: Schedule, path: str | Path) -> Path:
     """Write a schedule as Parquet, or as JSON lines when the name ends in .jsonl/.json (atomically)."""
-    path = Path(path)
+    path = check_schedule_out(path)
     with atomic_path(path) as tmp:
         if path.suffix in (".jsonl", ".json"):
             with open(tmp, "w") as fh:
@@ -69,10 +77,16 @@ def write_schedule(schedule: Schedule, path: str | Path) -> Path:
 
 
 def read_schedule(path: str | Path) -> Schedule:
+    """A schedule file (.parquet, or JSON lines .jsonl/.json); other extensions are refused."""
     path = Path(path)
-    if path.suffix in (".jsonl", ".json"):
-        if not path.exists():
-            raise InputError(path, "file not found")
+    if not path.exists():
+        raise InputError(path, "file not found")
+    if path.is_dir():
+        raise InputError(path, "is a directory, expected a schedule file (.parquet or .jsonl)")
+    if path.suffix.lower() not in SCHEDULE_SUFFIXES:
+        raise InputError(path, f"unknown extension {path.suffix or '(none)'!r} for a schedule: use .parquet or .jsonl"
+                               " (CSV is not read: convert it)")
+    if path.suffix.lower() in (".jsonl", ".json"):
         rows = []
         for k, line in enumerate(path.read_text().splitlines()):
             if not line.strip():
@@ -88,14 +102,22 @@ def read_schedule(path: str | Path) -> Schedule:
                     raise InputError(path, "must be an integer", column=key, row=k)
             if not isinstance(row["start"], (int, float)) or isinstance(row["start"], bool):
                 raise InputError(path, "must be a number", column="start", row=k)
+            try:
+                finite = math.isfinite(row["start"])
+            except OverflowError:
+                finite = False
+            if not finite:
+                raise InputError(path, "NaN or infinite start", column="start", row=k)
             rows.append(row)
         for key in ("acq", "node"):
             for k, r in enumerate(rows):
                 if not 0 <= r[key] <= np.iinfo(np.int32).max:
                     raise InputError(path, "id out of range (0 .. 2**31-1)", column=key, row=k)
-        return Schedule(acq=np.array([r["acq"] for r in rows], dtype=np.int32),
-                        node=np.array([r["node"] for r in rows], dtype=np.int32),
-                        start=np.array([r["start"] for r in rows], dtype=np.float64))
+        sched = Schedule(acq=np.array([r["acq"] for r in rows], dtype=np.int32),
+                         node=np.array([r["node"] for r in rows], dtype=np.int32),
+                         start=np.array([r["start"] for r in rows], dtype=np.float64))
+        _check_starts(path, sched.start)
+        return sched
     table = read_parquet(path)
     check_columns(path, table, SCHEDULE_COLUMNS, {})
     ids = {}
@@ -105,7 +127,15 @@ def read_schedule(path: str | Path) -> Schedule:
         if bad.any():
             raise InputError(path, "id out of range (0 .. 2**31-1)", column=key, row=int(np.flatnonzero(bad)[0]))
         ids[key] = v.astype(np.int32)
-    return Schedule(acq=ids["acq"], node=ids["node"], start=column(path, table, "start", "float"))
+    start = column(path, table, "start", "float")
+    _check_starts(path, start)
+    return Schedule(acq=ids["acq"], node=ids["node"], start=start)
+
+
+def _check_starts(path: Path, start: np.ndarray) -> None:
+    bad = ~np.isfinite(start)
+    if bad.any():
+        raise InputError(path, "NaN or infinite start", column="start", row=int(np.flatnonzero(bad)[0]))
 
 
 @dataclass

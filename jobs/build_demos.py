@@ -42,14 +42,15 @@ def run(cfg: DemoConfig, ray_cfg: RayConfig) -> dict:
     for data in cfg.data:
         for shard in dataset_shards(data):
             for mode in cfg.modes:
-                if is_complete(demo_file(Path(shard), mode), mode):
+                if is_complete(demo_file(Path(shard), mode), mode, cfg.action_sets):
                     skipped += 1
                 else:
                     jobs.append((Path(shard), mode))
     init_ray(ray_cfg.address, ray_cfg.num_cpus)
     task = ray.remote(num_cpus=1)(solve_shard)
     pending = {task.remote(str(s), m, time_limit=cfg.time_limit, action_sets=cfg.action_sets, beam=cfg.beam,
-                           prune=cfg.prune, out=str(demo_file(s, m))): (s, m) for s, m in jobs}
+                           prune=cfg.prune, out=str(demo_file(s, m)),
+                           sets_max_acquisitions=cfg.sets_max_acquisitions): (s, m) for s, m in jobs}
     print(f"[build_demos] {len(jobs)} (shard, mode) tasks, {skipped} already done", flush=True)
     done: list[dict] = []
     t0 = time.perf_counter()
@@ -67,7 +68,7 @@ def run(cfg: DemoConfig, ray_cfg: RayConfig) -> dict:
             d = Path(data) / "demos" / m
             entries = [x for x in done if x["data"] == str(Path(data)) and x["mode"] == m]
             manifest = {"config": to_dict(cfg), "mode": m, "written_this_run": entries,
-                        "files": sorted(p.name for p in d.glob("shard-*.parquet"))}
+                        "files": sorted(p.name for p in d.glob("*.parquet"))}
             with atomic_path(d / "manifest.json") as tmp:
                 tmp.write_text(json.dumps(manifest, indent=1))
     return {"tasks": done, "skipped": skipped, "wall_seconds": round(wall, 3)}
@@ -79,6 +80,10 @@ def main(argv: list[str] | None = None) -> int:
     add_config_args(p, RayConfig, prefix="ray.")
     ns = p.parse_args(argv)
     cfg = config_from_args(DemoConfig, ns)
+    from eosp.jobs.preflight import require_findable
+
+    for data in cfg.data:  # the demos are written under <data>/demos/
+        require_findable(data, "--data")
     try:
         out = run(cfg, prefixed_config(RayConfig, ns, "ray."))
     except InputError as exc:

@@ -6,12 +6,20 @@
 Instance k of the data set is generated from seed ``seed + k``; every shard is
 written atomically and the manifest (``manifest.json``) last, so a data set
 with a manifest is complete.
+
+A rerun with the same settings resumes: complete shards of the same data set are
+checked (every instance read) and kept, temporaries of a killed run are removed, and
+only the missing shards are built.  A shard of another configuration in ``--out``
+is refused, not replaced.  (Tests kill the driver after N shards with the
+environment variable ``EOSP_FAULT_KILL_AFTER=N``.)
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import os
+import signal
 import sys
 import time
 from pathlib import Path
@@ -38,25 +46,74 @@ def build_shard(cfg: DatasetConfig, shard: int) -> dict:
             "pruned_arcs": int(sum(i.pruned().n_arcs for i in insts)), "bytes": path.stat().st_size}
 
 
+def _same_dataset(a: dict, b: dict) -> bool:
+    """Two data set configurations (to_dict) that differ at most in where they are written."""
+    strip = lambda d: {k: v for k, v in json.loads(json.dumps(d)).items() if k != "out"}  # noqa: E731
+    return strip(a) == strip(b)
+
+
+def existing_shard(cfg: DatasetConfig, shard: int, path: Path) -> dict | None:
+    """The manifest entry of a complete shard `path` of this data set, None when it is not there yet.
+
+    SystemExit (one line) when the file is not a readable shard of this very data set: it is the user's to remove.
+    """
+    from eosp.errors import InputError
+    from eosp.shards.io import ShardReader
+
+    if not path.exists():
+        return None
+    first = shard * cfg.per_shard
+    expected = min(cfg.n_instances, first + cfg.per_shard) - first
+    try:
+        reader = ShardReader(path)
+        if not _same_dataset(reader.extra.get("dataset", {}), to_dict(cfg)):
+            raise SystemExit(f"error: {path} belongs to a data set with other settings: use another --out, "
+                             "or remove it")
+        if len(reader) != expected:
+            raise InputError(path, f"holds {len(reader)} instances, expected {expected}")
+        insts = list(reader)
+    except InputError as exc:
+        raise SystemExit(f"error: {exc} (not a complete shard of this data set: remove it to rebuild it)") from None
+    return {"file": path.name, "instances": [i.name for i in insts], "seconds": 0.0, "resumed": True,
+            "nodes": int(sum(i.n_nodes for i in insts)), "arcs": int(sum(i.unpruned().n_arcs for i in insts)),
+            "pruned_arcs": int(sum(i.pruned().n_arcs for i in insts)), "bytes": path.stat().st_size}
+
+
 def run(cfg: DatasetConfig, ray_cfg: RayConfig) -> dict:
     import ray
 
     from eosp.atomic import atomic_path
     from eosp.jobs.ray_init import init_ray
 
-    init_ray(ray_cfg.address, ray_cfg.num_cpus)
-    Path(cfg.out).mkdir(parents=True, exist_ok=True)
+    out = Path(cfg.out)
+    if out.exists() and not out.is_dir():
+        raise SystemExit(f"error: --out {out} is a file, not a directory")
+    out.mkdir(parents=True, exist_ok=True)
+    for stale in out.glob(".shard-*.parquet.*"):  # temporaries of a killed run, never renamed into place
+        stale.unlink(missing_ok=True)
     n_shards = (cfg.n_instances + cfg.per_shard - 1) // cfg.per_shard
-    task = ray.remote(num_cpus=1)(build_shard)
-    pending = {task.remote(cfg, s): s for s in range(n_shards)}
     done: dict[int, dict] = {}
+    for s in range(n_shards):
+        entry = existing_shard(cfg, s, out / f"shard-{s:05d}.parquet")
+        if entry is not None:
+            done[s] = entry
+    if done:
+        print(f"[build_shards] resuming: {len(done)} of {n_shards} shards already complete", flush=True)
+    init_ray(ray_cfg.address, ray_cfg.num_cpus)
+    task = ray.remote(num_cpus=1)(build_shard)
+    pending = {task.remote(cfg, s): s for s in range(n_shards) if s not in done}
+    kill_after = int(os.environ.get("EOSP_FAULT_KILL_AFTER", "0") or 0)
+    built = 0
     t0 = time.perf_counter()
     while pending:
         ready, _ = ray.wait(list(pending), num_returns=1)
         s = pending.pop(ready[0])
         done[s] = ray.get(ready[0])
+        built += 1
         print(f"[build_shards] shard {len(done)}/{n_shards} ({done[s]['file']}, {len(done[s]['instances'])} "
               f"instances, {done[s]['seconds']:.1f} s)", flush=True)
+        if built == kill_after:  # fault injection for the tests: die like a killed job
+            os.kill(os.getpid(), signal.SIGKILL)
     manifest = {"dataset": to_dict(cfg), "shards": [done[s] for s in range(n_shards)],
                 "wall_seconds": round(time.perf_counter() - t0, 3)}
     with atomic_path(Path(cfg.out) / "manifest.json") as tmp:
@@ -71,6 +128,9 @@ def main(argv: list[str] | None = None) -> int:
     ns = p.parse_args(argv)
     cfg = config_from_args(DatasetConfig, ns)
     ray_cfg = prefixed_config(RayConfig, ns, "ray.")
+    from eosp.jobs.preflight import require_findable
+
+    require_findable(cfg.out, "--out")
     m = run(cfg, ray_cfg)
     tot = sum(s["bytes"] for s in m["shards"])
     print(f"[build_shards] {cfg.n_instances} instances in {len(m['shards'])} shards, {tot / 1e6:.1f} MB, "

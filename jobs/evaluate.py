@@ -13,13 +13,21 @@ scores with ratios to Greedy and RAMP, gaps to the proven optimum or the bound, 
 tie/loss counts), ``schedules/<instance>/<solver>.parquet``, ``reports/<instance>.html`` (the
 planner's view of ``eosp report`` for the first ``--html-reports`` instances) and
 ``class_counts.png`` (acquisitions per priority class and solver); all logged to MLflow.
+
+Each finished (instance, solver) result is kept at once in ``OUT/partial/``; a killed
+job rerun with the same settings skips those and gives the same results and report
+(solve times aside).  (Tests kill the driver after N results with the environment
+variable ``EOSP_FAULT_KILL_AFTER=N``.)
 """
 
 from __future__ import annotations
 
 import argparse
+import hashlib
+import json
 import os
 import re
+import signal
 import sys
 import time
 from pathlib import Path
@@ -87,6 +95,58 @@ class SolverWorker:
 LEARNED = ("policy", "mcts", "sample", "beam")
 
 
+RESUME_KEYS = ("mode", "time_limit", "checkpoint", "save_schedules")  # settings a kept result depends on
+
+
+def _job_file(partial: Path, job: tuple) -> Path:
+    shard, index, solver, budget = job
+    key = json.dumps([str(Path(shard).resolve()), index, solver, budget])
+    return partial / (hashlib.sha1(key.encode()).hexdigest()[:20] + ".json")
+
+
+def load_partial(cfg: EvalConfig, jobs: list[tuple]) -> tuple[Path, dict[tuple, dict]]:
+    """The results a killed run with the same settings kept (job -> row), and the folder they are kept in."""
+    from eosp.atomic import atomic_path
+
+    partial = Path(cfg.out) / "partial"
+    settings = {k: getattr(cfg, k) for k in RESUME_KEYS}
+    stamp = partial / "settings.json"
+    kept: dict[tuple, dict] = {}
+    if stamp.exists():
+        try:
+            same = json.loads(stamp.read_text()) == json.loads(json.dumps(settings))
+        except (OSError, json.JSONDecodeError):
+            same = False
+        if not same:
+            print(f"[evaluate] {partial}: kept results of other settings discarded", flush=True)
+            for f in partial.glob("*.json"):
+                f.unlink()
+        for job in jobs if same else ():
+            f = _job_file(partial, job)
+            try:
+                row = json.loads(f.read_text())
+            except (OSError, json.JSONDecodeError):
+                continue  # not finished (or not readable): solve it again
+            import numpy as np
+
+            row["_key"] = (job[0], job[1])
+            row["_schedule"] = tuple(np.asarray(x, dtype=t) for x, t in zip(row["_schedule"], ("int32", "int32",
+                                                                                                  "float64")))
+            kept[job] = row
+    partial.mkdir(parents=True, exist_ok=True)
+    with atomic_path(stamp) as tmp:
+        tmp.write_text(json.dumps(settings))
+    return partial, kept
+
+
+def keep_partial(partial: Path, job: tuple, row: dict) -> None:
+    from eosp.atomic import atomic_path
+
+    data = {**row, "_key": list(row["_key"]), "_schedule": [a.tolist() for a in row["_schedule"]]}
+    with atomic_path(_job_file(partial, job)) as tmp:
+        tmp.write_text(json.dumps(data, default=lambda o: o.item() if hasattr(o, "item") else str(o)))
+
+
 def run(cfg: EvalConfig, ray_cfg: RayConfig) -> "object":
     import mlflow
     import pandas as pd
@@ -104,23 +164,35 @@ def run(cfg: EvalConfig, ray_cfg: RayConfig) -> "object":
         from eosp.models.pretrained import pretrained_dir
 
         print(f"[evaluate] policy/mcts: the shipped model {pretrained_dir(cfg.mode)}", flush=True)
-    init_ray(ray_cfg.address, ray_cfg.num_cpus)
+    if Path(cfg.out).exists() and not Path(cfg.out).is_dir():
+        raise SystemExit(f"error: --out {cfg.out} is a file, not a directory")
     jobs = []
     for shard in expand_shards(list(cfg.data)):
         for i in range(len(ShardReader(shard))):
             for s in cfg.solvers:
                 for b in (cfg.budgets if s == "mcts" else (None,)):
                     jobs.append((str(shard), i, s, b))
+    partial, kept = load_partial(cfg, jobs)
+    if kept:
+        print(f"[evaluate] resuming: {len(kept)} of {len(jobs)} results kept from a previous run", flush=True)
+    todo = [j for j in jobs if j not in kept]
+    init_ray(ray_cfg.address, ray_cfg.num_cpus)
     n_workers = max(1, int(ray.available_resources().get("CPU", 1)))
     pool = ActorPool([ray.remote(num_cpus=1)(SolverWorker).remote() for _ in range(n_workers)])
     t0 = time.perf_counter()
-    rows = []
-    for k, row in enumerate(pool.map_unordered(lambda a, j: a.solve.remote(j[0], j[1], j[2], cfg, j[3]), jobs)):
+    rows = list(kept.values())
+    kill_after = int(os.environ.get("EOSP_FAULT_KILL_AFTER", "0") or 0)
+
+    for k, row in enumerate(pool.map_unordered(lambda a, j: a.solve.remote(j[0], j[1], j[2], cfg, j[3]), todo)):
         rows.append(row)
         if not row["feasible"]:
             raise SystemExit(f"{row['solver']} produced an infeasible schedule on {row['instance']}: {row['reason']}")
-        if (k + 1) % max(1, len(jobs) // 20) == 0 or k + 1 == len(jobs):
-            print(f"[evaluate] {k + 1}/{len(jobs)} done ({time.perf_counter() - t0:.0f} s)", flush=True)
+        job = next(j for j in todo if (j[0], j[1]) == row["_key"] and _label(j) == row["solver"])
+        keep_partial(partial, job, row)
+        if k + 1 == kill_after:  # fault injection for the tests: die like a killed job
+            os.kill(os.getpid(), signal.SIGKILL)
+        if (k + 1) % max(1, len(todo) // 20) == 0 or k + 1 == len(todo):
+            print(f"[evaluate] {k + 1}/{len(todo)} done ({time.perf_counter() - t0:.0f} s)", flush=True)
     wall = time.perf_counter() - t0
     html = write_html_reports(cfg, jobs, rows)
     for row in rows:
@@ -150,8 +222,15 @@ def run(cfg: EvalConfig, ray_cfg: RayConfig) -> "object":
         mlflow.log_artifact(str(counts_png))
         for p in html:
             mlflow.log_artifact(str(p), artifact_path="reports")
+    import shutil
+
+    shutil.rmtree(partial, ignore_errors=True)  # complete: the results are in results.parquet
     print(report)
     return results
+
+
+def _label(job: tuple) -> str:
+    return f"mcts({job[3]})" if job[2] == "mcts" else job[2]
 
 
 def write_html_reports(cfg: EvalConfig, jobs: list[tuple], rows: list[dict]) -> list[Path]:
@@ -179,6 +258,10 @@ def main(argv: list[str] | None = None) -> int:
     ns = p.parse_args(argv)
     cfg = config_from_args(EvalConfig, ns)
     ray_cfg = prefixed_config(RayConfig, ns, "ray.")
+    from eosp.jobs.preflight import check_mlflow, require_findable
+
+    require_findable(cfg.out, "--out")
+    check_mlflow(cfg.mlflow_uri)
     run(cfg, ray_cfg)
     return 0
 

@@ -64,7 +64,7 @@ def run(cfg: PretrainConfig) -> dict:
     rng = np.random.default_rng(im.seed)
     init_ray(cfg.ray.address, cfg.ray.num_cpus)
     t_load = time.perf_counter()
-    data = DemoData(im.train_data, cfg.env, cfg.model.n_values)
+    data = DemoData(im.train_data, cfg.env, cfg.model.n_values, im.set_tolerance)
     if cfg.model.value_scale <= 0:
         cfg.model.value_scale = float(max(1.0, np.mean(data.start_values)))
     print(f"[pretrain] {len(data.instances)} training instances, {len(data.samples)} expert states "
@@ -89,7 +89,8 @@ def run(cfg: PretrainConfig) -> dict:
     t0 = time.perf_counter()
     deadline = t0 + im.time_budget if im.time_budget > 0 else None
     for epoch in range(1, im.epochs + 1):
-        metrics = train_epoch(agent, opt, data.samples, im.batch_size, im.value_coeff, im.grad_clip, rng, deadline)
+        metrics = train_epoch(agent, opt, data.samples, im.batch_size, im.value_coeff, im.grad_clip, rng, deadline,
+                              im.regret_coeff)
         out_of_time = deadline is not None and time.perf_counter() > deadline
         last = epoch == im.epochs or out_of_time
         if validator is not None and (epoch % im.validate_every == 0 or last):
@@ -126,6 +127,10 @@ def run(cfg: PretrainConfig) -> dict:
 
 def main(argv: list[str] | None = None) -> int:
     cfg = parse(argv)
+    from eosp.jobs.preflight import check_mlflow, require_findable
+
+    require_findable(cfg.imitation.run_dir, "--imitation.run-dir")
+    check_mlflow(cfg.imitation.mlflow_uri, "--imitation.mlflow-uri")
     try:
         out = run(cfg)
     except InputError as exc:

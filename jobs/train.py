@@ -86,6 +86,10 @@ def ensure_demo_data(cfg: RunConfig) -> None:
 
 def main(argv: list[str] | None = None) -> int:
     cfg, ns = parse(argv)
+    from eosp.jobs.preflight import check_mlflow, require_findable
+
+    require_findable(cfg.train.run_dir, "--train.run-dir")
+    check_mlflow(cfg.train.mlflow_uri, "--train.mlflow-uri")
     import mlflow
     import ray
     import torch

@@ -168,6 +168,10 @@ def main(argv: list[str] | None = None) -> int:
     tc = prefixed_config(TuneConfig, ns, "tune.")
     if cfg.env.reward == "lexicographic":
         cfg.model.n_values = max(cfg.model.n_values, 7)
+    from eosp.jobs.preflight import check_mlflow, require_findable
+
+    require_findable(cfg.train.run_dir, "--train.run-dir")
+    check_mlflow(cfg.train.mlflow_uri, "--train.mlflow-uri")
     run(cfg, tc)
     return 0
 

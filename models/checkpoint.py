@@ -37,11 +37,13 @@ def save_agent(agent: EOSPAgent, directory: str | Path, env_cfg: EnvConfig, extr
 
 def load_agent(directory: str | Path) -> tuple[EOSPAgent, EnvConfig, dict[str, Any]]:
     """The agent (eval mode), the env configuration it was trained with, and the metadata."""
-    d = Path(directory)
-    if d.is_file():
-        d = d.parent
+    given = Path(directory)
+    if not given.exists():
+        raise InputError(given, "checkpoint not found")
+    d = given.parent if given.is_file() else given
     if not (d / WEIGHTS).exists() or not (d / CONFIG).exists():
-        raise InputError(d, f"unknown checkpoint: expected {WEIGHTS} and {CONFIG} in this directory")
+        where = "this directory" if given.is_dir() else f"its directory {d}"
+        raise InputError(given, f"not an agent checkpoint: expected {WEIGHTS} and {CONFIG} in {where}")
     try:
         meta = json.loads((d / CONFIG).read_text())
     except json.JSONDecodeError as exc:

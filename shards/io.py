@@ -28,7 +28,7 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
 
-from eosp.atomic import atomic_path
+from eosp.atomic import atomic_path, check_output_file
 from eosp.errors import InputError
 from eosp.memory import require_memory
 from eosp.graphs.discrete import DiscreteGraph, first_backward_arc
@@ -96,10 +96,24 @@ def _list_array(vals: list, typ: pa.ListType) -> pa.Array:
     return pa.ListArray.from_arrays(pa.array(offsets), pa.array(flat, vt), mask=pa.array(mask) if mask.any() else None)
 
 
+def is_shard(path: str | Path) -> bool:
+    """Whether `path` is a Parquet file written by :func:`write_shard` (its key-value metadata says so)."""
+    try:
+        md = pq.read_schema(path).metadata or {}
+    except (pa.ArrowException, OSError):
+        return False
+    return md.get(b"eosp.kind") == KIND.encode()
+
+
+def check_shard_out(path: str | Path) -> Path:
+    """Refuse, before any work, a shard output path: a directory, not .parquet, or an existing foreign file."""
+    return check_output_file(path, (".parquet",), owned=is_shard, what="shard")
+
+
 def write_shard(path: str | Path, instances: list[Instance], include_unpruned: bool = True,
                 extra_meta: dict | None = None) -> Path:
     """Write instances (with their pruned graphs) to one Parquet shard, atomically."""
-    path = Path(path)
+    path = check_shard_out(path)
     meta = {b"eosp.kind": KIND.encode(), b"eosp.schema_version": str(SCHEMA_VERSION).encode(),
             b"eosp.n_instances": str(len(instances)).encode(),
             b"eosp.extra": json.dumps(extra_meta or {}, sort_keys=True).encode()}
@@ -217,6 +231,7 @@ def _instance_from_row(path: Path, row: int, t: pa.Table, unpruned: bool) -> Ins
                         utility=need("utility", np.float64), priority=maybe("priority", np.int8),
                         lat=maybe("lat", np.float64), lon=maybe("lon", np.float64),
                         attitude=None)
+    _check_values(path, row, acqs, node_time, node_ids)
     att = maybe("attitude", np.float64)
     if att is not None:
         if len(att) != 6 * n:
@@ -247,6 +262,23 @@ def _instance_from_row(path: Path, row: int, t: pa.Table, unpruned: bool) -> Ins
     return Instance(name=t.column("name")[0].as_py(), acqs=acqs, unpruned_graph=unpruned_graph, node_ids=node_ids,
                     meta=meta, node_attitude=None if node_att is None else node_att.reshape(big_n, 4),
                     pruned_graph=DiscreteGraph(node_acq, node_time, pindptr, pdst, acq_ptr))
+
+
+def _check_values(path: Path, row: int, acqs: Acquisitions, node_time: np.ndarray, node_ids: np.ndarray) -> None:
+    for name in ("duration", "vtw_start", "vtw_end", "utility"):
+        if not np.all(np.isfinite(getattr(acqs, name))):
+            raise InputError(path, "NaN or infinite value", column=name, row=row)
+    if not np.all(np.isfinite(node_time)):
+        raise InputError(path, "NaN or infinite value", column="node_time", row=row)
+    if np.any(acqs.duration <= 0) or np.any(acqs.utility <= 0):
+        raise InputError(path, "durations and utilities must be > 0", column="utility" if np.any(acqs.utility <= 0)
+                         else "duration", row=row)
+    with np.errstate(over="ignore"):
+        total = np.sum(acqs.utility)
+    if not np.isfinite(total):
+        raise InputError(path, "the utilities add up past the largest float (1.8e308)", column="utility", row=row)
+    if node_ids.size and (node_ids.min() < 0 or np.unique(node_ids).size != node_ids.size):
+        raise InputError(path, "node ids must be distinct and >= 0", column="node_ids", row=row)
 
 
 def _check_csr(path: Path, row: int, prefix: str, indptr: np.ndarray, dst: np.ndarray, node_acq: np.ndarray,

@@ -37,6 +37,7 @@ import numpy as np
 
 from eosp.envs.core import EnvGraph
 from eosp.graphs.discrete import DiscreteGraph, acq_ptr_from_node_acq
+from eosp.solvers.base import objective_weights
 from eosp.solvers.bound import completion_bound, lagrangian
 from eosp.solvers.ramp import label_search
 
@@ -143,7 +144,7 @@ def beam_value(res: Residual, weights: np.ndarray, beam: int = 4) -> float:
 # ---------------------------------------------------------------- environment states
 def objective(inst, mode: str) -> np.ndarray:
     """Weights of the expert's objective: 1 per acquisition (unitary) or the utilities (utility modes)."""
-    return np.ones(inst.n_acq) if mode == "unitary" else np.asarray(inst.acqs.utility, dtype=np.float64)
+    return objective_weights(inst, "unitary" if mode == "unitary" else "utility")
 
 
 def state_residual(env) -> Residual:

@@ -168,7 +168,9 @@ def test_build_demos_job_is_resumable_and_refuses_bad_options(demo_shard, capsys
     assert "0 (shard, mode) tasks, 2 already done" in capsys.readouterr().out
     assert main(["--data", str(demo_shard.parent), "--modes", "lexical"]) == 2
     assert "unknown mode 'lexical'" in capsys.readouterr().err
-    assert main(["--data", str(demo_shard.parent), "--time-limit", "-1"]) == 2
+    with pytest.raises(SystemExit) as exc:  # the typed config refuses it while parsing
+        main(["--data", str(demo_shard.parent), "--time-limit", "-1"])
+    assert exc.value.code == 2 and "--time-limit" in capsys.readouterr().err
 
 
 @pytest.mark.parametrize("mode", ["unitary", "utility"])

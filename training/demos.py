@@ -14,6 +14,8 @@ column              type          meaning
 ``return_to_go``    float64       objective collected from this step on (this step included)
 ``optimal``         list<int32>   actions of this state whose value is the best (empty: not computed)
 ``n_allowed``       int16         number of allowed actions in this state
+``allowed``         list<int32>   the allowed actions (empty: not computed)
+``q``               list<float64> their values Q(s, a) (objective units; empty: not computed)
 ``value``           float64       the expert schedule's value (per instance)
 ``bound``           float64       upper bound of the instance's optimum (= value when proven)
 ``status``          string        'optimal' or 'time_limit'
@@ -39,11 +41,13 @@ import pyarrow.parquet as pq
 from eosp.atomic import atomic_path
 from eosp.errors import InputError
 
-SCHEMA_VERSION = 1
+SCHEMA_VERSION = 2  # 2: columns allowed and q (files of version 1 are still read)
+READABLE = (b"1", b"2")
 MODES = ("unitary", "utility")
 SCHEMA = pa.schema([("instance", pa.int32()), ("name", pa.string()), ("step", pa.int32()), ("action", pa.int32()),
                     ("reward", pa.float64()), ("return_to_go", pa.float64()), ("optimal", pa.list_(pa.int32())),
-                    ("n_allowed", pa.int16()), ("value", pa.float64()), ("bound", pa.float64()),
+                    ("n_allowed", pa.int16()), ("allowed", pa.list_(pa.int32())), ("q", pa.list_(pa.float64())),
+                    ("value", pa.float64()), ("bound", pa.float64()),
                     ("status", pa.string())])
 
 
@@ -57,11 +61,11 @@ def graph_signature(prepared) -> list[int]:
 
 
 def solve_shard(shard: str | Path, mode: str, *, time_limit: float, action_sets: bool, beam: int,
-                prune: bool, out: str | Path) -> dict:
+                prune: bool, out: str | Path, sets_max_acquisitions: int = 0) -> dict:
     """Solve every instance of a shard in `mode`, replay it in the environment, write the demos file."""
     from eosp.config import EnvConfig
     from eosp.envs.eosp_env import EOSPEnv
-    from eosp.envs.sources import prepare_instance
+    from eosp.envs.sources import FixedSource, prepare_instance
     from eosp.shards.io import ShardReader
     from eosp.solvers import expert
 
@@ -75,24 +79,29 @@ def solve_shard(shard: str | Path, mode: str, *, time_limit: float, action_sets:
         prepared = prepare_instance(reader.read(k, unpruned=not prune), prune)
         sigs.append(graph_signature(prepared))
         if env is None or prepared.inst.n_acq > env.n_max:
-            env = EOSPEnv(EnvConfig(max_acquisitions=0, prune=prune), source=_Fixed(prepared))
+            env = EOSPEnv(EnvConfig(max_acquisitions=0, prune=prune), source=FixedSource(prepared))
         env.reset(options={"instance": prepared})
         w = expert.objective(prepared.inst, mode)
         path = expert.optimal_path(expert.state_residual(env), w, unitary=unitary, time_limit=time_limit)
         stats["solve_s"] += path.seconds
         rewards = w[path.actions]
         togo = np.cumsum(rewards[::-1])[::-1] if rewards.size else rewards
+        sets = action_sets and (not sets_max_acquisitions or prepared.inst.n_acq <= sets_max_acquisitions)
         for step, a in enumerate(path.actions):
             opt: list[int] = []
+            allowed_l: list[int] = []
+            q_l: list[float] = []
             n_allowed = int(env.state.ep.mask.sum())
-            if action_sets:
+            if sets:
                 allowed, q = expert.action_values(env, w, beam)
                 q[allowed == a] = np.maximum(q[allowed == a], togo[step])  # the expert's value is exact
                 opt = allowed[expert.optimal_set(q, unitary)].tolist()
+                allowed_l, q_l = allowed.tolist(), q.tolist()
             env.step(int(a))  # raises if the expert's action is not allowed: never written
             for c, v in (("instance", k), ("name", prepared.inst.name), ("step", step), ("action", int(a)),
                          ("reward", float(rewards[step])), ("return_to_go", float(togo[step])), ("optimal", opt),
-                         ("n_allowed", n_allowed), ("value", path.value), ("bound", path.bound),
+                         ("n_allowed", n_allowed), ("allowed", allowed_l), ("q", q_l), ("value", path.value),
+                         ("bound", path.bound),
                          ("status", path.status)):
                 cols[c].append(v)
         replayed = float(np.sum(w[[int(x) for x in path.actions]])) if path.actions.size else 0.0
@@ -105,25 +114,12 @@ def solve_shard(shard: str | Path, mode: str, *, time_limit: float, action_sets:
     table = pa.table(cols, schema=SCHEMA)
     meta = {b"eosp.demos.schema_version": str(SCHEMA_VERSION).encode(), b"eosp.demos.mode": mode.encode(),
             b"eosp.demos.shard": Path(shard).name.encode(), b"eosp.demos.graph": json.dumps(sigs).encode(),
-            b"eosp.demos.prune": str(prune).encode()}
+            b"eosp.demos.prune": str(prune).encode(), b"eosp.demos.sets": str(bool(action_sets)).lower().encode()}
     out = Path(out)
     out.parent.mkdir(parents=True, exist_ok=True)
     with atomic_path(out) as tmp:
         pq.write_table(table.replace_schema_metadata(meta), tmp)
     return {"file": out.name, "shard": Path(shard).name, **stats, "seconds": round(time.perf_counter() - t0, 3)}
-
-
-class _Fixed:
-    """A one-instance source for an environment that is always reset with an explicit instance."""
-
-    def __init__(self, prepared):
-        self.prepared = prepared
-
-    def max_acquisitions(self) -> int:
-        return self.prepared.inst.n_acq
-
-    def sample(self, rng):
-        return self.prepared
 
 
 @dataclass
@@ -137,6 +133,8 @@ class Demo:
     rewards: np.ndarray  # float64 [T]
     return_to_go: np.ndarray  # float64 [T]
     optimal: list[np.ndarray]  # per step; empty arrays when not computed
+    allowed: list[np.ndarray]  # per step: the allowed actions (empty when not computed)
+    q: list[np.ndarray]  # per step: their values (objective units)
     value: float
     bound: float
     status: str
@@ -146,14 +144,21 @@ def demo_file(shard: Path, mode: str) -> Path:
     return demo_dir(shard.parent, mode) / shard.name
 
 
-def is_complete(path: Path, mode: str) -> bool:
-    """A demos file that exists and carries this schema version (resuming skips it)."""
+def is_complete(path: Path, mode: str, action_sets: bool = False) -> bool:
+    """A demos file that exists, is readable, is of `mode`, and has action sets when they are asked for
+    (resuming skips it)."""
     try:
         md = pq.read_schema(path).metadata or {}
-    except (OSError, pa.ArrowInvalid):
+        if md.get(b"eosp.demos.schema_version") not in READABLE or md.get(b"eosp.demos.mode") != mode.encode():
+            return False
+        if not action_sets:
+            return True
+        if b"eosp.demos.sets" in md:
+            return md[b"eosp.demos.sets"] == b"true"
+        first = pq.ParquetFile(path).read_row_group(0, columns=["optimal"]).column(0)  # version 1: look
+        return len(first) == 0 or len(first[0]) > 0
+    except (OSError, pa.ArrowInvalid, IndexError):
         return False
-    return (md.get(b"eosp.demos.schema_version") == str(SCHEMA_VERSION).encode()
-            and md.get(b"eosp.demos.mode") == mode.encode())
 
 
 def read_demos(shard: Path, mode: str, prepared: list) -> list[Demo]:
@@ -171,8 +176,8 @@ def read_demos(shard: Path, mode: str, prepared: list) -> list[Demo]:
     except (OSError, pa.ArrowInvalid) as exc:
         raise InputError(path, f"not a readable Parquet file: {exc}") from None
     md = table.schema.metadata or {}
-    if md.get(b"eosp.demos.schema_version") != str(SCHEMA_VERSION).encode():
-        raise InputError(path, f"not an expert demos file of schema version {SCHEMA_VERSION}")
+    if md.get(b"eosp.demos.schema_version") not in READABLE:
+        raise InputError(path, f"not an expert demos file of schema version {', '.join(v.decode() for v in READABLE)}")
     if md.get(b"eosp.demos.shard", b"").decode() != shard.name:
         raise InputError(path, f"demos of shard {md.get(b'eosp.demos.shard', b'?').decode()}, not {shard.name}")
     sigs = json.loads(md.get(b"eosp.demos.graph", b"[]"))
@@ -182,10 +187,11 @@ def read_demos(shard: Path, mode: str, prepared: list) -> list[Demo]:
         if sigs[k] != graph_signature(p):
             raise InputError(path, f"instance {k}: demos solved on another graph ({sigs[k][0]} nodes, {sigs[k][1]} "
                                    f"arcs; the shard's environment graph has {graph_signature(p)})")
+    optional = ("allowed", "q")  # version 2
     for c in SCHEMA.names:
-        if c not in table.column_names:
+        if c not in table.column_names and c not in optional:
             raise InputError(path, f"missing column {c!r}", column=c)
-    d = {c: table.column(c).to_pylist() for c in SCHEMA.names}
+    d = {c: table.column(c).to_pylist() if c in table.column_names else [[]] * table.num_rows for c in SCHEMA.names}
     rows_of: dict[int, list[int]] = {}
     for r, k in enumerate(d["instance"]):
         if not 0 <= k < len(prepared):
@@ -202,7 +208,9 @@ def read_demos(shard: Path, mode: str, prepared: list) -> list[Demo]:
                              row=rows[0])
         out.append(Demo(shard, k, name, np.array([d["action"][r] for r in rows], np.int32),
                         np.array([d["reward"][r] for r in rows]), np.array([d["return_to_go"][r] for r in rows]),
-                        [np.array(d["optimal"][r], np.int32) for r in rows], float(d["value"][rows[0]]),
+                        [np.array(d["optimal"][r], np.int32) for r in rows],
+                        [np.array(d["allowed"][r], np.int32) for r in rows],
+                        [np.array(d["q"][r], np.float64) for r in rows], float(d["value"][rows[0]]),
                         float(d["bound"][rows[0]]), d["status"][rows[0]]))
     return out
 

@@ -42,6 +42,8 @@ class Sample:
     mask: np.ndarray  # int8 [n]
     optimal: np.ndarray  # int32: optimal actions
     value: np.ndarray  # float32 [n_values]: remaining return (NaN: unknown)
+    allowed: np.ndarray | None = None  # int32: actions with a known value (None: unknown)
+    regret: np.ndarray | None = None  # float32: their regret, (Q* - Q(a)) / the instance's optimum
 
 
 def objective_mode(env_cfg: EnvConfig) -> str:
@@ -71,23 +73,35 @@ def to_units(v_objective: float, prepared, env_cfg: EnvConfig, n_values: int) ->
     return np.array([v_objective / scale], np.float32)
 
 
-def samples_along(env, prepared, actions: np.ndarray, optimal: list[np.ndarray], values: np.ndarray) -> list[Sample]:
-    """Replay `actions` and record the observation of every state before its action."""
+def samples_along(env, prepared, actions: np.ndarray, optimal: list[np.ndarray], values: np.ndarray,
+                  q: list[tuple[np.ndarray, np.ndarray]] | None = None, scale: float = 1.0,
+                  tolerance: float = 0.0) -> list[Sample]:
+    """Replay `actions` and record the observation of every state before its action.
+
+    `q`: per step, (allowed actions, their values) or empty arrays; when known, the optimal set is
+    every action whose regret (Q* - Q(a)) / `scale` is at most `tolerance`, and the regrets are kept
+    for the expected-regret loss."""
     obs, _ = env.reset(options={"instance": prepared})
     n = prepared.inst.n_acq
     out = []
     for t, a in enumerate(actions):
         m = int(obs["n_edges"][0])
         opt = optimal[t] if len(optimal[t]) else np.array([a], np.int32)
+        allowed = regret = None
+        if q is not None and len(q[t][0]):
+            allowed, qv = q[t]
+            regret = ((qv.max() - qv) / max(scale, 1e-300)).astype(np.float32)
+            opt = allowed[regret <= tolerance + 1e-12]
         out.append(Sample(obs["x"][:n].copy(), obs["edge_index"][:, :m].copy(), obs["edge_attr"][:m].copy(),
                           obs["action_mask"][:n].copy(), np.asarray(opt, np.int32),
-                          np.asarray(values[t], np.float32)))
+                          np.asarray(values[t], np.float32), allowed, regret))
         obs, *_ = env.step(int(a))
     return out
 
 
-def collate(samples: list[Sample]) -> tuple[dict[str, torch.Tensor], torch.Tensor, torch.Tensor]:
-    """Padded observation batch, optimal-action mask [B, N] and value targets [B, V]."""
+def collate(samples: list[Sample]) -> tuple[dict[str, torch.Tensor], torch.Tensor, torch.Tensor, torch.Tensor]:
+    """Padded observation batch, optimal-action mask [B, N], value targets [B, V] and regrets [B, N]
+    (NaN rows: regret unknown)."""
     b = len(samples)
     n = max(s.x.shape[0] for s in samples)
     m = max(1, max(s.edge_index.shape[1] for s in samples))
@@ -97,31 +111,42 @@ def collate(samples: list[Sample]) -> tuple[dict[str, torch.Tensor], torch.Tenso
     ea = np.zeros((b, m, samples[0].edge_attr.shape[1]), np.float32)
     mask = np.zeros((b, n), np.int8)
     opt = np.zeros((b, n), bool)
+    regret = np.full((b, n), np.nan, np.float32)
     for i, s in enumerate(samples):
         k, e = s.x.shape[0], s.edge_index.shape[1]
         x[i, :k], ei[i, :, :e], ea[i, :e], mask[i, :k] = s.x, s.edge_index, s.edge_attr, s.mask
         opt[i, s.optimal] = True
+        if s.regret is not None:
+            regret[i] = 0.0
+            regret[i, s.allowed] = s.regret
     obs = {"x": torch.from_numpy(x), "edge_index": torch.from_numpy(ei), "edge_attr": torch.from_numpy(ea),
            "n_nodes": torch.tensor([[s.x.shape[0]] for s in samples], dtype=torch.int32),
            "n_edges": torch.tensor([[s.edge_index.shape[1]] for s in samples], dtype=torch.int32),
            "action_mask": torch.from_numpy(mask)}
-    return obs, torch.from_numpy(opt), torch.from_numpy(np.stack([s.value for s in samples]))
+    return obs, torch.from_numpy(opt), torch.from_numpy(np.stack([s.value for s in samples])), torch.from_numpy(regret)
 
 
-def losses(agent: EOSPAgent, obs, opt, target) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
-    """(policy loss, value loss, accuracy of the argmax) of one batch."""
+def losses(agent: EOSPAgent, obs, opt, target, regret=None) -> dict[str, torch.Tensor]:
+    """Policy loss (-log P(an optimal action)), value loss, expected regret under the policy (states with
+    known action values), and the accuracy of the argmax, of one batch."""
     gb, valid = batch_from_padded(obs)
     logits, values = agent(gb)
     padded = agent.padded_logits(logits, valid)
     log_z = torch.logsumexp(padded, dim=-1)
     log_opt = torch.logsumexp(padded.masked_fill(~opt, float("-inf")), dim=-1)
-    policy_loss = (log_z - log_opt).mean()
+    out = {"policy_loss": (log_z - log_opt).mean()}
     scale = agent.cfg.value_scale or 1.0
     known = ~torch.isnan(target)
     diff = torch.where(known, (values - torch.nan_to_num(target)) / scale, torch.zeros_like(values))
-    value_loss = (diff ** 2).sum() / known.sum().clamp(min=1)
-    acc = opt.gather(1, padded.argmax(dim=-1, keepdim=True)).float().mean()
-    return policy_loss, value_loss, acc
+    out["value_loss"] = (diff ** 2).sum() / known.sum().clamp(min=1)
+    out["regret"] = padded.new_zeros(())
+    if regret is not None:
+        rows = ~torch.isnan(regret[:, 0])
+        if rows.any():
+            p = torch.softmax(padded[rows], dim=-1)
+            out["regret"] = (p * regret[rows]).sum(-1).mean()
+    out["accuracy"] = opt.gather(1, padded.argmax(dim=-1, keepdim=True)).float().mean()
+    return out
 
 
 def label_states(shard: str, index: int, mode: str, actions: list[int], beam: int, prune: bool,
@@ -159,7 +184,7 @@ def label_states(shard: str, index: int, mode: str, actions: list[int], beam: in
 class DemoData:
     """Training instances with their demos, and the labelled states built from them."""
 
-    def __init__(self, paths: tuple[str, ...], env_cfg: EnvConfig, n_values: int):
+    def __init__(self, paths: tuple[str, ...], env_cfg: EnvConfig, n_values: int, set_tolerance: float = 0.0):
         from eosp.envs.eosp_env import EOSPEnv
         from eosp.envs.sources import FixedSource, expand_shards, prepare_instance
         from eosp.shards.io import ShardReader
@@ -186,7 +211,8 @@ class DemoData:
         for (_, _, p), d in zip(self.instances, demos):
             targets = reward_units(p, d.actions, env_cfg, n_values)
             self.start_values.append(float(targets[0].max()) if len(targets) else 0.0)
-            self.samples += samples_along(self.env, p, d.actions, d.optimal, targets)
+            q = [(al, qv) for al, qv in zip(d.allowed, d.q)]
+            self.samples += samples_along(self.env, p, d.actions, d.optimal, targets, q, d.value, set_tolerance)
 
     def add_policy_states(self, agent: EOSPAgent, n: int, beam: int, rng: np.random.Generator) -> dict:
         """One DAgger round: the policy samples episodes on `n` training instances, the expert labels them."""
@@ -224,22 +250,21 @@ class DemoData:
 
 def train_epoch(agent: EOSPAgent, opt: torch.optim.Optimizer, samples: list[Sample], batch_size: int,
                 value_coeff: float, grad_clip: float, rng: np.random.Generator,
-                deadline: float | None = None) -> dict[str, float]:
+                deadline: float | None = None, regret_coeff: float = 0.0) -> dict[str, float]:
     agent.train()
     order = rng.permutation(len(samples))
-    tot = {"policy_loss": 0.0, "value_loss": 0.0, "accuracy": 0.0}
+    tot = {"policy_loss": 0.0, "value_loss": 0.0, "regret": 0.0, "accuracy": 0.0}
     batches = 0
     for start in range(0, len(order), batch_size):
-        obs, optm, target = collate([samples[i] for i in order[start:start + batch_size]])
-        pl, vl, acc = losses(agent, obs, optm, target)
-        loss = pl + value_coeff * vl
+        obs, optm, target, regret = collate([samples[i] for i in order[start:start + batch_size]])
+        parts = losses(agent, obs, optm, target, regret if regret_coeff > 0 else None)
+        loss = parts["policy_loss"] + value_coeff * parts["value_loss"] + regret_coeff * parts["regret"]
         opt.zero_grad()
         loss.backward()
         torch.nn.utils.clip_grad_norm_(agent.parameters(), grad_clip)
         opt.step()
-        tot["policy_loss"] += pl.item()
-        tot["value_loss"] += vl.item()
-        tot["accuracy"] += acc.item()
+        for k in tot:
+            tot[k] += parts[k].item()
         batches += 1
         if deadline is not None and time.perf_counter() > deadline:
             break
