@@ -19,6 +19,13 @@ class Solution:
     value: float
     info: dict[str, Any] = field(default_factory=dict)
 
+    @classmethod
+    def from_path(cls, inst: Instance, nodes: np.ndarray, mode: str, info: dict[str, Any] | None = None) -> Solution:
+        """The solution of a path, valued with the objective of `mode` (:func:`objective_weights`)."""
+        nodes = np.asarray(nodes)
+        value = float(objective_weights(inst, mode)[inst.node_acq[nodes]].sum()) if len(nodes) else 0.0
+        return cls(nodes, value, info or {})
+
 
 def objective_weights(inst: Instance, mode: str) -> np.ndarray:
     """Per-acquisition weight: the utility, or 1 per acquisition in unitary mode."""

@@ -13,7 +13,7 @@ import time
 from eosp.envs.sources import prepare_instance
 from eosp.instances.instance import Instance
 from eosp.search.rollouts import beam, replay
-from eosp.solvers.base import Solution, objective_weights
+from eosp.solvers.base import Solution
 from eosp.solvers.policy import evaluate_batch, make_env_for, resolve_agent
 
 
@@ -28,7 +28,5 @@ def solve(inst: Instance, *, mode: str = "utility", time_limit: float | None = N
     best = beam(env, lambda obss: evaluate_batch(model, obss), width=beam_width, expand=expand, seed=seed,
                 time_limit=time_limit)
     nodes, _ = replay(env, best.actions, seed)
-    w = objective_weights(inst, mode)
-    value = float(w[inst.node_acq[nodes]].sum()) if len(nodes) else 0.0
-    return Solution(nodes, value, {"solver": "beam", "beam_width": beam_width, "episodes": best.episodes,
+    return Solution.from_path(inst, nodes, mode, {"solver": "beam", "beam_width": beam_width, "episodes": best.episodes,
                                    "evaluations": best.evaluations, "seconds": time.perf_counter() - t0})

@@ -8,7 +8,7 @@ import time
 from eosp.envs.sources import prepare_instance
 from eosp.instances.instance import Instance
 from eosp.search.mcts import solve as mcts_solve
-from eosp.solvers.base import Solution, objective_weights
+from eosp.solvers.base import Solution
 from eosp.solvers.policy import evaluate_batch, make_env_for, resolve_agent, value_weights
 
 
@@ -27,9 +27,7 @@ def solve(inst: Instance, *, mode: str = "utility", time_limit: float | None = N
     nodes, ret, stats = mcts_solve(env, lambda obss: evaluate_batch(model, obss, vw), num_simulations=int(budget or 0),
                                    c_puct=c_puct, batch=batch, seed=seed, time_limit=time_limit,
                                    gumbel=gumbel)
-    w = objective_weights(inst, mode)
-    value = float(w[inst.node_acq[nodes]].sum()) if len(nodes) else 0.0
-    return Solution(nodes, value, {"solver": "mcts", "budget": budget, "simulations": stats.simulations,
+    return Solution.from_path(inst, nodes, mode, {"solver": "mcts", "budget": budget, "simulations": stats.simulations,
                                    "expansions": stats.expansions, "evaluations": stats.evaluations,
                                    "seconds": time.perf_counter() - t0,
                                    "return": ret})

@@ -15,7 +15,7 @@ from eosp.envs.sources import FixedSource, PreparedInstance, prepare_instance
 from eosp.config import CLASS_UTILITIES, EnvConfig
 from eosp.instances.instance import Instance
 from eosp.models.agent import EOSPAgent, batch_from_padded
-from eosp.solvers.base import Solution, objective_weights
+from eosp.solvers.base import Solution
 
 
 def to_batch(obs: dict[str, np.ndarray]) -> dict[str, torch.Tensor]:
@@ -99,6 +99,4 @@ def solve(inst: Instance, *, mode: str = "utility", time_limit: float | None = N
     agent, env_cfg, _ = resolve_agent("policy", checkpoint, agent, mode)
     prepared = prepare_instance(inst, env_cfg.prune)
     nodes, _ = rollout(agent, prepared, env_cfg, sample=sample, seed=seed)
-    w = objective_weights(inst, mode)
-    return Solution(nodes, float(w[inst.node_acq[nodes]].sum()) if len(nodes) else 0.0,
-                    {"solver": "policy", "sample": sample})
+    return Solution.from_path(inst, nodes, mode, {"solver": "policy", "sample": sample})

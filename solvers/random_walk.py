@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 
 from eosp.instances.instance import Instance
-from eosp.solvers.base import Solution, objective_weights
+from eosp.solvers.base import Solution
 
 
 def solve(inst: Instance, *, mode: str = "utility", time_limit: float | None = None, seed: int = 0,
@@ -28,5 +28,4 @@ def solve(inst: Instance, *, mode: str = "utility", time_limit: float | None = N
         used[g.node_acq[node]] = True
         path.append(node)
     nodes = np.asarray(path, dtype=np.int64)
-    w = objective_weights(inst, mode)
-    return Solution(nodes, float(np.sum(w[g.node_acq[nodes]])) if nodes.size else 0.0, {"solver": "random"})
+    return Solution.from_path(inst, nodes, mode, {"solver": "random"})

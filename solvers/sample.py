@@ -12,7 +12,7 @@ import time
 from eosp.envs.sources import prepare_instance
 from eosp.instances.instance import Instance
 from eosp.search.rollouts import replay, sample
-from eosp.solvers.base import Solution, objective_weights
+from eosp.solvers.base import Solution
 from eosp.solvers.policy import evaluate_batch, make_env_for, resolve_agent
 
 
@@ -27,7 +27,5 @@ def solve(inst: Instance, *, mode: str = "utility", time_limit: float | None = N
     best = sample(env, lambda obss: evaluate_batch(model, obss), samples=samples, temperature=temperature,
                   seed=seed, time_limit=time_limit)
     nodes, _ = replay(env, best.actions, seed)
-    w = objective_weights(inst, mode)
-    value = float(w[inst.node_acq[nodes]].sum()) if len(nodes) else 0.0
-    return Solution(nodes, value, {"solver": "sample", "samples": samples, "episodes": best.episodes,
+    return Solution.from_path(inst, nodes, mode, {"solver": "sample", "samples": samples, "episodes": best.episodes,
                                    "evaluations": best.evaluations, "seconds": time.perf_counter() - t0})
