@@ -123,7 +123,7 @@ def test_checkpoint_round_trip_same_actions(tmp_path, agent):
 def test_unknown_or_bad_checkpoint(tmp_path, agent):
     from eosp.errors import InputError
 
-    with pytest.raises(InputError, match="unknown checkpoint"):
+    with pytest.raises(InputError, match="nothing: checkpoint not found"):
         load_agent(tmp_path / "nothing")
     save_agent(agent, tmp_path / "ck", EnvConfig())
     (tmp_path / "ck" / "agent.pt").write_bytes(b"\x80\x04not a zip")
