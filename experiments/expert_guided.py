@@ -98,7 +98,9 @@ def budget_args(kind: str, mode: str, seconds: float, run: str, a) -> list[list[
     pre = [PY, "jobs/pretrain.py", "--imitation.train-data", str(base / "train"), "--imitation.val-data",
            str(base / "val"), "--imitation.epochs", "1000", "--imitation.dagger-every", "2",
            "--imitation.run-name", run if kind == "imitation" else run + "-bc", "--imitation.experiment",
-           "expert-guided", *common_env]
+           "expert-guided", "--imitation.dagger-beam", "1", *common_env]
+    if mode == "utility":  # decisions weighed by what they cost (see docs/training.md)
+        pre += ["--imitation.regret-coeff", "100", "--imitation.set-tolerance", "1e-6"]
     ppo = [PY, "jobs/train.py", "--train.train-data", str(base / "train"), "--train.val-data", str(base / "val"),
            "--train.iterations", "100000", "--train.run-name", run, "--train.experiment", "expert-guided",
            "--train.validate-every", "2", "--train.checkpoint-every", "2", "--train.time-budget", None, *common_env]

@@ -74,6 +74,8 @@ def main() -> None:
         "at optimum": int((g.policy >= g.exact * (1 - 1e-9)).sum()),
         "below Greedy": int((g.policy < g.greedy * (1 - 1e-9)).sum()),
         "policy s / instance": g.policy_s.mean()}), include_groups=False)
+    for c in ("instances", "exact proven", "at optimum", "below Greedy"):
+        per[c] = per[c].astype(int)
     history = run / "history.json"
     cfg = json.loads(history.read_text())["config"] if history.exists() else {}
     data_sets = cfg.get("imitation", {}).get("train_data", [])
@@ -91,9 +93,9 @@ def main() -> None:
           f"(model {json.dumps(cfg.get('model', {}))}, env reward `{env_cfg.reward}`).  Source run: "
           f"`{run.name}` ({meta.get('source', 'ppo')}, epoch/iteration {meta.get('epoch', meta.get('iteration'))}).",
           "", "## How it was trained", "", "```bash",
-          "python experiments/expert_guided.py data      # data sets and expert demos (seeds below)",
-          "python jobs/build_demos.py --data data/expert/train data/expert/val --modes utility --action-sets false",
-          "python jobs/build_demos.py --data data/expert/train data/expert/val --modes unitary --beam 1",
+          "python experiments/expert_guided.py data      # data sets (seeds below) and expert demos:",
+          "#   jobs/build_demos.py --modes unitary --action-sets true --beam 1",
+          "#   jobs/build_demos.py --modes utility --action-sets true --beam 1 --sets-max-acquisitions 150",
           "python jobs/pretrain.py " + " ".join(f"--{k.replace('_', '-')} {v}" for k, v in _flags(cfg)), "```", "",
           "Training data (generated with jobs/build_shards.py; instance k of a set uses seed + k):", "",
           "| set | family | acquisitions | instances | seed | generator settings |", "|---|---|---|---|---|---|"]
@@ -116,7 +118,7 @@ def _flags(cfg: dict) -> list[tuple[str, str]]:
     out = []
     im = cfg.get("imitation", {})
     for k in ("train_data", "val_data", "epochs", "time_budget", "batch_size", "lr", "dagger_every",
-              "dagger_instances", "seed"):
+              "dagger_instances", "dagger_beam", "regret_coeff", "set_tolerance", "seed"):
         if k in im:
             v = im[k]
             out.append((f"imitation.{k}", " ".join(map(str, v)) if isinstance(v, list) else v))
