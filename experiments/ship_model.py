@@ -75,7 +75,7 @@ def main() -> None:
         "below Greedy": int((g.policy < g.greedy * (1 - 1e-9)).sum()),
         "policy s / instance": g.policy_s.mean()}), include_groups=False)
     for c in ("instances", "exact proven", "at optimum", "below Greedy"):
-        per[c] = per[c].astype(int)
+        per[c] = per[c].astype(int).astype(str)  # counts print as integers
     history = run / "history.json"
     cfg = json.loads(history.read_text())["config"] if history.exists() else {}
     data_sets = cfg.get("imitation", {}).get("train_data", [])
