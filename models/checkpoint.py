@@ -54,7 +54,8 @@ def load_agent(directory: str | Path) -> tuple[EOSPAgent, EnvConfig, dict[str, A
     try:
         state = torch.load(d / WEIGHTS, map_location="cpu", weights_only=True)
     except Exception as exc:  # truncated or foreign file
-        raise InputError(d / WEIGHTS, f"cannot read the weights: {exc}") from None
+        first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+        raise InputError(d / WEIGHTS, f"cannot read the weights: {first}") from None  # one line: torch's are long
     try:
         agent.load_state_dict(state)
     except RuntimeError as exc:

@@ -189,7 +189,7 @@ def test_shipped_models_solve_without_a_checkpoint(tmp_path, mode):
         out = tmp_path / f"{solver}.parquet"
         assert main(["solve", str(tmp_path / "inst"), "--solver", solver, "--mode", mode, "--out", str(out),
                      *extra]) == 0
-        assert check(inst, read_schedule(out, inst)).feasible
+        assert check(inst, read_schedule(out)).feasible
 
 
 def test_missing_or_corrupt_shipped_model_is_one_line(tmp_path, monkeypatch, capsys):
