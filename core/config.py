@@ -360,6 +360,10 @@ class EnvConfig:
     """Play in the pruned discrete graph (the paper); false: in the unpruned one."""
     obs_edges: str = "earliest"
     """'earliest' (sparse, for the GNN) or 'full' (the whole surviving continuous graph)."""
+    obs_horizon_s: float = ranged(0.0, 0.0)
+    """Observation horizon (s): acquisitions not selectable now whose earliest start is more than this after
+    the current time are left out of the network's graph (cost follows the near future); 0 = the whole
+    graph."""
     max_edges: int = 0
     """Edge padding; 0 = max_acquisitions * (max_out_degree + 4)."""
     shards: tuple[str, ...] = ()

@@ -218,3 +218,30 @@ def test_shard_source_splits_shards_between_workers(tmp_path):
     ctx = EnvContext({"shards": [str(tmp_path)], "max_acquisitions": 16, "seed": 0}, worker_index=1, num_workers=2)
     a, b = EOSPEnv(ctx), EOSPEnv(ctx)
     assert [a.reset()[1]["instance"] for _ in range(5)] == [b.reset()[1]["instance"] for _ in range(5)]
+
+
+def test_observation_horizon_keeps_the_selectable_and_drops_the_far_future():
+    """With obs_horizon_s, far acquisitions leave the graph: no edge touches them, every allowed action stays."""
+    from eosp.envs.observation import LAST, REMOVED, SCHEDULED, SELECTABLE
+    from eosp.envs.sources import FixedSource
+
+    inst = generated("uniform", 60, 3)
+    full = EOSPEnv(EnvConfig(max_acquisitions=0), source=FixedSource(inst))
+    near = EOSPEnv(EnvConfig(max_acquisitions=0, obs_horizon_s=300.0), source=FixedSource(inst))
+    o_full, _ = full.reset(seed=1)
+    o_near, _ = near.reset(seed=1)
+    rng = np.random.default_rng(0)
+    dropped_any = False
+    while o_full["action_mask"].any():
+        x = o_near["x"]
+        active = (x[:, REMOVED] == 0) & ((x[:, SCHEDULED] == 0) | (x[:, LAST] == 1))
+        m = int(o_near["n_edges"][0])
+        assert active[o_near["edge_index"][:, :m]].all()  # no edge to or from a node left out
+        assert (active | (o_near["action_mask"] == 0)).all() and (x[:, SELECTABLE] == o_near["action_mask"]).all()
+        np.testing.assert_array_equal(o_near["action_mask"], o_full["action_mask"])
+        assert m <= int(o_full["n_edges"][0])
+        dropped_any |= bool((~active & (o_full["x"][:, REMOVED] == 0) & (o_full["x"][:, SCHEDULED] == 0)).any())
+        a = int(rng.choice(np.flatnonzero(o_full["action_mask"])))
+        o_full, *_ = full.step(a)
+        o_near, *_ = near.step(a)
+    assert dropped_any
