@@ -27,12 +27,7 @@ def learning_curve(history: list[dict], out: str | Path) -> Path:
         ax[1].set_xlabel("iteration")
         ax[1].set_ylabel("validation mean ratio")
         ax[1].legend()
-    fig.tight_layout()
-    png = out.with_suffix(".png")
-    fig.savefig(png, dpi=120)
-    fig.savefig(out.with_suffix(".svg"))
-    plt.close(fig)
-    return png
+    return _save(fig, out)
 
 
 def imitation_curve(history: list[dict], out: str | Path) -> Path:
@@ -54,6 +49,11 @@ def imitation_curve(history: list[dict], out: str | Path) -> Path:
     ax[1].set_ylabel("validation mean ratio")
     if val:
         ax[1].legend()
+    return _save(fig, out)
+
+
+def _save(fig, out: Path) -> Path:
+    """PNG and SVG beside each other; returns the PNG."""
     fig.tight_layout()
     png = out.with_suffix(".png")
     fig.savefig(png, dpi=120)
