@@ -51,7 +51,7 @@ def main() -> None:
 
     from eosp.config import family_config
     from eosp.instances.generator import generate
-    from eosp.solvers.base import get_solver
+    from eosp.solvers.base import run_solver
     from eosp.solvers.policy import resolve_agent
 
     torch.set_num_threads(1)
@@ -74,7 +74,7 @@ def main() -> None:
 
                     if "policy" in a.methods:
                         t0 = time.perf_counter()
-                        sol = get_solver("policy")(inst, mode=mode, agent=agents[mode])
+                        sol = run_solver("policy", inst, mode=mode, agent=agents[mode])
                         dt = time.perf_counter() - t0
                         for t in a.times:
                             add("policy", t, sol.value if dt <= t else np.nan, dt)
@@ -82,7 +82,7 @@ def main() -> None:
                         runs, beam = [], 1
                         while True:
                             t0 = time.perf_counter()
-                            sol = get_solver("ramp")(inst, mode=mode, beam=beam)
+                            sol = run_solver("ramp", inst, mode=mode, beam=beam)
                             runs.append((time.perf_counter() - t0, sol.value, beam))
                             if runs[-1][0] > max(a.times) or beam >= 256:
                                 break
@@ -102,7 +102,7 @@ def main() -> None:
                             if method == "beam":
                                 kw["beam_width"] = 4
                             t0 = time.perf_counter()
-                            sol = get_solver(method)(inst, mode=mode, time_limit=t, **kw)
+                            sol = run_solver(method, inst, mode=mode, time_limit=t, **kw)
                             add(method, t, sol.value, time.perf_counter() - t0,
                                 status=str(sol.info.get("status", "")))
     df = pd.DataFrame(rows)

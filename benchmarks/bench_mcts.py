@@ -19,7 +19,7 @@ from eosp.envs.sources import prepare_instance
 from eosp.config import MODEL_PRESETS, EnvConfig, ModelConfig, family_config
 from eosp.instances.generator import generate
 from eosp.models.agent import EOSPAgent
-from eosp.solvers.mcts import solve
+from eosp.solvers.mcts import MctsConfig, solve
 
 
 def main() -> None:
@@ -37,14 +37,14 @@ def main() -> None:
     else:
         torch.manual_seed(0)
         agent = (EOSPAgent(ModelConfig(**MODEL_PRESETS["cpu"])).eval(), EnvConfig(), {})
-    solve(generate(family_config("uniform", 20, 0)), agent=agent, budget=5)  # warm-up
+    solve(generate(family_config("uniform", 20, 0)), MctsConfig(budget=5), agent=agent)  # warm-up
     print("| acq | budget | decisions | simulations | expansions | episode (s) | ms / simulation | "
           "ms / expansion |\n|---|---|---|---|---|---|---|---|")
     for n in a.sizes:
         inst = generate(family_config("uniform", n, a.seed))
         prepare_instance(inst)  # pruning outside the timing (done once per instance)
         t0 = time.perf_counter()
-        sol = solve(inst, agent=agent, budget=a.budget, mode="utility")
+        sol = solve(inst, MctsConfig(budget=a.budget, mode="utility"), agent=agent)
         dt = time.perf_counter() - t0
         i = sol.info
         print(f"| {n} | {a.budget} | {len(sol.nodes)} | {i['simulations']} | {i['expansions']} | {dt:.1f} | "

@@ -23,7 +23,7 @@ import numpy as np
 from eosp.config import family_config
 from eosp.instances.generator import generate
 from eosp.instances.schedule import check, from_internal_nodes
-from eosp.solvers import exact, greedy, ramp
+from eosp.solvers.base import run_solver
 
 MODES = ("utility", "unitary")
 
@@ -43,11 +43,11 @@ def run_instance(family: str, n: int, seed: int, args: argparse.Namespace) -> li
                "arcs": inst.unpruned().n_arcs, "pruned_arcs": inst.pruned().n_arcs, "t_generate": t_gen,
                "t_prune": t_prune}
         sols = {}
-        sols["greedy"], row["t_greedy"] = timed(greedy.solve, inst, mode=mode)
-        sols["ramp"], row["t_ramp"] = timed(ramp.solve, inst, mode=mode, beam=args.beam,
+        sols["greedy"], row["t_greedy"] = timed(run_solver, "greedy", inst, mode=mode)
+        sols["ramp"], row["t_ramp"] = timed(run_solver, "ramp", inst, mode=mode, beam=args.beam,
                                             time_limit=args.ramp_limit)
         if n <= args.exact_max_size:
-            sols["exact"], row["t_exact"] = timed(exact.solve, inst, mode=mode, time_limit=args.exact_limit)
+            sols["exact"], row["t_exact"] = timed(run_solver, "exact", inst, mode=mode, time_limit=args.exact_limit)
             info = sols["exact"].info
             row.update(status=info["status"], gap=info["gap"], bound=info["bound"],
                        t_lagrangian=info["lagrangian_seconds"])
@@ -119,8 +119,8 @@ def main(argv: list[str] | None = None) -> int:
     # warm up the JIT on a tiny instance so that the first row is not compile time
     warm = generate(family_config("clusters", 12, 0, graph={"step_s": 5.0}))
     for mode in MODES:
-        for solve in (greedy.solve, ramp.solve, exact.solve):
-            solve(warm, mode=mode)
+        for name in ("greedy", "ramp", "exact"):
+            run_solver(name, warm, mode=mode)
 
     print(HEADER, flush=True)
     rows = []

@@ -14,7 +14,7 @@ import time
 from pathlib import Path
 
 from eosp.args import add_config_args, config_from_args
-from eosp.config import InstanceConfig, SolveConfig, family_config
+from eosp.config import InstanceConfig, family_config
 from eosp.errors import InputError
 
 
@@ -108,30 +108,32 @@ def cmd_validate(ns: argparse.Namespace) -> int:
     return 1
 
 
+def solve_options(ns: argparse.Namespace) -> dict:
+    """The solver options given on the command line (flags of the solver's config, see build_parser);
+    0 for --time-limit or --budget means unset, as it always has."""
+    from dataclasses import fields
+
+    from eosp.solvers.base import solver_config_class
+
+    options = {f.name: getattr(ns, f.name) for f in fields(solver_config_class(ns.solver)) if hasattr(ns, f.name)}
+    for name in ("time_limit", "budget"):
+        if options.get(name) == 0:
+            options[name] = None
+    return options
+
+
 def cmd_solve(ns: argparse.Namespace) -> int:
     from eosp.instances.schedule import check, check_schedule_out, from_internal_nodes, write_schedule
-    from eosp.solvers.base import get_solver
+    from eosp.solvers.base import make_config, run_solver
 
-    cfg = config_from_args(SolveConfig, ns)
+    options = solve_options(ns)
+    make_config(ns.solver, **options)  # bad options are refused before any file is read
     check_schedule_out(ns.out)
-    if ns.checkpoint and not Path(ns.checkpoint).exists():
-        raise InputError(ns.checkpoint, "checkpoint not found")
+    if options.get("checkpoint") and not Path(options["checkpoint"]).exists():
+        raise InputError(options["checkpoint"], "checkpoint not found")
     inst = _load_instance(ns.instance_dir)
-    solver = get_solver(ns.solver)
-    kwargs = {"mode": cfg.mode, "time_limit": cfg.time_limit or None, "seed": cfg.seed}
-    if ns.checkpoint:
-        kwargs["checkpoint"] = ns.checkpoint
-    if cfg.budget:
-        kwargs["budget"] = cfg.budget
-    if ns.sample:
-        kwargs["sample"] = True
-    if ns.gumbel:
-        kwargs["gumbel"] = True
-    for name in ("samples", "beam_width"):
-        if getattr(ns, name) is not None:
-            kwargs[name] = getattr(ns, name)
     t0 = time.perf_counter()
-    sol = solver(inst, **kwargs)
+    sol = run_solver(ns.solver, inst, **options)
     elapsed = time.perf_counter() - t0
     sched = from_internal_nodes(inst, sol.nodes)
     verdict = check(inst, sched)
@@ -195,7 +197,18 @@ def cmd_report(ns: argparse.Namespace) -> int:
     return 0
 
 
-def build_parser() -> argparse.ArgumentParser:
+def solver_of(argv: list[str]) -> str | None:
+    """The --solver of an ``eosp solve`` command line ("" when missing), None for other commands."""
+    if not argv or argv[0] != "solve":
+        return None
+    pre = argparse.ArgumentParser(add_help=False)
+    pre.add_argument("--solver", default="")
+    return pre.parse_known_args(argv[1:])[0].solver
+
+
+def build_parser(solver: str | None = None) -> argparse.ArgumentParser:
+    """The ``eosp`` parser.  `solver`: the --solver of a solve command (:func:`solver_of`), whose config
+    (:mod:`eosp.solvers.base`) gives ``eosp solve`` its flags; "" or an unknown name: the shared ones."""
     p = argparse.ArgumentParser(prog="eosp", description=__doc__.splitlines()[0])
     sub = p.add_subparsers(dest="command", required=True)
 
@@ -227,16 +240,15 @@ def build_parser() -> argparse.ArgumentParser:
     v.add_argument("schedule")
     v.set_defaults(func=cmd_validate)
 
-    s = sub.add_parser("solve", help="solve an instance and write a schedule file")
+    s = sub.add_parser("solve", help="solve an instance and write a schedule file",
+                       epilog="Each solver has its own options: eosp solve --solver NAME --help lists them.")
     s.add_argument("instance_dir", help="instance directory (or SHARD#INDEX)")
-    s.add_argument("--solver", required=True)
+    s.add_argument("--solver", required=True, help="random, greedy, ramp, exact, policy, sample, beam, mcts")
     s.add_argument("--out", required=True, help="schedule file (.parquet, or .jsonl)")
-    add_config_args(s, SolveConfig)
-    s.add_argument("--checkpoint", default="", help="trained agent (policy, mcts, sample, beam solvers); default: the shipped pretrained model of --mode")
-    s.add_argument("--sample", action="store_true", help="policy: sample actions (seeded) instead of argmax")
-    s.add_argument("--gumbel", action="store_true", help="mcts: Gumbel root selection with sequential halving")
-    s.add_argument("--samples", type=int, default=None, help="sample solver: episodes per batched round (16)")
-    s.add_argument("--beam-width", type=int, default=None, help="beam solver: partial schedules kept (4)")
+    if solver is not None:
+        from eosp.solvers.base import REGISTRY, SolverConfig, solver_config_class
+
+        add_config_args(s, solver_config_class(solver) if solver in REGISTRY else SolverConfig)
     s.set_defaults(func=cmd_solve)
 
     b = sub.add_parser("build-shards", help="generate a data set of Parquet shards with Ray (jobs/build_shards.py)",
@@ -261,10 +273,23 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else argv
-    parser = build_parser()
+    solver = solver_of(argv)
+    parser = build_parser(solver)
     if argv and argv[0] == "build-shards":
         return cmd_build_shards(argparse.Namespace(), argv[1:])
-    ns = parser.parse_args(argv)
+    ns, extra = parser.parse_known_args(argv)
+    if extra and ns.command == "solve" and extra[0].startswith("--"):
+        from dataclasses import fields
+
+        from eosp.solvers.base import REGISTRY, solver_config_class
+
+        if solver in REGISTRY:  # a misspelled or foreign option: name it and the valid ones
+            valid = ", ".join("--" + f.name.replace("_", "-") for f in fields(solver_config_class(solver)))
+            print(f"eosp solve: error: solver {solver!r} has no option {extra[0].partition('=')[0]}; its options: "
+                  f"{valid}", file=sys.stderr)
+            return 2
+    if extra:
+        parser.error(f"unrecognized arguments: {' '.join(extra)}")
     try:
         return ns.func(ns)
     except (InputError, FileExistsError, ValueError, IndexError) as exc:

@@ -18,7 +18,16 @@ from typing import Any
 
 
 def _field_docs(cls: type) -> dict[str, str]:
-    """The string literal that follows each field in the class body (its doc)."""
+    """The string literal that follows each field in the class body (its doc), also for the fields a
+    dataclass inherits (the subclass's doc wins)."""
+    docs: dict[str, str] = {}
+    for klass in reversed(cls.__mro__):
+        if is_dataclass(klass):
+            docs.update(_own_field_docs(klass))
+    return docs
+
+
+def _own_field_docs(cls: type) -> dict[str, str]:
     try:
         tree = ast.parse(inspect.getsource(cls))
     except (OSError, TypeError):
@@ -69,12 +78,15 @@ def add_config_args(parser: argparse.ArgumentParser, cls: type, prefix: str = ""
             add_config_args(parser, type(value), prefix=name + ".", defaults=value)
             continue
         hint = hints[f.name]
+        options = [a for a in typing.get_args(hint) if a is not type(None)]
+        if len(options) == 1 and len(typing.get_args(hint)) == 2:  # `X | None`: the flag gives an X
+            hint = options[0]
         flag = "--" + name.replace("_", "-")
         help_text = (docs.get(f.name, "") + f" (default: {value!r})").strip()
         origin = typing.get_origin(hint)
-        if hint is bool:
-            parser.add_argument(flag, dest=name, type=_parse_bool, default=argparse.SUPPRESS, metavar="BOOL",
-                                help=help_text)
+        if hint is bool:  # `--flag` alone means true
+            parser.add_argument(flag, dest=name, type=_parse_bool, nargs="?", const=True, default=argparse.SUPPRESS,
+                                metavar="BOOL", help=help_text)
         elif origin is tuple:
             elem = typing.get_args(hint)[0]
             parser.add_argument(flag, dest=name, type=_checked(cls, f.name, elem), nargs="+",

@@ -511,16 +511,3 @@ class TuneConfig:
     grace_period: int = 2
     """ASHA: iterations every trial runs before it can be stopped."""
     cpus_per_trial: int = ranged(1, 1)
-
-
-@dataclass
-class SolveConfig:
-    """Options of ``eosp solve`` shared by the solvers."""
-
-    mode: str = choice("utility", "utility", "unitary")
-    """'utility' (sum of utilities) or 'unitary' (count acquisitions)."""
-    time_limit: float = ranged(0.0, 0)
-    """Seconds for the searching solvers (ramp, exact, mcts); 0: no limit."""
-    seed: int = ranged(0, 0)
-    budget: int = ranged(0, 0)
-    """MCTS simulations per decision; 0: the solver's default."""

@@ -72,14 +72,14 @@ def report(a) -> None:
     from eosp.config import CLASS_UTILITIES, N_CLASSES
     from eosp.models.checkpoint import load_agent
     from eosp.shards.io import read_instances
-    from eosp.solvers.base import get_solver
+    from eosp.solvers.base import run_solver
     from eosp.solvers.policy import rollout
 
     torch.set_num_threads(1)
     insts = read_instances(expand_shards([str(ROOT / a.val)]))
     methods: dict[str, list] = {}
     for s in ("greedy", "ramp"):
-        methods[s] = [per_class(i, get_solver(s)(i, mode="utility").nodes) for i in insts]
+        methods[s] = [per_class(i, run_solver(s, i, mode="utility").nodes) for i in insts]
     for v in VARIANTS:
         agent, env_cfg, _ = load_agent(ROOT / "runs" / f"reward-{v}" / "checkpoints" / "best")
         methods[v] = [per_class(i, rollout(agent, prepare_instance(i, env_cfg.prune), env_cfg)[0]) for i in insts]

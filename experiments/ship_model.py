@@ -26,7 +26,7 @@ def evaluate(agent_tuple, mode: str, tests: list[str], exact_limit: float) -> li
 
     from eosp.envs.sources import expand_shards
     from eosp.shards.io import read_instances
-    from eosp.solvers.base import get_solver
+    from eosp.solvers.base import run_solver
 
     rows = []
     for test in tests:
@@ -35,7 +35,7 @@ def evaluate(agent_tuple, mode: str, tests: list[str], exact_limit: float) -> li
             for s in ("greedy", "ramp", "exact", "policy"):
                 t0 = time.perf_counter()
                 kw = {"agent": agent_tuple} if s == "policy" else ({"time_limit": exact_limit} if s == "exact" else {})
-                sol = get_solver(s)(inst, mode=mode, **kw)
+                sol = run_solver(s, inst, mode=mode, **kw)
                 r[s], r[f"{s}_s"] = sol.value, time.perf_counter() - t0
                 if s == "exact":
                     r["exact_status"] = sol.info.get("status", "")

@@ -53,19 +53,20 @@ class SolverWorker:
         from eosp.config import N_CLASSES
         from eosp.instances.schedule import check, from_internal_nodes, write_schedule
         from eosp.shards.io import ShardReader
-        from eosp.solvers.base import get_solver
+        from eosp.solvers.base import run_solver, takes_time_limit
 
         inst = ShardReader(shard).read(index)
-        kwargs = {"mode": cfg.mode, "time_limit": cfg.time_limit}
-        if solver in LEARNED:
-            kwargs["agent"] = self._agent(cfg.checkpoint, cfg.mode)
+        options = {"mode": cfg.mode}
+        if takes_time_limit(solver):  # the one-shot solvers (random, greedy, policy) refuse a limit
+            options["time_limit"] = cfg.time_limit
+        agent = self._agent(cfg.checkpoint, cfg.mode) if solver in LEARNED else None
         if solver in ("sample", "beam"):
-            kwargs["time_limit"] = cfg.search_time or None
-            kwargs.update({"samples": cfg.samples} if solver == "sample" else {"beam_width": cfg.beam_width})
+            options["time_limit"] = cfg.search_time or None
+            options.update({"samples": cfg.samples} if solver == "sample" else {"beam_width": cfg.beam_width})
         if solver == "mcts":
-            kwargs["budget"] = budget
+            options["budget"] = budget
         t0 = time.perf_counter()
-        sol = get_solver(solver)(inst, **kwargs)
+        sol = run_solver(solver, inst, agent=agent, **options)
         seconds = time.perf_counter() - t0
         sched = from_internal_nodes(inst, sol.nodes)
         verdict = check(inst, sched)

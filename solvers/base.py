@@ -1,13 +1,27 @@
-"""What every solver returns, and the registry behind ``eosp solve --solver NAME``."""
+"""What every solver takes and returns, and the registry behind ``eosp solve --solver NAME``.
+
+Each solver module defines a config dataclass (a subclass of :class:`SolverConfig`,
+or of :class:`LearnedConfig` for the solvers that play a trained agent) and one entry
+``solve(inst, cfg) -> Solution``.  :func:`run_solver` builds the config from keyword
+options, so a misspelled option is an error naming the valid ones, never ignored; the
+CLI builds its flags from the same config (:func:`eosp.args.add_config_args`).
+
+Time limits: the searching solvers (ramp, exact, sample, beam, mcts) honour
+``time_limit``; the one-shot constructions (random, greedy, policy) always finish in
+one pass and refuse a limit (``ONE_SHOT``), so a caller never believes it bounded them.
+"""
 
 from __future__ import annotations
 
 import importlib
-from dataclasses import dataclass, field
-from typing import Any, Callable
+import numbers
+import typing
+from dataclasses import dataclass, field, fields
+from typing import Any, Callable, ClassVar
 
 import numpy as np
 
+from eosp.config import check_value, choice, ranged
 from eosp.instances.instance import Instance
 
 
@@ -36,21 +50,130 @@ def objective_weights(inst: Instance, mode: str) -> np.ndarray:
     raise ValueError(f"unknown objective mode {mode!r} (utility, unitary)")
 
 
-# name -> "module:function"; each function is solve(inst, *, mode, time_limit, seed, **kw) -> Solution
-REGISTRY: dict[str, str] = {
-    "random": "eosp.solvers.random_walk:solve",
-    "policy": "eosp.solvers.policy:solve",
-    "mcts": "eosp.solvers.mcts:solve",
-    "sample": "eosp.solvers.sample:solve",
-    "beam": "eosp.solvers.beam:solve",
-    "greedy": "eosp.solvers.greedy:solve",
-    "ramp": "eosp.solvers.ramp:solve",
-    "exact": "eosp.solvers.exact:solve",
+@dataclass
+class SolverConfig:
+    """Options every solver takes."""
+
+    mode: str = choice("utility", "utility", "unitary")
+    """'utility' (sum of utilities) or 'unitary' (count acquisitions)."""
+    time_limit: float | None = ranged(None, 0)
+    """Seconds the search may run (ramp, exact, sample, beam, mcts); unset: no limit (0 on the command line
+    means unset).  The one-shot solvers (random, greedy, policy) always finish in one pass and refuse it."""
+    seed: int = ranged(0, 0)
+    """Seed of the random choices (random walk, sampled policy, sample, beam, mcts)."""
+
+    NAME: ClassVar[str] = ""
+    ONE_SHOT: ClassVar[bool] = False  # one pass, no search: a time limit is refused, not ignored
+
+    def __post_init__(self) -> None:
+        self.validate()
+
+    def validate(self) -> None:
+        """Every field of the right type and within its limits (:func:`eosp.config.check_value`); a
+        one-shot solver given a time limit is refused.  A one-line ValueError otherwise."""
+        cls = type(self)
+        hints = typing.get_type_hints(cls)
+        for f in fields(self):
+            value = getattr(self, f.name)
+            _check_type(cls.__name__, f.name, hints[f.name], value)
+            check_value(cls, f.name, value)
+        if self.ONE_SHOT and self.time_limit is not None:
+            raise ValueError(f"solver {self.NAME!r} takes no time_limit: it builds its schedule in one pass and "
+                             f"always finishes (got {self.time_limit!r}; leave it unset)")
+
+
+@dataclass
+class LearnedConfig(SolverConfig):
+    """Options of the solvers that play a trained agent (policy, sample, beam, mcts).  An agent already
+    loaded is passed to ``solve(inst, cfg, agent=...)`` instead, as an (agent, env config, metadata) tuple."""
+
+    checkpoint: str = ""
+    """Trained agent (a checkpoint directory); empty: the shipped pretrained model of --mode."""
+
+
+def _check_type(owner: str, name: str, hint: Any, value: Any) -> None:
+    args = typing.get_args(hint)
+    if value is None and type(None) in args:
+        return
+    base = next((a for a in args if a is not type(None)), hint) if args else hint
+    ok = {bool: lambda v: isinstance(v, (bool, np.bool_)),
+          int: lambda v: isinstance(v, numbers.Integral) and not isinstance(v, (bool, np.bool_)),
+          float: lambda v: isinstance(v, numbers.Real) and not isinstance(v, (bool, np.bool_)),
+          str: lambda v: isinstance(v, str)}.get(base)
+    if ok is not None and not ok(value):
+        kind = {bool: "true/false", int: "an integer", float: "a number", str: "a string"}[base]
+        raise ValueError(f"{owner}.{name}: expected {kind}{' or None' if type(None) in args else ''}, got {value!r}")
+
+
+@dataclass(frozen=True)
+class SolverEntry:
+    """Where a solver lives: its ``solve(inst, cfg)`` and its config class, as "module:name"."""
+
+    function: str
+    config: str
+
+    def load(self, which: str) -> Any:
+        module, name = getattr(self, which).split(":")
+        return getattr(importlib.import_module(module), name)
+
+
+REGISTRY: dict[str, SolverEntry] = {
+    "random": SolverEntry("eosp.solvers.random_walk:solve", "eosp.solvers.random_walk:RandomConfig"),
+    "policy": SolverEntry("eosp.solvers.policy:solve", "eosp.solvers.policy:PolicyConfig"),
+    "mcts": SolverEntry("eosp.solvers.mcts:solve", "eosp.solvers.mcts:MctsConfig"),
+    "sample": SolverEntry("eosp.solvers.sample:solve", "eosp.solvers.sample:SampleConfig"),
+    "beam": SolverEntry("eosp.solvers.beam:solve", "eosp.solvers.beam:BeamConfig"),
+    "greedy": SolverEntry("eosp.solvers.greedy:solve", "eosp.solvers.greedy:GreedyConfig"),
+    "ramp": SolverEntry("eosp.solvers.ramp:solve", "eosp.solvers.ramp:RampConfig"),
+    "exact": SolverEntry("eosp.solvers.exact:solve", "eosp.solvers.exact:ExactConfig"),
 }
 
 
-def get_solver(name: str) -> Callable[..., Solution]:
+def _entry(name: str) -> SolverEntry:
     if name not in REGISTRY:
         raise ValueError(f"unknown solver {name!r}; available: {', '.join(sorted(REGISTRY))}")
-    module, func = REGISTRY[name].split(":")
-    return getattr(importlib.import_module(module), func)
+    return REGISTRY[name]
+
+
+def solver_config_class(name: str) -> type[SolverConfig]:
+    """The config dataclass of solver `name`."""
+    return _entry(name).load("config")
+
+
+def solver_function(name: str) -> Callable[..., Solution]:
+    """The ``solve(inst, cfg)`` of solver `name`."""
+    return _entry(name).load("function")
+
+
+def is_learned(name: str) -> bool:
+    return issubclass(solver_config_class(name), LearnedConfig)
+
+
+def takes_time_limit(name: str) -> bool:
+    """Whether solver `name` honours a time limit (the one-shot ones refuse it)."""
+    return not solver_config_class(name).ONE_SHOT
+
+
+def make_config(name: str, **options: Any) -> SolverConfig:
+    """The config of solver `name` with `options` set; an unknown option is a one-line ValueError that
+    names it and the valid ones, a bad value one that names the field."""
+    cls = solver_config_class(name)
+    valid = [f.name for f in fields(cls)]
+    unknown = [k for k in options if k not in valid]
+    if unknown:
+        raise ValueError(f"solver {name!r} has no option {', '.join(map(repr, unknown))}; "
+                         f"its options: {', '.join(valid)}")
+    return cls(**options)
+
+
+def run_solver(name: str, inst: Instance, *, agent: tuple | None = None, **options: Any) -> Solution:
+    """Solve `inst` with solver `name`, its config built from `options` (:func:`make_config`).
+
+    `agent`: an already loaded (agent, env config, metadata) for the learned solvers."""
+    cfg = make_config(name, **options)
+    if agent is not None:
+        if not isinstance(cfg, LearnedConfig):
+            raise ValueError(f"solver {name!r} plays no agent: agent= is only for "
+                             f"{', '.join(n for n in sorted(REGISTRY) if is_learned(n))}")
+        return solver_function(name)(inst, cfg, agent=agent)
+    return solver_function(name)(inst, cfg)

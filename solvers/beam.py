@@ -9,20 +9,33 @@ first one is the plain policy's, so it never does worse.
 from __future__ import annotations
 
 import time
+from dataclasses import dataclass
 
 from eosp.envs.sources import prepare_instance
 from eosp.instances.instance import Instance
 from eosp.search.rollouts import beam, replay
-from eosp.solvers.base import Solution
+from eosp.config import ranged
+from eosp.solvers.base import LearnedConfig, Solution
 from eosp.solvers.policy import evaluate_batch, make_env_for, resolve_agent
 
 
-def solve(inst: Instance, *, mode: str = "utility", time_limit: float | None = None, seed: int = 0,
-          checkpoint: str = "", agent: tuple | None = None, beam_width: int = 4, expand: int = 4,
-          **_: object) -> Solution:
-    if beam_width < 1 or expand < 1:
-        raise ValueError(f"beam width and expansion must be at least 1, got {beam_width} and {expand}")
-    model, env_cfg, _ = resolve_agent("beam", checkpoint, agent, mode)
+@dataclass
+class BeamConfig(LearnedConfig):
+    """Policy-guided beam search with rollouts; anytime: at the time limit, the best complete schedule met."""
+
+    beam_width: int = ranged(4, 1)
+    """Partial schedules kept."""
+    expand: int = ranged(4, 1)
+    """Children of each partial schedule: the policy's top actions."""
+
+    NAME = "beam"
+
+
+def solve(inst: Instance, cfg: BeamConfig | None = None, *, agent: tuple | None = None) -> Solution:
+    cfg = cfg or BeamConfig()
+    cfg.validate()
+    mode, time_limit, seed, beam_width, expand = cfg.mode, cfg.time_limit, cfg.seed, cfg.beam_width, cfg.expand
+    model, env_cfg, _ = resolve_agent("beam", cfg.checkpoint, agent, mode)
     env = make_env_for(prepare_instance(inst, env_cfg.prune), env_cfg)
     t0 = time.perf_counter()
     best = beam(env, lambda obss: evaluate_batch(model, obss), width=beam_width, expand=expand, seed=seed,

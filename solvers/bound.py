@@ -177,9 +177,10 @@ def upper_bound(inst: Instance, mode: str = "utility", *, lower: float | None = 
     inst.unpruned("the upper bound")
     w = objective_weights(inst, mode)
     if lower is None:
+        from eosp.solvers.greedy import GreedyConfig
         from eosp.solvers.greedy import solve as greedy
 
-        lower = greedy(inst, mode=mode).value
+        lower = greedy(inst, GreedyConfig(mode=mode)).value
     lb = lagrangian(inst.pruned(), w, wait=True, lower=lower, iterations=iterations, time_limit=time_limit,
                     integral=mode == "unitary")
     return float(math.floor(lb.bound + 1e-6)) if mode == "unitary" else lb.bound

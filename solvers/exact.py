@@ -39,19 +39,38 @@ from __future__ import annotations
 
 import math
 import time
+from dataclasses import dataclass
 
 import numpy as np
 
 from eosp.instances.instance import Instance
-from eosp.solvers.base import Solution, objective_weights
+from eosp.config import ranged
+from eosp.solvers.base import Solution, SolverConfig, objective_weights
 from eosp.solvers.bound import completion_bound, lagrangian
+from eosp.solvers.greedy import GreedyConfig
 from eosp.solvers.greedy import solve as greedy
-from eosp.solvers.ramp import label_search
+from eosp.solvers.ramp import RampConfig, label_search
 from eosp.solvers.ramp import solve as ramp
 
 
-def solve(inst: Instance, *, mode: str = "utility", time_limit: float | None = None, seed: int = 0,
-          lagrangian_iterations: int = 400, max_labels: int = 20_000_000, **_: object) -> Solution:
+@dataclass
+class ExactConfig(SolverConfig):
+    """The exact label-setting DP with Lagrangian bounds.  At the time (or label memory) limit it returns
+    the best schedule known with its bound and gap (status "time_limit")."""
+
+    lagrangian_iterations: int = ranged(400, 0)
+    """Subgradient iterations of the Lagrangian bound."""
+    max_labels: int = ranged(20_000_000, 1)
+    """Label memory of the exact sweep; reaching it stops the sweep like the time limit."""
+
+    NAME = "exact"
+
+
+def solve(inst: Instance, cfg: ExactConfig | None = None) -> Solution:
+    cfg = cfg or ExactConfig()
+    cfg.validate()
+    mode, time_limit = cfg.mode, cfg.time_limit
+    lagrangian_iterations, max_labels = cfg.lagrangian_iterations, cfg.max_labels
     t0 = time.perf_counter()
     unitary = mode == "unitary"
     w = objective_weights(inst, mode)
@@ -60,8 +79,8 @@ def solve(inst: Instance, *, mode: str = "utility", time_limit: float | None = N
     def left() -> float | None:
         return None if time_limit is None else max(0.0, time_limit - (time.perf_counter() - t0))
 
-    starts = [greedy(inst, mode=mode), ramp(inst, mode=mode, time_limit=None if time_limit is None
-                                            else 0.2 * time_limit)]
+    starts = [greedy(inst, GreedyConfig(mode=mode)),
+              ramp(inst, RampConfig(mode=mode, time_limit=None if time_limit is None else 0.2 * time_limit))]
     best = max(starts, key=lambda s: s.value)
     nodes, value = best.nodes, best.value
     info = {"solver": "exact", "start": best.info["solver"], "start_value": value}

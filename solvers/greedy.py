@@ -34,12 +34,15 @@ the earliest start of the inserted acquisition.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numba
 import numpy as np
 
 from eosp.graphs.discrete import arc_to_acq
 from eosp.instances.instance import Instance
-from eosp.solvers.base import Solution, objective_weights
+from eosp.config import choice
+from eosp.solvers.base import Solution, SolverConfig, objective_weights
 
 
 @numba.njit(cache=True)
@@ -126,16 +129,29 @@ def insertion_order(inst: Instance, mode: str, order: str | None = None) -> np.n
     return np.lexsort(keys).astype(np.int32)
 
 
-def solve(inst: Instance, *, mode: str = "utility", time_limit: float | None = None, seed: int = 0,
-          order: str | None = None, **_: object) -> Solution:
+@dataclass
+class GreedyConfig(SolverConfig):
+    """The operational greedy insertion; one pass, so no time limit."""
+
+    order: str = choice("", "", "utility", "start", "deadline", "window", "index")
+    """Order in which acquisitions are inserted; empty: by decreasing utility in utility mode, by window
+    start in unitary mode (see the module docstring)."""
+
+    NAME = "greedy"
+    ONE_SHOT = True
+
+
+def solve(inst: Instance, cfg: GreedyConfig | None = None) -> Solution:
     """Greedy insertion.  ``info["trace"]``: (acquisition, position) per step, position -1 when skipped.
 
     Replaying the trace (insert each accepted acquisition at its position in a
     list) gives the final sequence: nothing inserted is ever removed.
     """
+    cfg = cfg or GreedyConfig()
+    cfg.validate()
     g = inst.unpruned("the greedy solver")
-    w = objective_weights(inst, mode)
-    seq = insertion_order(inst, mode, order)
+    w = objective_weights(inst, cfg.mode)
+    seq = insertion_order(inst, cfg.mode, cfg.order or None)
     last = g.node_time[g.acq_ptr[1:] - 1].astype(np.float64)
     acqs, nodes, pos = _greedy(g.indptr, g.dst, g.acq_ptr, g.node_time, seq, last)
     trace = np.stack([seq, pos], axis=1)

@@ -3,21 +3,39 @@
 from __future__ import annotations
 
 import time
-
+from dataclasses import dataclass
 
 from eosp.envs.sources import prepare_instance
 from eosp.instances.instance import Instance
 from eosp.search.mcts import solve as mcts_solve
-from eosp.solvers.base import Solution
+from eosp.config import ranged
+from eosp.solvers.base import LearnedConfig, Solution
 from eosp.solvers.policy import evaluate_batch, make_env_for, resolve_agent, value_weights
 
 
-def solve(inst: Instance, *, mode: str = "utility", time_limit: float | None = None, seed: int = 0,
-          checkpoint: str = "", agent: tuple | None = None, budget: int | None = None, c_puct: float = 1.25,
-          batch: int = 8, gumbel: bool = False, **_: object) -> Solution:
-    if budget is not None and budget < 0:
-        raise ValueError(f"budget must be a non-negative number of simulations, got {budget}")
-    model, env_cfg, _ = resolve_agent("mcts", checkpoint, agent, mode)
+@dataclass
+class MctsConfig(LearnedConfig):
+    """MCTS guided by the trained agent; with a time limit it stops searching at the deadline and plays
+    the rest of the episode from the tree and the policy."""
+
+    budget: int | None = ranged(None, 0)
+    """Simulations per decision; unset: 100, or unbounded (the time limit only) when a time limit is given."""
+    c_puct: float = ranged(1.25, 0)
+    """Exploration constant of the PUCT rule."""
+    batch: int = ranged(8, 1)
+    """Leaves evaluated per network call (virtual loss)."""
+    gumbel: bool = False
+    """Gumbel root selection with sequential halving."""
+
+    NAME = "mcts"
+
+
+def solve(inst: Instance, cfg: MctsConfig | None = None, *, agent: tuple | None = None) -> Solution:
+    cfg = cfg or MctsConfig()
+    cfg.validate()
+    mode, time_limit, seed, budget = cfg.mode, cfg.time_limit, cfg.seed, cfg.budget
+    c_puct, batch, gumbel = cfg.c_puct, cfg.batch, cfg.gumbel
+    model, env_cfg, _ = resolve_agent("mcts", cfg.checkpoint, agent, mode)
     prepared = prepare_instance(inst, env_cfg.prune)
     env = make_env_for(prepared, env_cfg)
     vw = value_weights(model, prepared)  # lexicographic heads: per-class values weighed by class utilities

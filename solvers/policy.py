@@ -5,7 +5,7 @@
 
 from __future__ import annotations
 
-from dataclasses import replace
+from dataclasses import dataclass, replace
 
 import numpy as np
 import torch
@@ -15,7 +15,7 @@ from eosp.envs.sources import FixedSource, PreparedInstance, prepare_instance
 from eosp.config import CLASS_UTILITIES, EnvConfig
 from eosp.instances.instance import Instance
 from eosp.models.agent import EOSPAgent, batch_from_padded
-from eosp.solvers.base import Solution
+from eosp.solvers.base import LearnedConfig, Solution
 
 
 def to_batch(obs: dict[str, np.ndarray]) -> dict[str, torch.Tensor]:
@@ -93,10 +93,22 @@ def resolve_agent(solver: str, checkpoint: str, agent: tuple | None, mode: str =
     return load_agent(checkpoint)
 
 
-def solve(inst: Instance, *, mode: str = "utility", time_limit: float | None = None, seed: int = 0,
-          checkpoint: str = "", agent: tuple | None = None, sample: bool = False, **_: object) -> Solution:
+@dataclass
+class PolicyConfig(LearnedConfig):
+    """One episode of the trained agent; one pass, so no time limit."""
+
+    sample: bool = False
+    """Sample actions (seeded by --seed) instead of taking the argmax."""
+
+    NAME = "policy"
+    ONE_SHOT = True
+
+
+def solve(inst: Instance, cfg: PolicyConfig | None = None, *, agent: tuple | None = None) -> Solution:
     """`agent`: an already loaded (agent, env config, metadata) from models.checkpoint.load_agent."""
-    agent, env_cfg, _ = resolve_agent("policy", checkpoint, agent, mode)
+    cfg = cfg or PolicyConfig()
+    cfg.validate()
+    agent, env_cfg, _ = resolve_agent("policy", cfg.checkpoint, agent, cfg.mode)
     prepared = prepare_instance(inst, env_cfg.prune)
-    nodes, _ = rollout(agent, prepared, env_cfg, sample=sample, seed=seed)
-    return Solution.from_path(inst, nodes, mode, {"solver": "policy", "sample": sample})
+    nodes, _ = rollout(agent, prepared, env_cfg, sample=cfg.sample, seed=cfg.seed)
+    return Solution.from_path(inst, nodes, cfg.mode, {"solver": "policy", "sample": cfg.sample})

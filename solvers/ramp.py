@@ -42,7 +42,8 @@ import numpy as np
 
 from eosp.graphs.discrete import DiscreteGraph
 from eosp.instances.instance import Instance
-from eosp.solvers.base import Solution, objective_weights
+from eosp.config import ranged
+from eosp.solvers.base import Solution, SolverConfig, objective_weights
 from eosp.solvers.bound import acq_last_time, topological_order
 
 STOP_DONE, STOP_GROW, STOP_CHECK = 0, 1, 2  # why _sweep returned
@@ -395,12 +396,26 @@ def _path(label: int, par: np.ndarray, lnode: np.ndarray) -> np.ndarray:
     return np.asarray(out[::-1], dtype=np.int64)
 
 
-def solve(inst: Instance, *, mode: str = "utility", time_limit: float | None = None, seed: int = 0,
-          beam: int = 4, pruned: bool = True, **_: object) -> Solution:
-    """RAMP with `beam` labels per node on the pruned (default) or unpruned graph."""
-    g = inst.graph_for(pruned)
-    w = objective_weights(inst, mode)
-    res = label_search(g, w, beam=beam, time_limit=time_limit)
-    return Solution(res.nodes, res.value, {"solver": "ramp", "beam": beam, "pruned": pruned,
+@dataclass
+class RampConfig(SolverConfig):
+    """RAMP: label setting with a beam of labels per node.  At the time limit the rest of the sweep keeps
+    one label per node, so the answer is always a complete schedule."""
+
+    beam: int = ranged(4, 1)
+    """Labels kept per node (1: the classic best path per node, skipping repeats)."""
+    pruned: bool = True
+    """Search the pruned graph (false: the unpruned one, slower, never worse at equal beam)."""
+
+    NAME = "ramp"
+
+
+def solve(inst: Instance, cfg: RampConfig | None = None) -> Solution:
+    """RAMP with `cfg.beam` labels per node on the pruned (default) or unpruned graph."""
+    cfg = cfg or RampConfig()
+    cfg.validate()
+    g = inst.graph_for(cfg.pruned)
+    w = objective_weights(inst, cfg.mode)
+    res = label_search(g, w, beam=cfg.beam, time_limit=cfg.time_limit)
+    return Solution(res.nodes, res.value, {"solver": "ramp", "beam": cfg.beam, "pruned": cfg.pruned,
                                            "complete": res.complete, "labels": res.labels,
                                            "seconds": res.seconds})

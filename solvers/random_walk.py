@@ -9,13 +9,24 @@ from __future__ import annotations
 import numpy as np
 
 from eosp.instances.instance import Instance
-from eosp.solvers.base import Solution
+from dataclasses import dataclass
+
+from eosp.solvers.base import Solution, SolverConfig
 
 
-def solve(inst: Instance, *, mode: str = "utility", time_limit: float | None = None, seed: int = 0,
-          **_: object) -> Solution:
+@dataclass
+class RandomConfig(SolverConfig):
+    """The random walk: only the shared options; one pass, so no time limit."""
+
+    NAME = "random"
+    ONE_SHOT = True
+
+
+def solve(inst: Instance, cfg: RandomConfig | None = None) -> Solution:
+    cfg = cfg or RandomConfig()
+    cfg.validate()
     g = inst.pruned()
-    rng = np.random.default_rng(seed)
+    rng = np.random.default_rng(cfg.seed)
     used = np.zeros(inst.n_acq, dtype=bool)
     node = 0
     path = []
@@ -28,4 +39,4 @@ def solve(inst: Instance, *, mode: str = "utility", time_limit: float | None = N
         used[g.node_acq[node]] = True
         path.append(node)
     nodes = np.asarray(path, dtype=np.int64)
-    return Solution.from_path(inst, nodes, mode, {"solver": "random"})
+    return Solution.from_path(inst, nodes, cfg.mode, {"solver": "random"})

@@ -46,12 +46,12 @@ def make_base(root: Path) -> Path:
     from eosp.instances.interchange import write_instance
     from eosp.instances.schedule import from_internal_nodes, write_schedule
     from eosp.shards.io import write_shard
-    from eosp.solvers.base import get_solver
+    from eosp.solvers.base import run_solver
 
     inst = generated("uniform", 12, 0, 2.0)
     write_instance(inst, root / "inst")
     write_shard(root / "shard.parquet", [inst])
-    sched = from_internal_nodes(inst, get_solver("greedy")(inst, mode="utility").nodes)
+    sched = from_internal_nodes(inst, run_solver("greedy", inst, mode="utility").nodes)
     assert len(sched) >= 2
     write_schedule(sched, root / "sched.parquet")
     write_schedule(sched, root / "sched.jsonl")

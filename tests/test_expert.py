@@ -73,6 +73,7 @@ def demo_shard(tmp_path_factory):
 
 @pytest.mark.parametrize("mode", ["unitary", "utility"])
 def test_demos_replay_to_the_expert_value_with_allowed_actions(demo_shard, mode):
+    from eosp.solvers.exact import ExactConfig
     from eosp.solvers.exact import solve as exact
     from eosp.training.demos import read_demos
 
@@ -93,7 +94,7 @@ def test_demos_replay_to_the_expert_value_with_allowed_actions(demo_shard, mode)
         assert got == pytest.approx(d.value, rel=1e-12, abs=0)
         assert d.status == "optimal" and d.bound == d.value
         # the environment's graph is pruned: its optimum can only be below the unpruned one (here equal)
-        assert d.value <= exact(p.inst, mode=mode, time_limit=60).value * (1 + 1e-12)
+        assert d.value <= exact(p.inst, ExactConfig(mode=mode, time_limit=60)).value * (1 + 1e-12)
 
 
 def test_demos_of_another_shard_or_with_a_forbidden_action_are_refused(demo_shard, tmp_path):

@@ -72,10 +72,10 @@ def test_pitch_sweeps_through_the_window():
 
 def test_oversubscribed_like_the_paper():
     """Far more candidates than fit: a random feasible schedule keeps well under half of 100."""
-    from eosp.solvers.random_walk import solve
+    from eosp.solvers.random_walk import RandomConfig, solve
 
     inst = generate(family_config("uniform", 100, 0, graph={"step_s": 4.0}))
-    assert 10 < len(solve(inst, seed=0).nodes) < 80
+    assert 10 < len(solve(inst, RandomConfig(seed=0)).nodes) < 80
 
 
 def test_bang_coast_bang_and_csv_targets(tmp_path):

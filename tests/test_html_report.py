@@ -12,6 +12,7 @@ from eosp.evaluation.html_report import build_report, coastlines, ground_track, 
 from eosp.instances.interchange import write_instance
 from eosp.instances.schedule import Schedule, check, from_internal_nodes, write_schedule
 from eosp.solvers.greedy import solve as greedy
+from eosp.solvers.random_walk import RandomConfig
 from eosp.solvers.random_walk import solve as random_walk
 from tests.conftest import generated
 from tests.synthetic import synthetic_instance
@@ -47,7 +48,7 @@ def infeasible(inst, sched: Schedule) -> Schedule:
 def case():
     inst = generated("uniform", 30, 3)
     g = from_internal_nodes(inst, greedy(inst).nodes)
-    scheds = {"greedy": g, "walk": from_internal_nodes(inst, random_walk(inst, seed=1).nodes),
+    scheds = {"greedy": g, "walk": from_internal_nodes(inst, random_walk(inst, RandomConfig(seed=1)).nodes),
               "swapped": infeasible(inst, g)}
     assert not check(inst, scheds["swapped"]).feasible and len(g) >= 3
     return inst, scheds
@@ -106,7 +107,7 @@ def test_coastlines_are_embedded_data():
 
 def test_instance_without_lat_lon_gets_timeline_and_table():
     inst = synthetic_instance(8, 2)
-    s = from_internal_nodes(inst, random_walk(inst, seed=0).nodes)
+    s = from_internal_nodes(inst, random_walk(inst, RandomConfig(seed=0)).nodes)
     text = build_report(inst, {"walk": s})
     assert "id='map-section'" not in text and "no latitude/longitude" in text
     assert section_attrs(text, "timeline") == {"data-windows": 8, "data-taken": len(s)}
@@ -131,7 +132,7 @@ def test_cli_report_and_foreign_schedule(tmp_path):
     inst = generated("uniform", 30, 3)
     write_instance(inst, tmp_path / "inst")
     write_schedule(from_internal_nodes(inst, greedy(inst).nodes), tmp_path / "greedy.parquet")
-    write_schedule(from_internal_nodes(inst, random_walk(inst, seed=2).nodes), tmp_path / "walk.jsonl")
+    write_schedule(from_internal_nodes(inst, random_walk(inst, RandomConfig(seed=2)).nodes), tmp_path / "walk.jsonl")
     r = eosp("report", tmp_path / "inst", tmp_path / "greedy.parquet", tmp_path / "walk.jsonl",
              "--out", tmp_path / "out" / "report.html")
     assert r.returncode == 0, r.stderr

@@ -12,6 +12,7 @@ from hypothesis import strategies as st
 from eosp.errors import InputError
 from eosp.instances.interchange import read_instance, write_instance
 from eosp.instances.schedule import Schedule, check, from_internal_nodes, read_schedule, write_schedule
+from eosp.solvers.random_walk import RandomConfig
 from eosp.solvers.random_walk import solve as random_solve
 from tests.conftest import generated
 from tests.synthetic import synthetic_instance
@@ -71,7 +72,7 @@ def test_foreign_numbering_and_row_order_is_canonicalized(tmp_path_factory, n, s
         np.testing.assert_array_equal(getattr(inst.unpruned(), f), getattr(back.unpruned(), f))
     np.testing.assert_array_equal(back.node_ids, new_id)
     # a schedule found on the imported instance refers to the file's own node ids and validates
-    sol = random_solve(back, seed=seed)
+    sol = random_solve(back, RandomConfig(seed=seed))
     sched = from_internal_nodes(back, sol.nodes)
     assert check(back, sched).feasible
     # the same path, written with the original ids, is feasible for the original instance
@@ -80,7 +81,7 @@ def test_foreign_numbering_and_row_order_is_canonicalized(tmp_path_factory, n, s
 
 def test_schedule_files_parquet_and_jsonl(tmp_path):
     inst = generated("uniform", 12, 0)
-    sched = from_internal_nodes(inst, random_solve(inst, seed=3).nodes)
+    sched = from_internal_nodes(inst, random_solve(inst, RandomConfig(seed=3)).nodes)
     for name in ("s.parquet", "s.jsonl"):
         write_schedule(sched, tmp_path / name)
         back = read_schedule(tmp_path / name)
@@ -92,7 +93,7 @@ def test_schedule_files_parquet_and_jsonl(tmp_path):
 @given(n=st.integers(2, 8), seed=st.integers(0, 10_000))
 def test_checker_accepts_walks_and_rejects_broken_ones(n, seed):
     inst = synthetic_instance(n, seed)
-    nodes = random_solve(inst, seed=seed).nodes
+    nodes = random_solve(inst, RandomConfig(seed=seed)).nodes
     sched = from_internal_nodes(inst, nodes)
     v = check(inst, sched)
     assert v.feasible and v.value == pytest.approx(inst.acqs.utility[sched.acq].sum(), rel=1e-12)

@@ -43,9 +43,10 @@ def test_large_budget_finds_the_optimum_of_a_tiny_instance(agent, seed, batch):
     nodes, ret, _ = run(agent, inst, 400, batch=batch)
     value = inst.acqs.utility[inst.node_acq[nodes]].sum()
     assert value == pytest.approx(best, rel=1e-12) and ret == pytest.approx(best, rel=1e-9)
+    from eosp.solvers.exact import ExactConfig
     from eosp.solvers.exact import solve as exact
 
-    assert value <= exact(inst, time_limit=30).value * (1 + 1e-12)
+    assert value <= exact(inst, ExactConfig(time_limit=30)).value * (1 + 1e-12)
 
 
 def test_batched_evaluation_makes_fewer_network_calls(agent):
@@ -76,17 +77,17 @@ def test_gumbel_root_selection_finds_the_optimum_of_tiny_instances_and_is_seeded
 
     from eosp.config import EnvConfig, ModelConfig
     from eosp.models.agent import EOSPAgent
-    from eosp.solvers.base import get_solver
+    from eosp.solvers.base import run_solver
     from tests.synthetic import synthetic_instance
 
     torch.manual_seed(0)
     agent = (EOSPAgent(ModelConfig(hidden_dim=8, n_layers=1, heads=1, value_scale=5.0)), EnvConfig(reward="unitary"), {})
     for seed in range(3):
         inst = synthetic_instance(8, seed)
-        best = get_solver("exact")(inst, mode="unitary").value
-        a = get_solver("mcts")(inst, mode="unitary", agent=agent, budget=200, gumbel=True, seed=1)
-        b = get_solver("mcts")(inst, mode="unitary", agent=agent, budget=200, gumbel=True, seed=1)
+        best = run_solver("exact", inst, mode="unitary").value
+        a = run_solver("mcts", inst, mode="unitary", agent=agent, budget=200, gumbel=True, seed=1)
+        b = run_solver("mcts", inst, mode="unitary", agent=agent, budget=200, gumbel=True, seed=1)
         assert a.value == best and np.array_equal(a.nodes, b.nodes)
-        small = get_solver("mcts")(inst, mode="unitary", agent=agent, budget=4, gumbel=True)
-        policy = get_solver("policy")(inst, mode="unitary", agent=agent)
+        small = run_solver("mcts", inst, mode="unitary", agent=agent, budget=4, gumbel=True)
+        policy = run_solver("policy", inst, mode="unitary", agent=agent)
         assert small.value >= policy.value - 1  # a handful of simulations never loses much to the policy

@@ -26,11 +26,12 @@ def objective_mode(env_cfg: EnvConfig) -> str:
 
 def _solve_task(shard: str, index: int, solver: str, mode: str, time_limit: float) -> tuple[str, float, float]:
     from eosp.shards.io import ShardReader
-    from eosp.solvers.base import get_solver
+    from eosp.solvers.base import run_solver, takes_time_limit
 
     inst = ShardReader(shard).read(index)
     t0 = time.perf_counter()
-    sol = get_solver(solver)(inst, mode=mode, time_limit=time_limit)
+    limit = {"time_limit": time_limit} if takes_time_limit(solver) else {}  # greedy is one pass: no limit
+    sol = run_solver(solver, inst, mode=mode, **limit)
     return inst.name, float(sol.value), time.perf_counter() - t0
 
 
