@@ -162,6 +162,8 @@ def test_imitation_learns_the_expert_on_a_tiny_set(demo_shard):
 
 
 def test_build_demos_job_is_resumable_and_refuses_bad_options(demo_shard, capsys):
+    import ray
+
     from eosp.jobs.build_demos import main
 
     # both files exist: nothing to do
@@ -172,6 +174,7 @@ def test_build_demos_job_is_resumable_and_refuses_bad_options(demo_shard, capsys
     with pytest.raises(SystemExit) as exc:  # the typed config refuses it while parsing
         main(["--data", str(demo_shard.parent), "--time-limit", "-1"])
     assert exc.value.code == 2 and "--time-limit" in capsys.readouterr().err
+    ray.shutdown()  # the job started a local Ray in this process
 
 
 @pytest.mark.parametrize("mode", ["unitary", "utility"])

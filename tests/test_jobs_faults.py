@@ -59,6 +59,8 @@ def test_relative_output_refused_in_uploaded_working_dir(tmp_path, monkeypatch, 
 
     import ray
 
+    if ray.is_initialized():  # left by an earlier test: the check below is about this job only
+        ray.shutdown()
     _in_ray_working_dir_copy(tmp_path, monkeypatch)
     main = importlib.import_module(f"eosp.jobs.{module}").main
     with pytest.raises(SystemExit) as exc:
@@ -91,6 +93,8 @@ def test_mlflow_unreachable_is_one_line_before_work(tmp_path, module, argv):
 
     import ray
 
+    if ray.is_initialized():  # left by an earlier test: the check below is about this job only
+        ray.shutdown()
     uri = f"http://127.0.0.1:{closed_port()}"
     argv = [{"DATA": str(tmp_path / "data"), "OUT": str(tmp_path / "out"), "URI": uri}.get(a, a) for a in argv]
     with pytest.raises(SystemExit) as exc:
