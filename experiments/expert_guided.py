@@ -152,6 +152,68 @@ def cmd_report(a) -> None:
                          "at optimum": int((piv["policy"] >= piv["exact"] * (1 - 1e-9)).sum()),
                          "instances": len(piv)})
     print(pd.DataFrame(rows).to_markdown(index=False, floatfmt=".4f") if rows else "no finished evaluation")
+    plots = []
+    for mode in MODES:
+        curves = learning_curves(mode)
+        if curves:
+            plots.append(plot_curves(curves, mode, ROOT / "docs" / "figures" / f"expert-guided-{mode}.png"))
+            print(f"learning curves: {plots[-1]}")
+    if rows or plots:
+        import mlflow
+
+        from eosp.config import default_mlflow_uri
+
+        mlflow.set_tracking_uri(default_mlflow_uri(""))
+        mlflow.set_experiment("expert-guided")
+        with mlflow.start_run(run_name="comparison"):
+            if rows:
+                mlflow.log_text(pd.DataFrame(rows).to_markdown(index=False, floatfmt=".4f"), "comparison.md")
+            for f in plots:
+                mlflow.log_artifact(str(f))
+
+
+def learning_curves(mode: str) -> dict[str, list[tuple[float, float]]]:
+    """Validation ratio to the optimum (RAMP proved equal on the validation set) against wall time, per run."""
+    out = {}
+    for kind in ("ppo", "imitation", "imitation+ppo"):
+        run = ROOT / "runs" / f"eg-{mode}-{kind.replace('+', '-')}"
+        pts, offset = [], 0.0
+        bc = ROOT / "runs" / (run.name + "-bc") / "history.json"
+        for f in ([bc] if kind == "imitation+ppo" else []) + [run / "history.json", run / "run.json"]:
+            if not f.exists():
+                continue
+            hist = json.loads(f.read_text())["history"]
+            for h in hist:
+                if "val/ratio_to_exact" in h:
+                    pts.append((offset + h["wall_s"], h["val/ratio_to_exact"]))
+                elif "val/ratio_to_ramp" in h:
+                    pts.append((offset + h["perf/wall_s"], h["val/ratio_to_ramp"]))
+            if pts:
+                offset = pts[-1][0]
+        if pts:
+            out[kind] = pts
+    return out
+
+
+def plot_curves(curves: dict, mode: str, path: Path) -> Path:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(6, 3.6))
+    for kind, pts in curves.items():
+        ax.plot([t / 60 for t, _ in pts], [v for _, v in pts], marker="o", ms=3, label=kind)
+    ax.axhline(1.0, color="gray", lw=0.8, ls="--")
+    ax.set_xlabel("wall time (min)")
+    ax.set_ylabel("validation: policy / optimum")
+    ax.set_title(f"{mode} mode, greedy decoding")
+    ax.legend()
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
 
 
 def main() -> None:
