@@ -104,6 +104,24 @@ class PolicyConfig(LearnedConfig):
     ONE_SHOT = True
 
 
+def run_search(name: str, inst: Instance, cfg: LearnedConfig, agent: tuple | None, search, **info) -> Solution:
+    """The frame every rollout search shares: the agent (given, from cfg.checkpoint, or the shipped model of the
+    mode), an environment sized to the instance, ``search(env, evaluate) -> Best``, its best episode replayed
+    and scored (:mod:`eosp.search.rollouts`)."""
+    import time
+
+    from eosp.search.rollouts import replay
+
+    model, env_cfg, _ = resolve_agent(name, cfg.checkpoint, agent, cfg.mode)
+    env = make_env_for(prepare_instance(inst, env_cfg.prune), env_cfg)
+    t0 = time.perf_counter()
+    best = search(env, lambda obss: evaluate_batch(model, obss))
+    nodes, _ = replay(env, best.actions, cfg.seed)
+    return Solution.from_path(inst, nodes, cfg.mode, {"solver": name, **info, "episodes": best.episodes,
+                                                      "evaluations": best.evaluations,
+                                                      "seconds": time.perf_counter() - t0})
+
+
 def solve(inst: Instance, cfg: PolicyConfig | None = None, *, agent: tuple | None = None) -> Solution:
     """`agent`: an already loaded (agent, env config, metadata) from models.checkpoint.load_agent."""
     cfg = cfg or PolicyConfig()

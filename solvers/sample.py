@@ -7,15 +7,13 @@ With a time limit, rounds of K episodes go on until it is reached (anytime).
 
 from __future__ import annotations
 
-import time
 from dataclasses import dataclass
 
-from eosp.envs.sources import prepare_instance
 from eosp.instances.instance import Instance
-from eosp.search.rollouts import replay, sample
+from eosp.search.rollouts import sample
 from eosp.config import ranged
 from eosp.solvers.base import LearnedConfig, Solution
-from eosp.solvers.policy import evaluate_batch, make_env_for, resolve_agent
+from eosp.solvers.policy import run_search
 
 
 @dataclass
@@ -33,12 +31,6 @@ class SampleConfig(LearnedConfig):
 def solve(inst: Instance, cfg: SampleConfig | None = None, *, agent: tuple | None = None) -> Solution:
     cfg = cfg or SampleConfig()
     cfg.validate()
-    mode, time_limit, seed, samples, temperature = cfg.mode, cfg.time_limit, cfg.seed, cfg.samples, cfg.temperature
-    model, env_cfg, _ = resolve_agent("sample", cfg.checkpoint, agent, mode)
-    env = make_env_for(prepare_instance(inst, env_cfg.prune), env_cfg)
-    t0 = time.perf_counter()
-    best = sample(env, lambda obss: evaluate_batch(model, obss), samples=samples, temperature=temperature,
-                  seed=seed, time_limit=time_limit)
-    nodes, _ = replay(env, best.actions, seed)
-    return Solution.from_path(inst, nodes, mode, {"solver": "sample", "samples": samples, "episodes": best.episodes,
-                                   "evaluations": best.evaluations, "seconds": time.perf_counter() - t0})
+    return run_search("sample", inst, cfg, agent,
+                      lambda env, ev: sample(env, ev, samples=cfg.samples, temperature=cfg.temperature, seed=cfg.seed,
+                                             time_limit=cfg.time_limit), samples=cfg.samples)
