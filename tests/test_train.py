@@ -76,3 +76,31 @@ def test_two_iterations_checkpoint_mlflow_resume_and_solve(tmp_path, data):
     model = mlflow.pyfunc.load_model(f"runs:/{run['mlflow_run_id']}/agent")
     pred = model.predict(pd.DataFrame({"instance_dir": [str(inst_dir)]}))
     assert pred["n_acquisitions"][0] > 0 and np.isfinite(pred["value"][0])
+
+
+def test_ppo_starts_from_an_imitation_checkpoint(tmp_path, data):
+    """--train.init-checkpoint: the run takes the checkpoint's architecture and weights (first validation =
+    the checkpoint's greedy decoding), and --train.time-budget ends it early."""
+    import torch
+
+    from eosp.config import EnvConfig, ModelConfig
+    from eosp.envs.sources import expand_shards, prepare_instance
+    from eosp.models.agent import EOSPAgent
+    from eosp.models.checkpoint import save_agent
+    from eosp.shards.io import read_instances
+    from eosp.solvers.policy import rollout
+
+    torch.manual_seed(7)
+    env_cfg = EnvConfig(max_acquisitions=16)
+    agent = EOSPAgent(ModelConfig(hidden_dim=12, n_layers=1, heads=1, value_scale=3.0))
+    save_agent(agent, tmp_path / "init", env_cfg)
+    expected = np.mean([rollout(agent, prepare_instance(i), env_cfg)[1]
+                        for i in read_instances(expand_shards([str(data / "val")]))])
+    r = train(tmp_path, data, "--train.iterations", 50, "--train.init-checkpoint", tmp_path / "init",
+              "--train.time-budget", 1, "--train.num-epochs", 1, "--train.lr", 1e-9)
+    assert "starting from" in r.stdout and "time budget of 1 s reached" in r.stdout
+    run = json.loads((tmp_path / "runs" / "t" / "run.json").read_text())
+    assert run["config"]["model"]["hidden_dim"] == 12 and run["config"]["model"]["value_scale"] == 3.0
+    assert run["iteration"] < 50
+    first = run["history"][0]
+    assert first["val/policy_mean"] == pytest.approx(expected, rel=1e-6)
