@@ -9,7 +9,7 @@ Following the paper ("Solution" section):
   node's own state, and every node hears at least the global node.
 * Embeddings: an MLP over node features; edge types through an embedding table
   (plus a linear map of the edge's numeric attributes), both of size hidden_dim.
-* ``n_layers`` GATv2 convolutions with edge attributes and ``heads`` heads, an MLP
+* ``n_layers`` GATv2 convolutions (models/gat.py) with edge attributes and ``heads`` heads, an MLP
   from heads * hidden_dim back to hidden_dim after each, residual connections.
 * Action logits from the concatenation, for each node, of every layer's output
   (the embedding included) with the same for its graph's global node:
@@ -27,10 +27,10 @@ from dataclasses import dataclass
 
 import torch
 from torch import nn
-from torch_geometric.nn import GATv2Conv
 
 from eosp.config import ModelConfig
 from eosp.envs.observation import LAST, N_EDGE_FEATURES, N_NODE_FEATURES, REMOVED, SCHEDULED
+from eosp.models.gat import N_TYPES, EdgeStructure, GATv2Layer
 
 PRECEDENCE, REVERSE, TO_GLOBAL, FROM_GLOBAL = range(4)
 MASKED = -1e9  # logit of a forbidden action
@@ -100,14 +100,14 @@ class EOSPAgent(nn.Module):
         self.global_init = nn.Parameter(torch.zeros(h))
         self.edge_type_embed = nn.Embedding(4, h)
         self.edge_attr_embed = nn.Linear(N_EDGE_FEATURES, h, bias=False)
-        self.convs = nn.ModuleList(
-            GATv2Conv(h, h, heads=cfg.heads, concat=True, edge_dim=h, add_self_loops=False)
-            for _ in range(cfg.n_layers))
+        self.convs = nn.ModuleList(GATv2Layer(h, cfg.heads) for _ in range(cfg.n_layers))
         self.reduce = nn.ModuleList(_mlp(cfg.heads * h, h, h) for _ in range(cfg.n_layers))
         self.norms = nn.ModuleList(nn.LayerNorm(h) for _ in range(cfg.n_layers))
         width = (cfg.n_layers + 1) * h
         self.action_head = nn.Linear(2 * width, 1)
         self.value_head = _mlp(width, h, cfg.n_values)
+        self.fused: bool | None = None  # None: the numba kernel on CPU float32, torch elsewhere (models/gat.py)
+        assert self.edge_type_embed.num_embeddings == N_TYPES
 
     def rewire(self, gb: GraphBatch) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
         """Edge index over nodes + one global node per graph, edge types, numeric edge attributes."""
@@ -127,11 +127,13 @@ class EOSPAgent(nn.Module):
         """Logits [total_nodes] (forbidden actions at MASKED) and values [B, n_values]."""
         total, b = gb.x.shape[0], gb.n_graphs
         edge_index, types, attr = self.rewire(gb)
-        edge_feat = self.edge_type_embed(types) + self.edge_attr_embed(attr)
+        edges = EdgeStructure(edge_index, types, attr, total + b)
+        # an edge's embedding is edge_type_embed(type) + edge_attr_embed(attr): linear in (one-hot type, attr)
+        edge_basis = torch.cat([self.edge_type_embed.weight.T, self.edge_attr_embed.weight], dim=1)
         h = torch.cat([self.node_embed(gb.x), self.global_init.expand(b, -1)])
         layers = [h]
         for conv, red, norm in zip(self.convs, self.reduce, self.norms):
-            h = norm(h + red(conv(h, edge_index, edge_feat)))
+            h = norm(h + red(conv(h, edges, edge_basis, fused=self.fused)))
             layers.append(h)
         stacked = torch.cat(layers, dim=-1)  # [total + B, (n_layers + 1) * hidden]
         node_part, global_part = stacked[:total], stacked[total:]
