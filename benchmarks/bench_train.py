@@ -61,6 +61,8 @@ class Args:
     reward: str = "unitary"
     num_env_runners: int = 1
     num_envs_per_env_runner: int = 2
+    overlap_sampling: bool = False
+    """Sample the next batch while learning (eosp.config.TrainConfig.overlap_sampling)."""
     compare: str = ""
     """A git commit to benchmark against: both run in turn, `rounds` times each."""
     rounds: int = 2
@@ -223,6 +225,8 @@ def bench(a: Args) -> dict:
     cfg.train.train_data, cfg.train.val_data = str(data), ""
     cfg.train.num_env_runners, cfg.train.num_envs_per_env_runner = a.num_env_runners, a.num_envs_per_env_runner
     cfg.env.reward = a.reward
+    if a.overlap_sampling:
+        cfg.train.overlap_sampling = True
     cfg.env.max_acquisitions = max(cfg.env.max_acquisitions, a.acquisitions)
     cfg.model.value_scale = estimate_value_scale(cfg)
     obs_share = observation_share(data)

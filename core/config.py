@@ -411,6 +411,9 @@ class TrainConfig:
     num_env_runners: int = 1
     """Rollout workers; each owns its envs over its own subset of the shards."""
     num_envs_per_env_runner: int = 2
+    overlap_sampling: bool = False
+    """Sample the next batch while the learner updates on this one (training/overlap.py): on 2 cores both
+    work at once; the batch learned on was sampled with the weights of the previous update (lag of one)."""
     train_batch_size: int = ranged(512, 1)
     """Environment steps collected per iteration."""
     minibatch_size: int = ranged(128, 1)

@@ -25,6 +25,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import numpy as np
 import torch
 from torch import nn
 
@@ -69,21 +70,32 @@ def batch_from_padded(obs: dict[str, torch.Tensor]) -> tuple[GraphBatch, torch.T
     in_range = torch.arange(n_max, device=dev)[None, :] < n[:, None]
     active = (x[..., REMOVED] == 0) & ((x[..., SCHEDULED] == 0) | (x[..., LAST] == 1))  # not removed; not scheduled unless last
     node_valid = in_range & active
-    slot_to_node = torch.cumsum(node_valid.reshape(-1).long(), 0) - 1  # flattened slot -> node index
+    slots = flat_index(node_valid)  # flattened slot of each node
+    slot_to_node = torch.full((b * n_max,), -1, dtype=torch.long, device=dev)
+    slot_to_node[slots] = torch.arange(slots.shape[0], device=dev)
     e_max = obs["edge_index"].shape[-1]
-    edge_valid = torch.arange(e_max, device=dev)[None, :] < m[:, None]
-    flat = obs["edge_index"].long() + (torch.arange(b, device=dev) * n_max)[:, None, None]
-    edge_index = slot_to_node[flat.permute(1, 0, 2)[:, edge_valid]]
+    edge_slots = flat_index(torch.arange(e_max, device=dev)[None, :] < m[:, None])  # [valid edges] in b * e_max
+    graph_of_edge = edge_slots // e_max
+    ei = obs["edge_index"].permute(1, 0, 2).reshape(2, b * e_max)[:, edge_slots].long()
+    edge_index = slot_to_node[ei + (graph_of_edge * n_max)[None, :]]
     counts = node_valid.sum(1)
     gb = GraphBatch(
-        x=x[node_valid].float(),
+        x=x.reshape(b * n_max, -1)[slots].float(),
         edge_index=edge_index,
-        edge_attr=obs["edge_attr"][edge_valid].float(),
+        edge_attr=obs["edge_attr"].reshape(b * e_max, -1)[edge_slots].float(),
         batch=torch.repeat_interleave(torch.arange(b, device=dev), counts),
         n_nodes=counts,
-        mask=obs["action_mask"][node_valid] > 0,
+        mask=obs["action_mask"].reshape(-1)[slots] > 0,
     )
     return gb, node_valid
+
+
+def flat_index(mask: torch.Tensor) -> torch.Tensor:
+    """Positions of the true entries of `mask` flattened (long).  On CPU through numpy: torch's
+    nonzero costs ~150 us per call on small masks, several times per forward pass."""
+    if mask.device.type == "cpu":
+        return torch.from_numpy(np.flatnonzero(mask.reshape(-1).numpy()))
+    return torch.nonzero(mask.reshape(-1)).reshape(-1)
 
 
 def _mlp(d_in: int, d_hidden: int, d_out: int) -> nn.Sequential:
@@ -137,12 +149,15 @@ class EOSPAgent(nn.Module):
             layers.append(h)
         stacked = torch.cat(layers, dim=-1)  # [total + B, (n_layers + 1) * hidden]
         node_part, global_part = stacked[:total], stacked[total:]
-        logits = self.action_head(torch.cat([node_part, global_part[gb.batch]], dim=-1)).squeeze(-1)
+        # action_head over [node | its global node] computed as two halves: no [nodes, 2 * width] copy
+        w = self.action_head.weight[0]
+        width = node_part.shape[1]
+        logits = node_part @ w[:width] + (global_part @ w[width:])[gb.batch] + self.action_head.bias
         logits = torch.where(gb.mask, logits, torch.full_like(logits, MASKED))
         return logits, self.value_head(global_part) * (self.cfg.value_scale or 1.0)
 
     def padded_logits(self, logits: torch.Tensor, node_valid: torch.Tensor) -> torch.Tensor:
         """Scatter per-node logits back to the padded [B, N_max] layout (padding = MASKED)."""
-        out = logits.new_full(node_valid.shape, MASKED)
-        out[node_valid] = logits
-        return out
+        out = logits.new_full((node_valid.numel(),), MASKED)
+        out[flat_index(node_valid)] = logits
+        return out.reshape(node_valid.shape)

@@ -56,6 +56,13 @@ class EdgeStructure:
         self.indptr[1:] = torch.cumsum(counts, 0)
         self.n_nodes = n_nodes
         self.max_degree = int(counts.max()) if counts.numel() else 0
+        self._arrays: tuple | None = None
+
+    def arrays(self) -> tuple:
+        """(indptr, src, types, attr) as numpy arrays for the kernels (CPU), converted once per forward pass."""
+        if self._arrays is None:
+            self._arrays = (self.indptr.numpy(), self.src.numpy(), self.types.numpy(), self.attr.numpy())
+        return self._arrays
 
     def basis(self) -> torch.Tensor:
         """The [edges, N_BASIS] features f_e: one-hot type, numeric attributes."""
@@ -147,15 +154,21 @@ def _np(t: torch.Tensor) -> np.ndarray:
     return t.detach().contiguous().numpy()
 
 
+def fused_forward(xl: np.ndarray, xr: np.ndarray, w_edge_t: np.ndarray, att: np.ndarray,
+                  edges: EdgeStructure) -> tuple[np.ndarray, np.ndarray]:
+    """The kernel's forward pass: (out [N, H, C], attention weights [E, H])."""
+    out = np.zeros_like(xl)
+    alpha = np.empty((edges.src.shape[0], xl.shape[1]), dtype=np.float32)
+    score = np.empty(max(edges.max_degree, 1), dtype=np.float32)
+    _forward(*edges.arrays(), xl, xr, w_edge_t, att, out, alpha, score)
+    return out, alpha
+
+
 class _FusedAttention(torch.autograd.Function):
     @staticmethod
     def forward(ctx, xl, xr, w_edge, att, edges: EdgeStructure):
         xl_n, xr_n, w_n, att_n = _np(xl), _np(xr), _np(w_edge.T), _np(att)
-        out = np.zeros_like(xl_n)
-        alpha = np.zeros((edges.src.shape[0], xl_n.shape[1]), dtype=np.float32)
-        score = np.empty(max(edges.max_degree, 1), dtype=np.float32)
-        _forward(edges.indptr.numpy(), edges.src.numpy(), edges.types.numpy(), edges.attr.numpy(),
-                 xl_n, xr_n, w_n, att_n, out, alpha, score)
+        out, alpha = fused_forward(xl_n, xr_n, w_n, att_n, edges)
         ctx.edges = edges
         ctx.arrays = (xl_n, xr_n, w_n, att_n, alpha)
         return torch.from_numpy(out)
@@ -167,8 +180,7 @@ class _FusedAttention(torch.autograd.Function):
         gxl, gxr = np.zeros_like(xl_n), np.zeros_like(xr_n)
         gw, gatt = np.zeros_like(w_n), np.zeros_like(att_n)
         dalpha = np.empty(max(edges.max_degree, 1), dtype=np.float32)
-        _backward(edges.indptr.numpy(), edges.src.numpy(), edges.types.numpy(), edges.attr.numpy(),
-                  xl_n, xr_n, w_n, att_n, alpha, _np(gout), gxl, gxr, gw, gatt, dalpha)
+        _backward(*edges.arrays(), xl_n, xr_n, w_n, att_n, alpha, _np(gout), gxl, gxr, gw, gatt, dalpha)
         return torch.from_numpy(gxl), torch.from_numpy(gxr), torch.from_numpy(gw.T.copy()), torch.from_numpy(gatt), None
 
 
@@ -223,7 +235,10 @@ class GATv2Layer(nn.Module):
         w_edge = self.lin_edge.weight @ edge_basis  # [heads * dim, N_BASIS]
         att = self.att.view(self.heads, self.dim)
         if fused if fused is not None else use_kernel(x):
-            out = _FusedAttention.apply(xl, xr, w_edge, att, edges)
+            if torch.is_grad_enabled():
+                out = _FusedAttention.apply(xl, xr, w_edge, att, edges)
+            else:  # inference: no autograd node, nothing kept for a backward pass
+                out = torch.from_numpy(fused_forward(_np(xl), _np(xr), _np(w_edge.T), _np(att), edges)[0])
         else:
             out = attention_torch(xl, xr, w_edge, att, edges)
         return out.reshape(n, self.heads * self.dim) + self.bias

@@ -49,8 +49,13 @@ def ppo_config(cfg: RunConfig):
         from eosp.training.lexicographic import LexicographicPPOLearner
 
         learner = {"learner_class": LexicographicPPOLearner}
+    algo_class = None
+    if t.overlap_sampling:
+        from eosp.training.overlap import OverlappedPPO
+
+        algo_class = OverlappedPPO
     pc = (
-        PPOConfig()
+        PPOConfig(algo_class=algo_class)
         .environment(env=EOSPEnv, env_config=env_config, disable_env_checking=True)
         .framework("torch")
         .env_runners(num_env_runners=t.num_env_runners, num_envs_per_env_runner=t.num_envs_per_env_runner,
