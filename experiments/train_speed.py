@@ -1,0 +1,165 @@
+"""Learning against env steps and against wall time: an old commit and this tree, same PPO problem.
+
+    python experiments/train_speed.py --ref 331088a --iterations 40
+    python experiments/train_speed.py --variants new new-overlap --seeds 0 1   # this tree only
+
+Each variant runs ``jobs/train.py`` (unitary reward, cpu preset, PPO defaults:
+batch 512, minibatch 128, 4 epochs) on the same 100-acquisition training set with
+greedy-decoding validation every ``--val-every`` iterations, one after the other
+(never two at once: they would share the 2 cores).  Variants:
+
+* ``old``: the package as of ``--ref`` (installed in a temporary directory);
+* ``new``: this tree with its defaults;
+* ``new-overlap``: this tree with ``--train.overlap-sampling true``.
+
+Prints, per run: env steps/s, the validation ratio to Greedy at the end, and
+the wall time and env steps at which the ratio first reached ``--target``
+(1.05 x Greedy); writes the curves (ratio against env steps and against wall
+time) to ``--plot`` and the figures to ``--out``/summary.json.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import tempfile
+from dataclasses import dataclass
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "benchmarks"))
+TRAIN = "import sys; from eosp.jobs.train import main; sys.exit(main(sys.argv[1:]))"
+
+
+@dataclass
+class Args:
+    ref: str = "331088a"
+    """Old commit (variant 'old')."""
+    variants: tuple[str, ...] = ("old", "new", "new-overlap")
+    seeds: tuple[int, ...] = (0,)
+    iterations: int = 40
+    val_every: int = 2
+    target: float = 1.05
+    """Ratio to Greedy on the validation set whose first crossing is timed."""
+    out: str = "runs/train-speed"
+    plot: str = "docs/figures/train_speed"
+
+
+def parse(argv: list[str] | None) -> Args:
+    from eosp.args import add_config_args, config_from_args
+
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0], epilog=__doc__,
+                                formatter_class=argparse.RawDescriptionHelpFormatter)
+    add_config_args(p, Args)
+    return config_from_args(Args, p.parse_args(argv))
+
+
+def data_sets() -> tuple[Path, Path]:
+    import ray
+
+    from eosp.config import DatasetConfig, RayConfig
+    from eosp.jobs.build_shards import run as build
+
+    train = ROOT / "data" / "bench" / "train-100-32"
+    val = ROOT / "data" / "bench" / "val-100-16"
+    for path, n, seed in ((train, 32, 770_000), (val, 16, 780_000)):
+        if not (path / "manifest.json").exists():
+            build(DatasetConfig(out=str(path), family="uniform", n_acquisitions=100, n_instances=n, per_shard=8,
+                                seed=seed), RayConfig())
+    if ray.is_initialized():
+        ray.shutdown()
+    return train, val
+
+
+def run(variant: str, seed: int, a: Args, train: Path, val: Path, site: Path | None) -> dict:
+    name = f"{variant}-s{seed}"
+    out = (ROOT / a.out).resolve()
+    flags = ["--train.train-data", str(train), "--train.val-data", str(val), "--env.reward", "unitary",
+             "--train.iterations", str(a.iterations), "--train.validate-every", str(a.val_every),
+             "--train.checkpoint-every", str(a.iterations), "--train.seed", str(seed),
+             "--train.run-dir", str(out), "--train.run-name", name, "--train.experiment", "train-speed"]
+    if variant == "new-overlap":
+        flags += ["--train.overlap-sampling", "true"]
+    env = dict(os.environ)
+    if site is not None:
+        env["PYTHONPATH"] = f"{site}{os.pathsep}{env.get('PYTHONPATH', '')}"
+    log = out / f"{name}.log"
+    out.mkdir(parents=True, exist_ok=True)
+    print(f"[train_speed] {name}: log in {log}", flush=True)
+    with open(log, "w") as f:
+        subprocess.run([sys.executable, "-c", TRAIN, *flags], env=env, stdout=f, stderr=subprocess.STDOUT,
+                       check=True, cwd=ROOT)
+    history = json.loads((out / name / "run.json").read_text())["history"]
+    return summarize(name, history, a.target)
+
+
+def summarize(name: str, history: list[dict], target: float) -> dict:
+    vals = [h for h in history if "val/ratio_to_greedy" in h]
+    reached = next((h for h in vals if h["val/ratio_to_greedy"] >= target), None)
+    rates = [h["perf/env_steps_per_s"] for h in history if "perf/env_steps_per_s" in h]
+    return {
+        "run": name, "env_steps_per_s": sum(rates) / len(rates), "final_ratio": vals[-1]["val/ratio_to_greedy"],
+        "best_ratio": max(h["val/ratio_to_greedy"] for h in vals),
+        "reached_wall_s": reached["perf/wall_s"] if reached else None,
+        "reached_env_steps": reached["perf/env_steps_lifetime"] if reached else None,
+        "curve": [(h["perf/env_steps_lifetime"], h["perf/wall_s"], h["val/ratio_to_greedy"]) for h in vals],
+    }
+
+
+def plot(results: list[dict], target: float, path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(1, 2, figsize=(11, 4))
+    for r in results:
+        steps, wall, ratio = zip(*r["curve"])
+        axes[0].plot(steps, ratio, marker=".", label=r["run"])
+        axes[1].plot(wall, ratio, marker=".", label=r["run"])
+    for ax, xl in zip(axes, ("env steps", "wall time (s), validation included")):
+        ax.axhline(target, color="grey", ls="--", lw=0.8)
+        ax.set_xlabel(xl)
+        ax.set_ylabel("validation: policy / Greedy (unitary)")
+        ax.grid(alpha=0.3)
+    axes[1].legend()
+    fig.suptitle("PPO, 100 acquisitions, cpu preset, batch 512 / minibatch 128 / 4 epochs")
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path.with_suffix(".png"), dpi=110)
+    fig.savefig(path.with_suffix(".svg"))
+
+
+def main(argv: list[str] | None = None) -> int:
+    from bench_train import install_commit
+
+    a = parse(argv)
+    train, val = data_sets()
+    results = []
+    with tempfile.TemporaryDirectory(prefix="train-speed-") as tmp:
+        site = install_commit(a.ref, Path(tmp)) if "old" in a.variants else None
+        for seed in a.seeds:
+            for v in a.variants:
+                results.append(run(v, seed, a, train, val, site if v == "old" else None))
+                r = results[-1]
+                print(f"[train_speed] {r['run']}: {r['env_steps_per_s']:.0f} env steps/s, final ratio "
+                      f"{r['final_ratio']:.4f}, reached {a.target} at {r['reached_wall_s']} s / "
+                      f"{r['reached_env_steps']} env steps", flush=True)
+    out = (ROOT / a.out)
+    (out / "summary.json").write_text(json.dumps(results, indent=1))
+    plot(results, a.target, ROOT / a.plot)
+    print(f"\n| run | env steps/s | final / Greedy | best / Greedy | wall to {a.target} (s) | env steps to {a.target} |")
+    print("|---|---|---|---|---|---|")
+    for r in results:
+        wall = f"{r['reached_wall_s']:.0f}" if r["reached_wall_s"] is not None else "not reached"
+        steps = f"{r['reached_env_steps']:.0f}" if r["reached_env_steps"] is not None else "-"
+        print(f"| {r['run']} | {r['env_steps_per_s']:.0f} | {r['final_ratio']:.4f} | {r['best_ratio']:.4f} | "
+              f"{wall} | {steps} |")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
