@@ -115,7 +115,7 @@ esac
 
 # Ray token authentication (on by default in Ray 2.60): make sure a token exists
 if [[ $AUTH_MODE == token && -z ${RAY_AUTH_TOKEN:-} && -z ${RAY_AUTH_TOKEN_PATH:-} && ! -s $HOME/.ray/auth_token ]]; then
-    "$RAY" get-auth-token --generate >/dev/null
+    "$PY" "$RAY" get-auth-token --generate >/dev/null
 fi
 
 export EOSP_PLATFORM_ID=$ID RAY_AUTH_MODE=$AUTH_MODE RAY_USAGE_STATS_ENABLED=0 OMP_NUM_THREADS=1
@@ -139,10 +139,13 @@ RAY_ARGS=(start --head --block --node-ip-address "$HOST" --port "$RAY_PORT" --nu
     --temp-dir "$RAY_TMP" --disable-usage-stats)
 [[ -z ${EOSP_RAY_OBJECT_STORE_BYTES:-} ]] || RAY_ARGS+=(--object-store-memory "$EOSP_RAY_OBJECT_STORE_BYTES")
 
-# `setsid` of a background job (not a process group leader) execs in place: $! is the leader
-setsid "$RAY" "${RAY_ARGS[@]}" >"$STATE/ray.log" 2>&1 </dev/null &
+# `setsid` of a background job (not a process group leader) execs in place: $! is the leader.
+# The console scripts run through $PY, not their shebang: a virtual environment copied from
+# another one keeps the shebangs of the original, whose Python (and installed project) Ray
+# would then give to every worker.
+setsid "$PY" "$RAY" "${RAY_ARGS[@]}" >"$STATE/ray.log" 2>&1 </dev/null &
 RAY_PID=$!
-setsid "$MLFLOW" server --host "$HOST" --port "$MLFLOW_PORT" --workers "$MLFLOW_WORKERS" \
+setsid "$PY" "$MLFLOW" server --host "$HOST" --port "$MLFLOW_PORT" --workers "$MLFLOW_WORKERS" \
     --backend-store-uri "$BACKEND" --artifacts-destination "$ARTIFACTS" --serve-artifacts \
     >"$STATE/mlflow.log" 2>&1 </dev/null &
 MLFLOW_PID=$!

@@ -121,7 +121,8 @@ def submit(p: Platform, data: Path, submission_id: str, run_name: str, iteration
             "--train.train-batch-size", 128, "--train.minibatch-size", 64, "--train.num-epochs", 1,
             "--model.hidden-dim", 8, "--model.n-layers", 2, "--model.heads", 1, "--train.validate-every", 1000,
             "--train.checkpoint-every", 1, "--train.iterations", iterations, "--ray.num-cpus", 2, *extra]
-    cmd = [str(BIN / "ray"), "job", "submit", "--no-wait", "--address", p.dashboard, "--submission-id", submission_id,
+    # through this Python, not the console script's shebang (which may name another environment's Python)
+    cmd = [sys.executable, str(BIN / "ray"), "job", "submit", "--no-wait", "--address", p.dashboard, "--submission-id", submission_id,
            "--working-dir", ".", "--runtime-env", "platform/runtime-env.yaml", "--",
            "python", "jobs/train.py", *map(str, args)]
     r = subprocess.run(cmd, env=p.env, cwd=ROOT, capture_output=True, text=True, timeout=120)
