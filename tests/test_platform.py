@@ -13,6 +13,7 @@ Only processes that carry this platform's EOSP_PLATFORM_ID are ever signalled.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import re
@@ -76,9 +77,10 @@ def run_script(name: str, env: dict, timeout: float = 300) -> subprocess.Complet
                           cwd=ROOT)
 
 
-@pytest.fixture(scope="module")
-def platform(tmp_path_factory):
-    state_dir = tmp_path_factory.mktemp("platform")
+@contextlib.contextmanager
+def running_platform(state_dir: Path, **settings: str):
+    """scripts/platform-up.sh on `state_dir` with a fresh token and the EOSP_* `settings`; on exit,
+    scripts/platform-down.sh, checking that nothing of the platform survives it."""
     token_file = state_dir / "auth_token"
     token = secrets.token_hex(32)
     token_file.write_text(token)
@@ -86,7 +88,7 @@ def platform(tmp_path_factory):
     env = {k: v for k, v in os.environ.items()
            if k not in ("RAY_ADDRESS", "RAY_API_SERVER_ADDRESS", "RAY_AUTH_TOKEN", "MLFLOW_TRACKING_URI")}
     env.update(EOSP_PLATFORM_DIR=str(state_dir), EOSP_PYTHON=sys.executable, RAY_AUTH_MODE="token",
-               RAY_AUTH_TOKEN_PATH=str(token_file))
+               RAY_AUTH_TOKEN_PATH=str(token_file), **settings)
     t0 = time.monotonic()
     up = run_script("platform-up.sh", env)
     assert up.returncode == 0, up.stdout + up.stderr
@@ -104,6 +106,12 @@ def platform(tmp_path_factory):
         ray_tmp = p.state["ray"]["temp_dir"]
         if ray_tmp.startswith("/tmp/eosp-ray-"):  # outside the state directory (its path was too long)
             shutil.rmtree(ray_tmp, ignore_errors=True)
+
+
+@pytest.fixture(scope="module")
+def platform(tmp_path_factory):
+    with running_platform(tmp_path_factory.mktemp("platform")) as p:
+        yield p
 
 
 @pytest.fixture(scope="module")
