@@ -408,12 +408,17 @@ class TrainConfig:
     iterations: int = ranged(10, 1)
     preset: str = "cpu"
     """Model preset applied before --model.* flags: 'cpu' or 'reference' (the paper's 64 x 10)."""
-    num_env_runners: int = 1
+    num_env_runners: int = ranged(1, 0)
     """Rollout workers; each owns its envs over its own subset of the shards."""
-    num_envs_per_env_runner: int = 2
+    num_envs_per_env_runner: int = ranged(2, 1)
     overlap_sampling: bool = False
     """Sample the next batch while the learner updates on this one (training/overlap.py): on 2 cores both
     work at once; the batch learned on was sampled with the weights of the previous update (lag of one)."""
+    env_runner_resource: str = ""
+    """A custom Ray resource each env runner requests one unit of, e.g. to place them on the nodes started
+    with `ray start --resources '{"NAME": k}'`; empty: anywhere."""
+    num_gpus_per_learner: float = ranged(0.0, 0)
+    """GPUs per learner; >0 needs a GPU visible to Ray.  The learner runs in the driver (num_learners=0)."""
     train_batch_size: int = ranged(512, 1)
     """Environment steps collected per iteration."""
     minibatch_size: int = ranged(128, 1)

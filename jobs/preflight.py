@@ -7,6 +7,10 @@
   refuses it with one line naming the absolute path to pass.
 * An MLflow tracking server that does not answer is reported in one line at the
   start, not after an hour of training.
+* A training the Ray cluster cannot run (more env runners than CPUs, a GPU learner
+  without a GPU, env runners placed on a custom resource no node offers) is refused in
+  one line once Ray is up, before RLlib builds anything (it would wait forever for the
+  env runners, or fail deep inside).
 """
 
 from __future__ import annotations
@@ -14,6 +18,7 @@ from __future__ import annotations
 import os
 import urllib.error
 import urllib.request
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 
 UPLOADED_MARKER = ("runtime_resources", "working_dir_files")
@@ -59,3 +64,82 @@ def check_mlflow(uri: str, flag: str = "--mlflow-uri", timeout: float = 5.0) -> 
         reason = getattr(exc, "reason", exc)
         raise SystemExit(f"error: MLflow tracking server {uri} unreachable ({reason}): start it, or pass another "
                          f"{flag} (e.g. sqlite:///$PWD/mlflow.db)") from None
+
+
+# --------------------------------------------------------------------------- what the Ray cluster offers
+
+_NOT_SHOWN = ("memory", "object_store_memory")
+
+
+def _describe(nodes: Sequence[Mapping[str, float]]) -> str:
+    """'3 CPU, 1 eosp_runner on 2 nodes': the cluster's schedulable resources (memory and node labels left out)."""
+    totals: dict[str, float] = {}
+    for node in nodes:
+        for k, v in node.items():
+            if k not in _NOT_SHOWN and not k.startswith(("node:", "accelerator_type:")):
+                totals[k] = totals.get(k, 0.0) + float(v)
+    order = sorted(totals, key=lambda k: (k not in ("CPU", "GPU"), k != "CPU", k))
+    parts = ", ".join(f"{totals[k]:g} {k}" for k in order) or "nothing"
+    return f"{parts} on {len(nodes)} node{'s' if len(nodes) != 1 else ''}"
+
+
+def cluster_problem(train, nodes: Sequence[Mapping[str, float]], driver_gpus: int | None = None) -> str | None:
+    """Why the Ray cluster cannot run this training (one line), or None when it can.
+
+    `train` is a :class:`eosp.config.TrainConfig`; `nodes` the total resources of each alive node
+    (``ray.nodes()[i]["Resources"]``; a single ``ray.cluster_resources()`` dict stands for the whole
+    cluster as one node); `driver_gpus` the CUDA devices the driver process sees (None: not checked).
+    What RLlib asks for: every env runner 1 CPU (+ 1 unit of `env_runner_resource` on the same node);
+    the learner, in the driver (num_learners=0), `num_gpus_per_learner` GPUs of the driver's node.
+    """
+    n = train.num_env_runners
+    where = _describe(nodes)
+
+    def total(key: str) -> float:
+        return sum(float(node.get(key, 0.0)) for node in nodes)
+
+    if train.num_gpus_per_learner > 0:
+        flag = f"--train.num-gpus-per-learner {train.num_gpus_per_learner:g}"
+        gpus = total("GPU")
+        if gpus <= 0:
+            return f"{flag}: this Ray cluster has no GPU (resources: {where})"
+        if gpus < train.num_gpus_per_learner:
+            return f"{flag}: this Ray cluster has {gpus:g} GPU (resources: {where})"
+        if driver_gpus == 0:
+            return (f"{flag}: the learner runs in the driver (num_learners=0), which sees no CUDA device "
+                    f"(resources: {where}): run the driver on a node with a GPU and a CUDA build of torch")
+    name = train.env_runner_resource
+    if name and n == 0:
+        return (f"--train.env-runner-resource {name} places env runners, but --train.num-env-runners is 0 (sampling "
+                "in the driver): pass --train.num-env-runners 1 or more")
+    cpus = int(sum(int(float(node.get("CPU", 0.0))) for node in nodes))
+    if n > cpus:
+        return (f"--train.num-env-runners {n}: each env runner takes 1 CPU and this Ray cluster has {cpus} "
+                f"(resources: {where}); pass --train.num-env-runners {cpus} or fewer, or add nodes")
+    if name:
+        if total(name) <= 0:
+            return (f"--train.env-runner-resource {name}: no node of this Ray cluster offers it (resources: {where});"
+                    f" start nodes with: ray start --address HEAD:PORT --resources '{{\"{name}\": K}}'")
+        # each runner needs 1 CPU and 1 unit of the resource on the same node
+        room = sum(min(int(float(node.get("CPU", 0.0))), int(float(node.get(name, 0.0)))) for node in nodes)
+        if n > room:
+            return (f"--train.env-runner-resource {name} --train.num-env-runners {n}: each env runner takes 1 {name} "
+                    f"and 1 CPU of the same node, and the nodes that offer {name} have room for {room} "
+                    f"(resources: {where}); pass --train.num-env-runners {room} or fewer, or add nodes")
+    return None
+
+
+def require_cluster_fits(train, nodes: Sequence[Mapping[str, float]], driver_gpus: int | None = None) -> None:
+    """SystemExit (one line) when the Ray cluster cannot run this training: see :func:`cluster_problem`.
+    Called after Ray is initialised and before the algorithm is built (which would hang waiting for the
+    env runners, or fail deep inside RLlib)."""
+    problem = cluster_problem(train, nodes, driver_gpus)
+    if problem:
+        raise SystemExit(f"error: {problem}")
+
+
+def ray_nodes() -> list[dict[str, float]]:
+    """The total resources of each alive node of the Ray cluster this process is attached to."""
+    import ray
+
+    return [dict(node["Resources"]) for node in ray.nodes() if node.get("Alive")]

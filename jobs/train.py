@@ -86,7 +86,7 @@ def ensure_demo_data(cfg: RunConfig) -> None:
 
 def main(argv: list[str] | None = None) -> int:
     cfg, ns = parse(argv)
-    from eosp.jobs.preflight import check_mlflow, require_findable
+    from eosp.jobs.preflight import check_mlflow, ray_nodes, require_cluster_fits, require_findable
 
     require_findable(cfg.train.run_dir, "--train.run-dir")
     check_mlflow(cfg.train.mlflow_uri, "--train.mlflow-uri")
@@ -103,8 +103,6 @@ def main(argv: list[str] | None = None) -> int:
 
     torch.set_num_threads(1)
     init_ray(cfg.ray.address, cfg.ray.num_cpus)
-    if ns.demo:
-        ensure_demo_data(cfg)
     t = cfg.train
     run_dir = Path(t.run_dir) / t.run_name
     ckpt_dir = run_dir / "checkpoints"
@@ -126,6 +124,10 @@ def main(argv: list[str] | None = None) -> int:
         cfg = from_dict(RunConfig, {**prev["config"], "train": {**prev["config"]["train"],
                                                                  "iterations": t.iterations, "resume": True}})
         t = cfg.train
+    # before anything is written or built: can this Ray cluster run the env runners and the learner?
+    require_cluster_fits(t, ray_nodes(), torch.cuda.device_count() if t.num_gpus_per_learner > 0 else None)
+    if ns.demo:
+        ensure_demo_data(cfg)
     run_dir.mkdir(parents=True, exist_ok=True)
     init = None
     if t.init_checkpoint and not t.resume:

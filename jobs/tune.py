@@ -22,6 +22,7 @@ import os
 import shutil
 import sys
 import tempfile
+from dataclasses import replace
 from pathlib import Path
 
 os.environ.setdefault("OMP_NUM_THREADS", "1")
@@ -85,6 +86,10 @@ def run(cfg: RunConfig, tc: TuneConfig) -> dict:
 
     init_ray(cfg.ray.address, cfg.ray.num_cpus)
     from eosp.config import default_mlflow_uri
+    from eosp.jobs.preflight import ray_nodes, require_cluster_fits
+
+    # what a trial runs (its learner and its sampling in the trial's actor), before anything is written
+    require_cluster_fits(replace(cfg.train, num_env_runners=0, env_runner_resource=""), ray_nodes())
 
     # trials run in their own working directories: every path they read must be absolute
     cfg.train.train_data = str(Path(cfg.train.train_data).resolve())
@@ -112,7 +117,8 @@ def run(cfg: RunConfig, tc: TuneConfig) -> dict:
     metric = tc.metric.replace("/", "_")
     space = {"run": to_dict(cfg), "hidden_dim": tune.grid_search(list(tc.hidden_dims)),
              "n_layers": tune.grid_search(list(tc.n_layers)), "lr": tune.grid_search(list(tc.lrs))}
-    trainable = tune.with_resources(trial, {"cpu": tc.cpus_per_trial})
+    gpus = cfg.train.num_gpus_per_learner  # a trial's learner runs in the trial's actor: Ray gives it the GPU
+    trainable = tune.with_resources(trial, {"cpu": tc.cpus_per_trial, **({"gpu": gpus} if gpus else {})})
     callbacks = [MLflowLoggerCallback(tracking_uri=uri, experiment_name=cfg.train.experiment,
                                       tags={"mlflow.parentRunId": parent_id, "eosp.sweep": tc.name})]
     if tune.Tuner.can_restore(str(sweep_dir)) and (sweep_dir / "tuner.pkl").exists():

@@ -1,10 +1,11 @@
 #!/usr/bin/env bash
 # Stop the platform started by scripts/platform-up.sh (or make platform-up).
 #
-# Stops exactly what platform-up.sh started: each service's process group (SIGTERM to its
-# leader, then to the group, then SIGKILL, within EOSP_PLATFORM_GRACE seconds [10]), then
-# any process left that carries this platform's EOSP_PLATFORM_ID in its environment (Ray job
-# drivers and workers run in sessions of their own).  It never runs `ray stop`, which would kill
+# Stops exactly what platform-up.sh started: each service's process group (the Ray head, the
+# extra Ray nodes of EOSP_RAY_WORKER_NODES, the MLflow server: SIGTERM to its leader, then to
+# the group, then SIGKILL, within EOSP_PLATFORM_GRACE seconds [10]), then any process left that
+# carries this platform's EOSP_PLATFORM_ID in its environment (Ray job drivers and workers run
+# in sessions of their own).  It never runs `ray stop`, which would kill
 # every Ray process on the machine, other users' local ray.init() sessions included.
 # The MLflow store (STATE/mlflow) and the logs are kept.
 set -euo pipefail

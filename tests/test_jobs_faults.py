@@ -104,6 +104,133 @@ def test_mlflow_unreachable_is_one_line_before_work(tmp_path, module, argv):
     assert not ray.is_initialized() and not (tmp_path / "out").exists()
 
 
+# --------------------------------------------------------------------------- what the Ray cluster offers
+
+HEAD = {"CPU": 2.0, "memory": 8e9, "object_store_memory": 2e9, "node:127.0.0.1": 1.0, "node:__internal_head__": 1.0}
+RUNNER_NODE = {"CPU": 1.0, "eosp_runner": 1.0, "memory": 8e9, "object_store_memory": 2e9, "node:127.0.0.1": 1.0}
+GPU_NODE = {"CPU": 8.0, "GPU": 1.0, "accelerator_type:H100": 1.0, "memory": 8e9, "node:10.0.0.3": 1.0}
+
+
+def _train(**kw):
+    from eosp.config import TrainConfig
+
+    return TrainConfig(**kw)
+
+
+@pytest.mark.parametrize("train,nodes,driver_gpus,expected", [
+    # fits: no message
+    (dict(), [HEAD], None, None),
+    (dict(num_env_runners=2), [HEAD], None, None),
+    (dict(num_env_runners=0), [{"CPU": 1.0}], None, None),
+    (dict(num_env_runners=3), [HEAD, RUNNER_NODE], None, None),
+    (dict(num_env_runners=1, env_runner_resource="eosp_runner"), [HEAD, RUNNER_NODE], None, None),
+    (dict(num_gpus_per_learner=1), [HEAD, GPU_NODE], 1, None),
+    (dict(num_gpus_per_learner=0.5), [GPU_NODE], None, None),
+    # (a) more env runners than CPUs
+    (dict(num_env_runners=5), [HEAD], None,
+     "--train.num-env-runners 5: each env runner takes 1 CPU and this Ray cluster has 2 (resources: 2 CPU on 1 node); "
+     "pass --train.num-env-runners 2 or fewer, or add nodes"),
+    (dict(num_env_runners=4), [HEAD, RUNNER_NODE], None,
+     "--train.num-env-runners 4: each env runner takes 1 CPU and this Ray cluster has 3 (resources: 3 CPU, "
+     "1 eosp_runner on 2 nodes); pass --train.num-env-runners 3 or fewer, or add nodes"),
+    (dict(num_env_runners=2), [{"CPU": 1.5}], None, "this Ray cluster has 1 (resources: 1.5 CPU on 1 node)"),
+    # (b) a GPU learner without a GPU
+    (dict(num_gpus_per_learner=1), [HEAD], None,
+     "--train.num-gpus-per-learner 1: this Ray cluster has no GPU (resources: 2 CPU on 1 node)"),
+    (dict(num_gpus_per_learner=2), [GPU_NODE], None,
+     "--train.num-gpus-per-learner 2: this Ray cluster has 1 GPU (resources: 8 CPU, 1 GPU on 1 node)"),
+    (dict(num_gpus_per_learner=1), [HEAD, GPU_NODE], 0,
+     "--train.num-gpus-per-learner 1: the learner runs in the driver (num_learners=0), which sees no CUDA device"),
+    # (c) env runners placed on a custom resource
+    (dict(env_runner_resource="eosp_runner"), [HEAD], None,
+     "--train.env-runner-resource eosp_runner: no node of this Ray cluster offers it (resources: 2 CPU on 1 node); "
+     "start nodes with: ray start --address HEAD:PORT --resources '{\"eosp_runner\": K}'"),
+    (dict(num_env_runners=2, env_runner_resource="eosp_runner"), [HEAD, RUNNER_NODE], None,
+     "--train.env-runner-resource eosp_runner --train.num-env-runners 2: each env runner takes 1 eosp_runner and "
+     "1 CPU of the same node, and the nodes that offer eosp_runner have room for 1 (resources: 3 CPU, 1 eosp_runner "
+     "on 2 nodes); pass --train.num-env-runners 1 or fewer, or add nodes"),
+    # a node offering 4 units but 1 CPU hosts one runner
+    (dict(num_env_runners=2, env_runner_resource="r"), [HEAD, {"CPU": 1.0, "r": 4.0}], None, "have room for 1"),
+    (dict(num_env_runners=0, env_runner_resource="eosp_runner"), [HEAD, RUNNER_NODE], None,
+     "--train.env-runner-resource eosp_runner places env runners, but --train.num-env-runners is 0 (sampling in "
+     "the driver): pass --train.num-env-runners 1 or more"),
+])
+def test_cluster_that_cannot_run_the_training_is_refused(train, nodes, driver_gpus, expected):
+    from eosp.jobs.preflight import cluster_problem, require_cluster_fits
+
+    t = _train(**train)
+    got = cluster_problem(t, nodes, driver_gpus)
+    if expected is None:
+        assert got is None
+        require_cluster_fits(t, nodes, driver_gpus)
+        return
+    assert got is not None and expected in got and "\n" not in got, got
+    with pytest.raises(SystemExit) as exc:
+        require_cluster_fits(t, nodes, driver_gpus)
+    assert exc.value.code == f"error: {got}"
+
+
+def test_cluster_resources_dict_stands_for_one_node():
+    """ray.cluster_resources() (the totals) is accepted as a one-node cluster."""
+    from eosp.jobs.preflight import cluster_problem
+
+    totals = {"CPU": 3.0, "eosp_runner": 1.0, "memory": 1e9}
+    assert cluster_problem(_train(num_env_runners=3), [totals]) is None
+    assert "has 3 (resources: 3 CPU, 1 eosp_runner on 1 node)" in cluster_problem(_train(num_env_runners=4), [totals])
+
+
+def test_new_train_flags_reach_rllib():
+    from eosp.config import RunConfig
+    from eosp.training.ppo import ppo_config
+
+    cfg = RunConfig()
+    pc = ppo_config(cfg)
+    assert pc.custom_resources_per_env_runner == {} and pc.num_gpus_per_learner == 0 and pc.num_learners == 0
+    cfg.train.env_runner_resource, cfg.train.num_gpus_per_learner = "eosp_runner", 0.5
+    pc = ppo_config(cfg)
+    assert pc.custom_resources_per_env_runner == {"eosp_runner": 1} and pc.num_gpus_per_learner == 0.5
+
+
+@pytest.mark.parametrize("args,line", [
+    (["--train.num-env-runners", 5],
+     "error: --train.num-env-runners 5: each env runner takes 1 CPU and this Ray cluster has 2 (resources: 2 CPU on "
+     "1 node); pass --train.num-env-runners 2 or fewer, or add nodes"),
+    (["--train.preset", "reference", "--train.num-gpus-per-learner", 1],
+     "error: --train.num-gpus-per-learner 1: this Ray cluster has no GPU (resources: 2 CPU on 1 node)"),
+])
+def test_train_job_refuses_what_the_local_ray_cannot_run(tmp_path, args, line):
+    """`python jobs/train.py` on a local Ray of 2 CPUs and no GPU: one line, before anything is written."""
+    import time
+
+    t0 = time.monotonic()
+    rc, so, se = job("train.py", "--train.train-data", tmp_path / "train", "--train.val-data", tmp_path / "val",
+                     "--train.run-dir", tmp_path / "runs", "--train.mlflow-uri", f"sqlite:///{tmp_path / 'm.db'}",
+                     "--ray.num-cpus", 2, *args, timeout=180)
+    assert rc == 1, (rc, so, se[-3000:])
+    assert se.strip().splitlines()[-1] == line, se[-3000:]
+    assert se.count("error:") == 1 and "Traceback" not in se, se[-3000:]
+    assert list(tmp_path.iterdir()) == []  # no run directory, no MLflow database
+    assert time.monotonic() - t0 < 120
+
+
+def test_tune_refuses_a_gpu_learner_without_a_gpu(tmp_path):
+    import ray
+
+    from eosp.jobs.tune import main
+
+    if ray.is_initialized():
+        ray.shutdown()
+    try:
+        with pytest.raises(SystemExit) as exc:
+            main(["--train.run-dir", str(tmp_path / "runs"), "--train.mlflow-uri", f"sqlite:///{tmp_path / 'm.db'}",
+                  "--train.num-gpus-per-learner", "1", "--ray.num-cpus", "1"])
+    finally:
+        ray.shutdown()
+    assert exc.value.code == ("error: --train.num-gpus-per-learner 1: this Ray cluster has no GPU "
+                              "(resources: 1 CPU on 1 node)")
+    assert list(tmp_path.iterdir()) == []
+
+
 # --------------------------------------------------------------------------- killed and rerun (local Ray)
 
 def test_build_shards_killed_and_rerun_resumes(tmp_path):

@@ -13,6 +13,7 @@ Only processes that carry this platform's EOSP_PLATFORM_ID are ever signalled.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import re
@@ -76,9 +77,10 @@ def run_script(name: str, env: dict, timeout: float = 300) -> subprocess.Complet
                           cwd=ROOT)
 
 
-@pytest.fixture(scope="module")
-def platform(tmp_path_factory):
-    state_dir = tmp_path_factory.mktemp("platform")
+@contextlib.contextmanager
+def running_platform(state_dir: Path, **settings: str):
+    """scripts/platform-up.sh on `state_dir` with a fresh token and the EOSP_* `settings`; on exit,
+    scripts/platform-down.sh, checking that nothing of the platform survives it."""
     token_file = state_dir / "auth_token"
     token = secrets.token_hex(32)
     token_file.write_text(token)
@@ -86,7 +88,7 @@ def platform(tmp_path_factory):
     env = {k: v for k, v in os.environ.items()
            if k not in ("RAY_ADDRESS", "RAY_API_SERVER_ADDRESS", "RAY_AUTH_TOKEN", "MLFLOW_TRACKING_URI")}
     env.update(EOSP_PLATFORM_DIR=str(state_dir), EOSP_PYTHON=sys.executable, RAY_AUTH_MODE="token",
-               RAY_AUTH_TOKEN_PATH=str(token_file))
+               RAY_AUTH_TOKEN_PATH=str(token_file), **settings)
     t0 = time.monotonic()
     up = run_script("platform-up.sh", env)
     assert up.returncode == 0, up.stdout + up.stderr
@@ -107,6 +109,12 @@ def platform(tmp_path_factory):
 
 
 @pytest.fixture(scope="module")
+def platform(tmp_path_factory):
+    with running_platform(tmp_path_factory.mktemp("platform")) as p:
+        yield p
+
+
+@pytest.fixture(scope="module")
 def data(tmp_path_factory):
     d = tmp_path_factory.mktemp("platform-data")
     write_shard(d / "train" / "shard-0.parquet", [generated("uniform", 12, s) for s in range(3)])
@@ -121,7 +129,8 @@ def submit(p: Platform, data: Path, submission_id: str, run_name: str, iteration
             "--train.train-batch-size", 128, "--train.minibatch-size", 64, "--train.num-epochs", 1,
             "--model.hidden-dim", 8, "--model.n-layers", 2, "--model.heads", 1, "--train.validate-every", 1000,
             "--train.checkpoint-every", 1, "--train.iterations", iterations, "--ray.num-cpus", 2, *extra]
-    cmd = [str(BIN / "ray"), "job", "submit", "--no-wait", "--address", p.dashboard, "--submission-id", submission_id,
+    # through this Python, not the console script's shebang (which may name another environment's Python)
+    cmd = [sys.executable, str(BIN / "ray"), "job", "submit", "--no-wait", "--address", p.dashboard, "--submission-id", submission_id,
            "--working-dir", ".", "--runtime-env", "platform/runtime-env.yaml", "--",
            "python", "jobs/train.py", *map(str, args)]
     r = subprocess.run(cmd, env=p.env, cwd=ROOT, capture_output=True, text=True, timeout=120)

@@ -438,6 +438,22 @@ def test_platform_scripts_default_to_loopback_and_token_auth():
     assert re.search(r"^platform-down:.*\n\t.*scripts/platform-down\.sh", makefile, re.M)
 
 
+@pytest.mark.parametrize("setting,value", [
+    ("EOSP_RAY_WORKER_NODES", "two"), ("EOSP_RAY_WORKER_CPUS", "-1"), ("EOSP_RAY_NUM_GPUS", "0.5"),
+    ("EOSP_RAY_WORKER_RESOURCES", "eosp_runner"), ("EOSP_RAY_WORKER_RESOURCES", '{"CPU": 1}'),
+    ("EOSP_RAY_WORKER_RESOURCES", '{"eosp_runner": "one"}'),
+])
+def test_platform_up_refuses_bad_node_settings_before_starting_anything(tmp_path, setting, value):
+    state = tmp_path / "state"
+    env = {**os.environ, "EOSP_PLATFORM_DIR": str(state), "EOSP_PYTHON": sys.executable, setting: value}
+    r = subprocess.run([str(ROOT / "scripts" / "platform-up.sh")], env=env, capture_output=True, text=True,
+                       timeout=60)
+    assert r.returncode == 2 and r.stdout == "", (r.returncode, r.stdout, r.stderr)
+    (line,) = r.stderr.strip().splitlines()
+    assert line.startswith(f"platform-up: {setting} must be") and repr(value)[1:-1] in line
+    assert not state.exists()
+
+
 def test_checkpoints_load_with_weights_only_and_refuse_pickled_code(tmp_path):
     import torch
 

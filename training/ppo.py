@@ -60,8 +60,9 @@ def ppo_config(cfg: RunConfig):
         .framework("torch")
         .env_runners(num_env_runners=t.num_env_runners, num_envs_per_env_runner=t.num_envs_per_env_runner,
                      num_cpus_per_env_runner=1, rollout_fragment_length="auto",
-                     gym_env_vectorize_mode="sync")
-        .learners(num_learners=0, **learner)
+                     gym_env_vectorize_mode="sync",
+                     custom_resources_per_env_runner={t.env_runner_resource: 1} if t.env_runner_resource else {})
+        .learners(num_learners=0, num_gpus_per_learner=t.num_gpus_per_learner, **learner)
         .rl_module(rl_module_spec=RLModuleSpec(module_class=EOSPTorchRLModule, model_config=to_dict(cfg.model)))
         .training(train_batch_size_per_learner=t.train_batch_size, minibatch_size=t.minibatch_size,
                   num_epochs=t.num_epochs, lr=t.lr, gamma=t.gamma, lambda_=t.gae_lambda, clip_param=t.clip_param,
