@@ -220,11 +220,12 @@ class GATv2Layer(nn.Module):
         self.lin_edge = nn.Linear(dim, heads * dim, bias=False)
         self.att = nn.Parameter(torch.empty(1, heads, dim))
         self.bias = nn.Parameter(torch.zeros(heads * dim))
-        for lin in (self.lin_l, self.lin_r, self.lin_edge):  # glorot, as GATv2Conv
-            nn.init.xavier_uniform_(lin.weight)
-            if lin.bias is not None:
-                nn.init.zeros_(lin.bias)
-        nn.init.xavier_uniform_(self.att)
+        # GATv2Conv's initialization: glorot over the last two dimensions, zero biases
+        for w in (self.lin_l.weight, self.lin_r.weight, self.lin_edge.weight, self.att):
+            bound = math.sqrt(6.0 / (w.shape[-2] + w.shape[-1]))
+            nn.init.uniform_(w, -bound, bound)
+        nn.init.zeros_(self.lin_l.bias)
+        nn.init.zeros_(self.lin_r.bias)
 
     def forward(self, x: torch.Tensor, edges: EdgeStructure, edge_basis: torch.Tensor,
                 fused: bool | None = None) -> torch.Tensor:

@@ -115,3 +115,15 @@ def tiny_instance_obs():
         out.append(obs)
         obs, _, done, _, _ = env.step(int(rng.choice(np.flatnonzero(obs["action_mask"]))))
     return out
+
+
+def test_initialization_follows_gatv2conv():
+    """Same parameter distributions as GATv2Conv at creation (glorot over the last two dims, zero biases)."""
+    dim, heads = 32, 2
+    ours = torch.stack([GATv2Layer(dim, heads).att.detach().abs().max() for _ in range(20)]).max()
+    pyg = torch.stack([GATv2Conv(dim, dim, heads=heads, edge_dim=dim, add_self_loops=False).att.detach().abs().max()
+                       for _ in range(20)]).max()
+    bound = (6.0 / (heads + dim)) ** 0.5
+    assert 0.9 * bound < ours <= bound and 0.9 * bound < pyg <= bound
+    layer = GATv2Layer(dim, heads)
+    assert layer.lin_l.bias.abs().sum() == 0 and layer.bias.abs().sum() == 0
