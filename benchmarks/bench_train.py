@@ -63,6 +63,8 @@ class Args:
     num_envs_per_env_runner: int = 2
     overlap_sampling: bool = False
     """Sample the next batch while learning (eosp.config.TrainConfig.overlap_sampling)."""
+    num_gpus_per_learner: float = 0.0
+    """GPU learner (refused in one line where Ray sees no GPU)."""
     compare: str = ""
     """A git commit to benchmark against: both run in turn, `rounds` times each."""
     rounds: int = 2
@@ -227,8 +229,15 @@ def bench(a: Args) -> dict:
     cfg.env.reward = a.reward
     if a.overlap_sampling:
         cfg.train.overlap_sampling = True
+    cfg.train.num_gpus_per_learner = a.num_gpus_per_learner
     cfg.env.max_acquisitions = max(cfg.env.max_acquisitions, a.acquisitions)
     cfg.model.value_scale = estimate_value_scale(cfg)
+    try:
+        from eosp.jobs.preflight import ray_nodes, require_cluster_fits
+    except ImportError:  # an older commit benchmarked by --compare
+        pass
+    else:
+        require_cluster_fits(cfg.train, ray_nodes(), torch.cuda.device_count() if a.num_gpus_per_learner > 0 else None)
     obs_share = observation_share(data)
     algo = ppo_config(cfg).build_algo()
     clock = instrument(algo)

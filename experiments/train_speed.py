@@ -14,8 +14,10 @@ greedy-decoding validation every ``--val-every`` iterations, one after the other
 
 Prints, per run: env steps/s, the validation ratio to Greedy at the end, and
 the wall time and env steps at which the ratio first reached ``--target``
-(1.05 x Greedy); writes the curves (ratio against env steps and against wall
-time) to ``--plot`` and the figures to ``--out``/summary.json.
+(1.05 x Greedy); then, over every run in ``--out`` (all seeds of all
+invocations), a table, the mean curve of each variant, the curves (ratio against
+env steps and against wall time) in ``--plot`` and the figures in
+``--out``/summary.json (``--report-only``: just that).
 """
 
 from __future__ import annotations
@@ -53,8 +55,12 @@ def parse(argv: list[str] | None) -> Args:
 
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0], epilog=__doc__,
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--report-only", action="store_true", help="only the table and plot of the runs already done")
     add_config_args(p, Args)
-    return config_from_args(Args, p.parse_args(argv))
+    ns = p.parse_args(argv)
+    a = config_from_args(Args, ns)
+    a.report_only = ns.report_only
+    return a
 
 
 def data_sets() -> tuple[Path, Path]:
@@ -116,10 +122,14 @@ def plot(results: list[dict], target: float, path: Path) -> None:
     import matplotlib.pyplot as plt
 
     fig, axes = plt.subplots(1, 2, figsize=(11, 4))
+    colors: dict[str, str] = {}
     for r in results:
+        variant = r["run"].rsplit("-s", 1)[0]
+        first = variant not in colors
+        colors.setdefault(variant, f"C{len(colors)}")
         steps, wall, ratio = zip(*r["curve"])
-        axes[0].plot(steps, ratio, marker=".", label=r["run"])
-        axes[1].plot(wall, ratio, marker=".", label=r["run"])
+        for ax, x in zip(axes, (steps, wall)):
+            ax.plot(x, ratio, marker=".", color=colors[variant], alpha=0.8, label=variant if first else None)
     for ax, xl in zip(axes, ("env steps", "wall time (s), validation included")):
         ax.axhline(target, color="grey", ls="--", lw=0.8)
         ax.set_xlabel(xl)
@@ -133,10 +143,43 @@ def plot(results: list[dict], target: float, path: Path) -> None:
     fig.savefig(path.with_suffix(".svg"))
 
 
+def report(a: Args) -> None:
+    """Table and curves over every run in the output directory (all seeds of all invocations)."""
+    out = ROOT / a.out
+    results = []
+    for run_file in sorted(out.glob("*-s*/run.json")):
+        state = json.loads(run_file.read_text())
+        if state["iteration"] >= a.iterations:
+            results.append(summarize(run_file.parent.name, state["history"], a.target))
+    (out / "summary.json").write_text(json.dumps(results, indent=1))
+    plot(results, a.target, ROOT / a.plot)
+    print(f"\n| run | env steps/s | final / Greedy | best / Greedy | wall to {a.target} (s) | env steps to {a.target} |")
+    print("|---|---|---|---|---|---|")
+    for r in results:
+        wall = f"{r['reached_wall_s']:.0f}" if r["reached_wall_s"] is not None else "not reached"
+        steps = f"{r['reached_env_steps']:.0f}" if r["reached_env_steps"] is not None else "-"
+        print(f"| {r['run']} | {r['env_steps_per_s']:.0f} | {r['final_ratio']:.4f} | {r['best_ratio']:.4f} | "
+              f"{wall} | {steps} |")
+    by_variant: dict[str, list[dict]] = {}
+    for r in results:
+        by_variant.setdefault(r["run"].rsplit("-s", 1)[0], []).append(r)
+    print("\nper variant (mean over seeds; ratio at each validation point averaged over seeds):")
+    for v, rs in by_variant.items():
+        n = min(len(r["curve"]) for r in rs)
+        mean_curve = [sum(r["curve"][i][2] for r in rs) / len(rs) for i in range(n)]
+        reached = [r["reached_wall_s"] for r in rs if r["reached_wall_s"] is not None]
+        print(f"  {v}: {len(rs)} seeds, {sum(r['env_steps_per_s'] for r in rs) / len(rs):.0f} env steps/s, "
+              f"reached {a.target} in {len(reached)}/{len(rs)} (wall {', '.join(f'{x:.0f}' for x in reached)} s); "
+              f"mean ratio at validations: {' '.join(f'{x:.3f}' for x in mean_curve)}")
+
+
 def main(argv: list[str] | None = None) -> int:
     from bench_train import install_commit
 
     a = parse(argv)
+    if a.report_only:
+        report(a)
+        return 0
     train, val = data_sets()
     results = []
     with tempfile.TemporaryDirectory(prefix="train-speed-") as tmp:
@@ -148,16 +191,7 @@ def main(argv: list[str] | None = None) -> int:
                 print(f"[train_speed] {r['run']}: {r['env_steps_per_s']:.0f} env steps/s, final ratio "
                       f"{r['final_ratio']:.4f}, reached {a.target} at {r['reached_wall_s']} s / "
                       f"{r['reached_env_steps']} env steps", flush=True)
-    out = (ROOT / a.out)
-    (out / "summary.json").write_text(json.dumps(results, indent=1))
-    plot(results, a.target, ROOT / a.plot)
-    print(f"\n| run | env steps/s | final / Greedy | best / Greedy | wall to {a.target} (s) | env steps to {a.target} |")
-    print("|---|---|---|---|---|---|")
-    for r in results:
-        wall = f"{r['reached_wall_s']:.0f}" if r["reached_wall_s"] is not None else "not reached"
-        steps = f"{r['reached_env_steps']:.0f}" if r["reached_env_steps"] is not None else "-"
-        print(f"| {r['run']} | {r['env_steps_per_s']:.0f} | {r['final_ratio']:.4f} | {r['best_ratio']:.4f} | "
-              f"{wall} | {steps} |")
+    report(a)
     return 0
 
 
