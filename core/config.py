@@ -328,6 +328,9 @@ class ImitationConfig:
     """Validate every this many epochs (and after the last)."""
     max_val_instances: int = 0
     """Validate on the first N instances only (0: all)."""
+    init_checkpoint: str = ""
+    """Start from this agent checkpoint (e.g. a shipped model's folder, to train it further): its model
+    configuration and value scale replace --model.*; empty: random initialization."""
     run_dir: str = "runs"
     run_name: str = ""
     mlflow_uri: str = ""

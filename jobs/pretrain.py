@@ -64,6 +64,16 @@ def run(cfg: PretrainConfig) -> dict:
     rng = np.random.default_rng(im.seed)
     init_ray(cfg.ray.address, cfg.ray.num_cpus)
     t_load = time.perf_counter()
+    agent = None
+    if im.init_checkpoint:
+        from eosp.models.checkpoint import load_agent
+
+        agent, init_env, _ = load_agent(im.init_checkpoint)
+        if init_env.reward != cfg.env.reward:
+            print(f"[pretrain] warning: {im.init_checkpoint} was trained with reward {init_env.reward!r}, "
+                  f"this run uses {cfg.env.reward!r}", flush=True)
+        cfg.model = agent.cfg  # the architecture and value scale come with the weights
+        print(f"[pretrain] starting from {im.init_checkpoint}", flush=True)
     data = DemoData(im.train_data, cfg.env, cfg.model.n_values, im.set_tolerance)
     if cfg.model.value_scale <= 0:
         cfg.model.value_scale = float(max(1.0, np.mean(data.start_values)))
@@ -76,7 +86,8 @@ def run(cfg: PretrainConfig) -> dict:
     ckpt = run_dir / "checkpoints"
     run_dir.mkdir(parents=True, exist_ok=True)
 
-    agent = EOSPAgent(cfg.model)
+    if agent is None:
+        agent = EOSPAgent(cfg.model)
     opt = torch.optim.Adam(agent.parameters(), lr=im.lr, weight_decay=im.weight_decay)
     mlflow.set_tracking_uri(default_mlflow_uri(im.mlflow_uri))
     mlflow.set_experiment(im.experiment)

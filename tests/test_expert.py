@@ -218,3 +218,24 @@ def test_missing_or_corrupt_shipped_model_is_one_line(tmp_path, monkeypatch, cap
     err = capsys.readouterr().err.strip()
     assert err.count("\n") == 0 and "cannot read the weights" in err
     assert not (tmp_path / "s.parquet").exists()
+
+
+def test_pretrain_continues_a_shipped_model_and_refuses_a_missing_one(demo_shard, tmp_path, capsys):
+    import ray
+
+    from eosp.jobs.pretrain import main
+    from eosp.models.checkpoint import load_agent
+    from eosp.models.pretrained import pretrained_dir
+
+    common = ["--imitation.train-data", str(demo_shard.parent), "--imitation.val-data", "", "--env.reward", "unitary",
+              "--imitation.epochs", "1", "--imitation.run-dir", str(tmp_path / "runs"), "--imitation.mlflow-uri",
+              f"sqlite:///{tmp_path / 'mlflow.db'}", "--ray.num-cpus", "1", "--env.max-acquisitions", "32"]
+    shipped = pretrained_dir("unitary")
+    assert main([*common, "--imitation.init-checkpoint", str(shipped), "--imitation.run-name", "more"]) == 0
+    assert f"starting from {shipped}" in capsys.readouterr().out
+    agent, _, _ = load_agent(tmp_path / "runs" / "more" / "checkpoints" / "last")
+    assert agent.cfg == load_agent(shipped)[0].cfg  # architecture and value scale came with the weights
+    assert main([*common, "--imitation.init-checkpoint", str(tmp_path / "none"), "--imitation.run-name", "x"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "checkpoint not found" in err
+    ray.shutdown()
