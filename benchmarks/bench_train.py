@@ -61,8 +61,8 @@ class Args:
     reward: str = "unitary"
     num_env_runners: int = 1
     num_envs_per_env_runner: int = 2
-    overlap_sampling: bool = False
-    """Sample the next batch while learning (eosp.config.TrainConfig.overlap_sampling)."""
+    overlap_sampling: bool = True
+    """Sample the next batch while learning (eosp.config.TrainConfig.overlap_sampling, on by default)."""
     num_gpus_per_learner: float = 0.0
     """GPU learner (refused in one line where Ray sees no GPU)."""
     compare: str = ""
@@ -227,8 +227,7 @@ def bench(a: Args) -> dict:
     cfg.train.train_data, cfg.train.val_data = str(data), ""
     cfg.train.num_env_runners, cfg.train.num_envs_per_env_runner = a.num_env_runners, a.num_envs_per_env_runner
     cfg.env.reward = a.reward
-    if a.overlap_sampling:
-        cfg.train.overlap_sampling = True
+    cfg.train.overlap_sampling = a.overlap_sampling  # an older commit ignores it (plain PPO)
     cfg.train.num_gpus_per_learner = a.num_gpus_per_learner
     cfg.env.max_acquisitions = max(cfg.env.max_acquisitions, a.acquisitions)
     cfg.model.value_scale = estimate_value_scale(cfg)

@@ -414,9 +414,11 @@ class TrainConfig:
     num_env_runners: int = ranged(1, 0)
     """Rollout workers; each owns its envs over its own subset of the shards."""
     num_envs_per_env_runner: int = ranged(2, 1)
-    overlap_sampling: bool = False
-    """Sample the next batch while the learner updates on this one (training/overlap.py): on 2 cores both
-    work at once; the batch learned on was sampled with the weights of the previous update (lag of one)."""
+    overlap_sampling: bool = True
+    """Sample the next batch while the learner updates on this one (training/overlap.py): the runners and
+    the learner work at once; each batch is sampled with the weights of the previous update (a lag of one
+    iteration).  Learned as well per env step as plain PPO on 3 seeds, 1.5x the env steps/s (docs/benchmarks.md);
+    false: RLlib's PPO (sample, then learn)."""
     env_runner_resource: str = ""
     """A custom Ray resource each env runner requests one unit of, e.g. to place them on the nodes started
     with `ray start --resources '{"NAME": k}'`; empty: anywhere."""

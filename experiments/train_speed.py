@@ -9,8 +9,8 @@ greedy-decoding validation every ``--val-every`` iterations, one after the other
 (never two at once: they would share the 2 cores).  Variants:
 
 * ``old``: the package as of ``--ref`` (installed in a temporary directory);
-* ``new``: this tree with its defaults;
-* ``new-overlap``: this tree with ``--train.overlap-sampling true``.
+* ``new``: this tree with ``--train.overlap-sampling false`` (RLlib's PPO: sample, then learn);
+* ``new-overlap``: this tree with ``--train.overlap-sampling true`` (the default since).
 
 Prints, per run: env steps/s, the validation ratio to Greedy at the end, and
 the wall time and env steps at which the ratio first reached ``--target``
@@ -87,8 +87,8 @@ def run(variant: str, seed: int, a: Args, train: Path, val: Path, site: Path | N
              "--train.iterations", str(a.iterations), "--train.validate-every", str(a.val_every),
              "--train.checkpoint-every", str(a.iterations), "--train.seed", str(seed),
              "--train.run-dir", str(out), "--train.run-name", name, "--train.experiment", "train-speed"]
-    if variant == "new-overlap":
-        flags += ["--train.overlap-sampling", "true"]
+    if variant.startswith("new"):
+        flags += ["--train.overlap-sampling", "true" if variant == "new-overlap" else "false"]
     env = dict(os.environ)
     if site is not None:
         env["PYTHONPATH"] = f"{site}{os.pathsep}{env.get('PYTHONPATH', '')}"
