@@ -280,7 +280,8 @@ def bench(a: Args) -> dict:
 def report(res: dict, title: str = "") -> None:
     s, it = res["split"], res["iteration_s"]
     print(f"\n{title}split of one iteration ({res['steps_per_iteration']} env steps, {it:.2f} s):")
-    if res["args"].get("overlap_sampling") and "learn/forward" in s:
+    runner = sum(v for k, v in s.items() if k.startswith("sample/") and "of which" not in k)
+    if runner > 1.5 * s["sample"] + 0.05:  # the runner worked longer than the driver waited: overlapped
         print("  (overlapped sampling: 'sample' is the driver's wait for the batch; the sample/* parts ran in the "
               "env runner during learning, percentages of the iteration)")
     for k in ("sample", *sorted(k for k in s if k.startswith("sample/")), "learn",
