@@ -180,16 +180,14 @@ def sampling_split(algo) -> dict[str, float]:
     return {k: sum(d.get(k, 0.0) for d in per_runner) / len(per_runner) for k in keys}
 
 
-def observation_share(data: Path, steps: int = 600) -> float:
+def observation_share(data: Path, cfg, steps: int = 600) -> float:
     """Fraction of an env step spent building the observation (both in numba), measured in this process."""
     import numpy as np
 
-    from eosp.config import EnvConfig
     from eosp.envs.eosp_env import EOSPEnv
     from eosp.envs.observation import build_observation
     from eosp.envs.sources import ShardSource, expand_shards
 
-    cfg = EnvConfig()
     env = EOSPEnv(cfg, source=ShardSource(expand_shards([str(data)]), max_cached=8, prune=cfg.prune))
     rng = np.random.default_rng(0)
     t_step = t_obs = 0.0
@@ -237,7 +235,7 @@ def bench(a: Args) -> dict:
         pass
     else:
         require_cluster_fits(cfg.train, ray_nodes(), torch.cuda.device_count() if a.num_gpus_per_learner > 0 else None)
-    obs_share = observation_share(data)
+    obs_share = observation_share(data, cfg.env)
     algo = ppo_config(cfg).build_algo()
     clock = instrument(algo)
     instrument_runners(algo)
