@@ -32,7 +32,6 @@ from dataclasses import dataclass
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT / "benchmarks"))
 TRAIN = "import sys; from eosp.jobs.train import main; sys.exit(main(sys.argv[1:]))"
 
 
@@ -173,9 +172,18 @@ def report(a: Args) -> None:
               f"mean ratio at validations: {' '.join(f'{x:.3f}' for x in mean_curve)}")
 
 
-def main(argv: list[str] | None = None) -> int:
-    from bench_train import install_commit
+def install_commit(ref: str, where: Path) -> Path:
+    """benchmarks/bench_train.py's installer of an old commit (loaded from its file: scripts are no package)."""
+    import importlib.util
 
+    spec = importlib.util.spec_from_file_location("bench_train", ROOT / "benchmarks" / "bench_train.py")
+    module = importlib.util.module_from_spec(spec)
+    sys.modules["bench_train"] = module  # its dataclasses look their module up
+    spec.loader.exec_module(module)
+    return module.install_commit(ref, where)
+
+
+def main(argv: list[str] | None = None) -> int:
     a = parse(argv)
     if a.report_only:
         report(a)
