@@ -262,27 +262,27 @@ def solve(env, evaluate: EvaluateMany, *, num_simulations: int, c_puct: float = 
           gumbel: bool = False, max_considered: int = 16) -> tuple[np.ndarray, float, SearchStats]:
     """Play one episode from the env's reset state with MCTS before each decision.
 
-    With `time_limit` (seconds for the whole episode) the search is anytime: the greedy
-    policy's episode is played first (the answer if time runs out), then each decision gets an
-    equal share of the time left over the decisions the greedy episode suggests remain
-    (at most `num_simulations` simulations each).
+    The greedy policy's episode is played first (one network call per decision): the answer is
+    never worse than the policy's own, and it is the answer if time runs out.  With `time_limit`
+    (seconds for the whole episode) the search is anytime: each decision gets an equal share of
+    the time left over the decisions the greedy episode suggests remain (at most
+    `num_simulations` simulations each).
     Returns the scheduled nodes, the episode's return in reward units, and search statistics.
     """
     t0 = time.perf_counter()
     stats = SearchStats()
-    expected_steps = None
-    if time_limit is not None:
-        obs, _ = env.reset(seed=seed)
-        ret, acts, done = 0.0, [], not obs["action_mask"].any()
-        while not done:
-            logits, _ = evaluate([obs])
-            stats.evaluations += 1
-            allowed = np.flatnonzero(obs["action_mask"])
-            a = int(allowed[np.argmax(logits[0][allowed])])
-            obs, r, done, _, _ = env.step(a)
-            ret, done = ret + r, done or not obs["action_mask"].any()
-            acts.append(a)
-        stats.best_return, stats.best_actions, expected_steps = ret, acts, max(1, len(acts))
+    # the greedy episode first: a floor for the answer, and the time plan of an anytime search
+    obs, _ = env.reset(seed=seed)
+    ret, acts, done = 0.0, [], not obs["action_mask"].any()
+    while not done:
+        logits, _ = evaluate([obs])
+        stats.evaluations += 1
+        allowed = np.flatnonzero(obs["action_mask"])
+        a = int(allowed[np.argmax(logits[0][allowed])])
+        obs, r, done, _, _ = env.step(a)
+        ret, done = ret + r, done or not obs["action_mask"].any()
+        acts.append(a)
+    stats.best_return, stats.best_actions, expected_steps = ret, acts, max(1, len(acts))
     obs, _ = env.reset(seed=seed)
     rng = np.random.default_rng(seed)
     root = new_node(env, obs, 0.0, False)
