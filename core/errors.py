@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import sys
+
 
 class InputError(ValueError):
     """Bad input data.  ``str()`` is one line: ``file: column 'c', row r: what is wrong``.
@@ -25,3 +27,15 @@ class InputError(ValueError):
     def __reduce__(self):
         # Ray and multiprocessing send exceptions between processes by pickling them
         return (type(self), (self.file, self.message, self.column, self.row))
+
+
+class Refused(SystemExit):
+    """A job refuses its arguments or its surroundings: one line ``error: ...`` on stderr, exit status 2.
+
+    ``message`` keeps the line.  Printed when raised, because Python prints a SystemExit's code only
+    when it is not an int, and then exits with status 1."""
+
+    def __init__(self, message: str):
+        self.message = f"error: {message}"
+        print(self.message, file=sys.stderr, flush=True)
+        super().__init__(2)

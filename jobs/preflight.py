@@ -21,6 +21,8 @@ import urllib.request
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 
+from eosp.errors import Refused
+
 UPLOADED_MARKER = ("runtime_resources", "working_dir_files")
 
 
@@ -35,23 +37,23 @@ def uploaded_working_dir(cwd: str | Path | None = None) -> Path | None:
 
 
 def require_findable(path: str, flag: str, example: str = "/shared") -> None:
-    """SystemExit (one line) when `path` is relative and the job runs from an uploaded working dir."""
+    """Refused (one line, exit status 2) when `path` is relative and the job runs from an uploaded working dir."""
     root = uploaded_working_dir()
     if root is None or Path(path).is_absolute():
         return
-    raise SystemExit(f"error: {flag} {path!r} is relative, and this job runs in Ray's temporary copy of the "
-                     f"working dir ({root}), deleted with the session: pass an absolute path, e.g. "
-                     f"{flag} {example.rstrip('/')}/{Path(path).as_posix()}")
+    raise Refused(f"{flag} {path!r} is relative, and this job runs in Ray's temporary copy of the "
+                  f"working dir ({root}), deleted with the session: pass an absolute path, e.g. "
+                  f"{flag} {example.rstrip('/')}/{Path(path).as_posix()}")
 
 
 def check_mlflow(uri: str, flag: str = "--mlflow-uri", timeout: float = 5.0) -> None:
-    """SystemExit (one line) when the tracking URI cannot be used: an HTTP server that does not answer,
+    """Refused (one line, exit status 2) when the tracking URI cannot be used: an HTTP server that does not answer,
     or (from an uploaded working dir) the default database inside Ray's temporary copy."""
     if not uri:
         if uploaded_working_dir() is not None:
-            raise SystemExit(f"error: no {flag} given, and the default mlflow.db would be written in Ray's temporary "
-                             "copy of the working dir: pass a tracking server (http://...) or "
-                             f"{flag} sqlite:////shared/mlflow.db")
+            raise Refused(f"no {flag} given, and the default mlflow.db would be written in Ray's temporary "
+                          "copy of the working dir: pass a tracking server (http://...) or "
+                          f"{flag} sqlite:////shared/mlflow.db")
         return
     if not uri.startswith(("http://", "https://")):
         return
@@ -62,8 +64,8 @@ def check_mlflow(uri: str, flag: str = "--mlflow-uri", timeout: float = 5.0) -> 
         return  # it answered (an old server without /health, or a proxy): let MLflow judge
     except (urllib.error.URLError, OSError, ValueError) as exc:
         reason = getattr(exc, "reason", exc)
-        raise SystemExit(f"error: MLflow tracking server {uri} unreachable ({reason}): start it, or pass another "
-                         f"{flag} (e.g. sqlite:///$PWD/mlflow.db)") from None
+        raise Refused(f"MLflow tracking server {uri} unreachable ({reason}): start it, or pass another "
+                      f"{flag} (e.g. sqlite:///$PWD/mlflow.db)") from None
 
 
 # --------------------------------------------------------------------------- what the Ray cluster offers
@@ -130,12 +132,12 @@ def cluster_problem(train, nodes: Sequence[Mapping[str, float]], driver_gpus: in
 
 
 def require_cluster_fits(train, nodes: Sequence[Mapping[str, float]], driver_gpus: int | None = None) -> None:
-    """SystemExit (one line) when the Ray cluster cannot run this training: see :func:`cluster_problem`.
+    """Refused (one line, exit status 2) when the Ray cluster cannot run this training: see :func:`cluster_problem`.
     Called after Ray is initialised and before the algorithm is built (which would hang waiting for the
     env runners, or fail deep inside RLlib)."""
     problem = cluster_problem(train, nodes, driver_gpus)
     if problem:
-        raise SystemExit(f"error: {problem}")
+        raise Refused(problem)
 
 
 def ray_nodes() -> list[dict[str, float]]:

@@ -65,8 +65,9 @@ def test_relative_output_refused_in_uploaded_working_dir(tmp_path, monkeypatch, 
     main = importlib.import_module(f"eosp.jobs.{module}").main
     with pytest.raises(SystemExit) as exc:
         main(argv)
-    msg = str(exc.value.code)
-    assert "\n" not in msg and flag in msg and "absolute path" in msg and "working_dir_files" in msg
+    msg = exc.value.message
+    assert exc.value.code == 2 and "\n" not in msg and flag in msg
+    assert "absolute path" in msg and "working_dir_files" in msg
     assert not ray.is_initialized()
     assert list(Path.cwd().iterdir()) == []  # nothing written there
 
@@ -99,8 +100,8 @@ def test_mlflow_unreachable_is_one_line_before_work(tmp_path, module, argv):
     argv = [{"DATA": str(tmp_path / "data"), "OUT": str(tmp_path / "out"), "URI": uri}.get(a, a) for a in argv]
     with pytest.raises(SystemExit) as exc:
         importlib.import_module(f"eosp.jobs.{module}").main(argv)
-    msg = str(exc.value.code)
-    assert "\n" not in msg and uri in msg and "unreachable" in msg
+    msg = exc.value.message
+    assert exc.value.code == 2 and "\n" not in msg and uri in msg and "unreachable" in msg
     assert not ray.is_initialized() and not (tmp_path / "out").exists()
 
 
@@ -167,7 +168,7 @@ def test_cluster_that_cannot_run_the_training_is_refused(train, nodes, driver_gp
     assert got is not None and expected in got and "\n" not in got, got
     with pytest.raises(SystemExit) as exc:
         require_cluster_fits(t, nodes, driver_gpus)
-    assert exc.value.code == f"error: {got}"
+    assert exc.value.code == 2 and exc.value.message == f"error: {got}"
 
 
 def test_cluster_resources_dict_stands_for_one_node():
@@ -206,7 +207,7 @@ def test_train_job_refuses_what_the_local_ray_cannot_run(tmp_path, args, line):
     rc, so, se = job("train.py", "--train.train-data", tmp_path / "train", "--train.val-data", tmp_path / "val",
                      "--train.run-dir", tmp_path / "runs", "--train.mlflow-uri", f"sqlite:///{tmp_path / 'm.db'}",
                      "--ray.num-cpus", 2, *args, timeout=180)
-    assert rc == 1, (rc, so, se[-3000:])
+    assert rc == 2, (rc, so, se[-3000:])
     assert se.strip().splitlines()[-1] == line, se[-3000:]
     assert se.count("error:") == 1 and "Traceback" not in se, se[-3000:]
     assert list(tmp_path.iterdir()) == []  # no run directory, no MLflow database
@@ -226,8 +227,8 @@ def test_tune_refuses_a_gpu_learner_without_a_gpu(tmp_path):
                   "--train.num-gpus-per-learner", "1", "--ray.num-cpus", "1"])
     finally:
         ray.shutdown()
-    assert exc.value.code == ("error: --train.num-gpus-per-learner 1: this Ray cluster has no GPU "
-                              "(resources: 1 CPU on 1 node)")
+    assert exc.value.code == 2 and exc.value.message == ("error: --train.num-gpus-per-learner 1: this Ray cluster has "
+                                                         "no GPU (resources: 1 CPU on 1 node)")
     assert list(tmp_path.iterdir()) == []
 
 
