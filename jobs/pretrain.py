@@ -66,14 +66,10 @@ def run(cfg: PretrainConfig) -> dict:
     t_load = time.perf_counter()
     agent = None
     if im.init_checkpoint:
-        from eosp.models.checkpoint import load_agent
+        from eosp.models.checkpoint import load_start
 
-        agent, init_env, _ = load_agent(im.init_checkpoint)
-        if init_env.reward != cfg.env.reward:
-            print(f"[pretrain] warning: {im.init_checkpoint} was trained with reward {init_env.reward!r}, "
-                  f"this run uses {cfg.env.reward!r}", flush=True)
-        cfg.model = agent.cfg  # the architecture and value scale come with the weights
-        print(f"[pretrain] starting from {im.init_checkpoint}", flush=True)
+        agent = load_start(im.init_checkpoint, cfg.env.reward, "pretrain")
+        cfg.model = agent.cfg
     data = DemoData(im.train_data, cfg.env, cfg.model.n_values, im.set_tolerance)
     if cfg.model.value_scale <= 0:
         cfg.model.value_scale = float(max(1.0, np.mean(data.start_values)))

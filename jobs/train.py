@@ -95,7 +95,7 @@ def main(argv: list[str] | None = None) -> int:
     import torch
 
     from eosp.jobs.ray_init import init_ray
-    from eosp.models.checkpoint import load_agent, save_agent
+    from eosp.models.checkpoint import load_agent, load_start, save_agent
     from eosp.training.loop import Trainer
     from eosp.training.plots import learning_curve
     from eosp.training.ppo import estimate_value_scale
@@ -131,12 +131,8 @@ def main(argv: list[str] | None = None) -> int:
     run_dir.mkdir(parents=True, exist_ok=True)
     init = None
     if t.init_checkpoint and not t.resume:
-        init, init_env, _ = load_agent(t.init_checkpoint)
-        if init_env.reward != cfg.env.reward:
-            print(f"[train] warning: {t.init_checkpoint} was trained with reward {init_env.reward!r}, "
-                  f"this run uses {cfg.env.reward!r}", file=sys.stderr)
-        cfg.model = init.cfg  # the architecture (and value scale) come with the weights
-        print(f"[train] starting from {t.init_checkpoint}", flush=True)
+        init = load_start(t.init_checkpoint, cfg.env.reward, "train")
+        cfg.model = init.cfg
     if cfg.model.value_scale <= 0:
         cfg.model.value_scale = estimate_value_scale(cfg)
         print(f"[train] value scale {cfg.model.value_scale:.3g} (mean return of random episodes)", flush=True)

@@ -8,6 +8,7 @@ trained with.  Nothing is ever unpickled.
 from __future__ import annotations
 
 import json
+import sys
 from pathlib import Path
 from typing import Any
 
@@ -75,3 +76,14 @@ def agent_from_rllib_weights(weights: dict[str, Any], model_cfg: ModelConfig) ->
 
 def rllib_weights_from_agent(agent: EOSPAgent) -> dict[str, Any]:
     return {f"agent.{k}": v.detach().cpu().numpy() for k, v in agent.state_dict().items()}
+
+
+def load_start(directory: str | Path, reward: str, job: str) -> EOSPAgent:
+    """The agent a training job starts from (`--train.init-checkpoint`, `--imitation.init-checkpoint`): its
+    architecture and value scale come with the weights; a different reward is worth a warning, not a refusal."""
+    agent, env, _ = load_agent(directory)
+    if env.reward != reward:
+        print(f"[{job}] warning: {directory} was trained with reward {env.reward!r}, this run uses {reward!r}",
+              file=sys.stderr)
+    print(f"[{job}] starting from {directory}", flush=True)
+    return agent
