@@ -306,6 +306,12 @@ class ImitationConfig:
     """Stop after this many seconds of training (0: no limit); the best checkpoint is kept."""
     batch_size: int = ranged(64, 1)
     lr: float = ranged(1e-3, 0, lo_open=True)
+    lr_schedule: str = choice("constant", "constant", "cosine")
+    """'cosine': the learning rate decays to 0 along a half cosine over the run (the time budget when one is set,
+    else the epochs), so that the last epochs settle instead of jumping between DAgger rounds."""
+    ema: float = ranged(0.0, 0.0, 0.9999)
+    """Decay of an exponential moving average of the weights (e.g. 0.999, per batch; 0: off).  With it the
+    average is what is validated and saved: a smoother policy than the last batch's weights."""
     weight_decay: float = 0.0
     value_coeff: float = 0.5
     """Weight of the value regression (remaining expert return) next to the action cross-entropy."""

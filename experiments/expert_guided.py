@@ -1,6 +1,7 @@
 """Expert-guided training: PPO only, imitation only, imitation + PPO, at equal wall time.
 
     python experiments/expert_guided.py data                 # the mixed data sets and their demos
+    python experiments/expert_guided.py data --more --modes unitary   # a second, larger mix (train2/)
     python experiments/expert_guided.py run --minutes 10     # the comparison (unitary and utility)
     python experiments/expert_guided.py report               # table of every finished run
 
@@ -44,6 +45,27 @@ TRAIN = {
     "x100-s1-bcb": ("conflict", 100, 32, 160_000, ["--instance.satellite.slew-model", "bang_coast_bang"]),
     "u300-s2-pw": ("uniform", 300, 8, 170_000, ["--instance.graph.step-s", "2"]),
 }
+# A second training mix (``data --more``, linked into ``train2/``): more instances, and generator settings the
+# first mix never varies (altitude, roll limit, slew rate and acceleration, a 3 s step, shorter acquisitions),
+# so that a policy trained on both cannot lean on one orbit or one agility.  Used as
+# ``--imitation.train-data data/expert/train data/expert/train2``.
+A = "--instance.orbit.altitude-km"
+ROLL = "--instance.satellite.roll-max-deg"
+STEP = "--instance.graph.step-s"
+BCB = ["--instance.satellite.slew-model", "bang_coast_bang"]
+TRAIN2 = {
+    "u100-s1-bcb-a500": ("uniform", 100, 80, 400_000, [A, "500", *BCB]),
+    "u100-s3-pw-r30": ("uniform", 100, 80, 410_000, [STEP, "3", ROLL, "30"]),
+    "u80-s2-pw-a800": ("uniform", 80, 64, 420_000, [STEP, "2", A, "800"]),
+    "c100-s2-pw": ("clusters", 100, 80, 430_000, [STEP, "2"]),
+    "c150-s1-bcb-fast": ("clusters", 150, 40, 440_000, [*BCB, "--instance.satellite.max-rate-deg-s", "2.5",
+                                                         "--instance.satellite.max-accel-deg-s2", "1.0"]),
+    "x100-s1-pw-a600": ("conflict", 100, 80, 450_000, [A, "600"]),
+    "x100-s2-bcb-short": ("conflict", 100, 64, 460_000, [STEP, "2", *BCB, "--instance.targets.duration-min-s", "5",
+                                                          "--instance.targets.duration-max-s", "20"]),
+    "u200-s2-bcb": ("uniform", 200, 24, 470_000, [STEP, "2", *BCB]),
+    "x150-s3-pw-r35": ("conflict", 150, 32, 480_000, [STEP, "3", ROLL, "35"]),
+}
 VAL = {
     "val-u100": ("uniform", 100, 8, 200_000, ["--instance.graph.step-s", "2"]),
     "val-c100": ("clusters", 100, 4, 210_000, ["--instance.satellite.slew-model", "bang_coast_bang"]),
@@ -82,6 +104,11 @@ def build(base: Path, sets: dict, link_into: str | None) -> list[Path]:
 
 def cmd_data(a) -> None:
     base = ROOT / a.data
+    if a.more:
+        build(base, TRAIN2, "train2")
+        sh([PY, "jobs/build_demos.py", "--data", str(base / "train2"), "--modes", *a.modes, "--action-sets", "true",
+            "--beam", "1", "--time-limit", "30", "--sets-max-acquisitions", "150"])
+        return
     build(base, TRAIN, "train")
     build(base, VAL, "val")
     build(base, TEST, None)
@@ -224,6 +251,7 @@ def main() -> None:
     p.add_argument("--modes", nargs="+", default=["unitary", "utility"], choices=list(MODES))
     p.add_argument("--kinds", nargs="+", default=["ppo", "imitation", "imitation+ppo"])
     p.add_argument("--tests", nargs="+", default=list(TEST))
+    p.add_argument("--more", action="store_true", help="data: build the second training mix (train2/) instead")
     a = p.parse_args()
     {"data": cmd_data, "run": cmd_run, "report": cmd_report}[a.stage](a)
 

@@ -54,7 +54,7 @@ def run(cfg: PretrainConfig) -> dict:
     from eosp.jobs.ray_init import init_ray
     from eosp.models.agent import EOSPAgent
     from eosp.models.checkpoint import save_agent
-    from eosp.training.imitation import DemoData, train_epoch
+    from eosp.training.imitation import DemoData, WeightAverage, cosine_lr, train_epoch
     from eosp.training.plots import imitation_curve
     from eosp.training.validation import Validator
 
@@ -93,20 +93,29 @@ def run(cfg: PretrainConfig) -> dict:
     mlflow.log_metrics({"data/instances": len(data.instances), "data/expert_states": len(data.samples)}, step=0)
 
     history, best = [], float("-inf")
+    average = WeightAverage(agent, im.ema) if im.ema > 0 else None
     t0 = time.perf_counter()
     deadline = t0 + im.time_budget if im.time_budget > 0 else None
     for epoch in range(1, im.epochs + 1):
+        lr_at = None
+        if im.lr_schedule == "cosine":
+            def lr_at(done: float, epoch: int = epoch) -> float:
+                by_epochs = (epoch - 1 + done) / im.epochs
+                by_time = (time.perf_counter() - t0) / im.time_budget if deadline is not None else 0.0
+                return cosine_lr(im.lr, max(by_epochs, by_time))
         metrics = train_epoch(agent, opt, data.samples, im.batch_size, im.value_coeff, im.grad_clip, rng, deadline,
-                              im.regret_coeff)
+                              im.regret_coeff, average, lr_at)
+        metrics["train/lr"] = opt.param_groups[0]["lr"]
+        policy = average.model if average is not None else agent  # what is validated, saved and rolled out
         out_of_time = deadline is not None and time.perf_counter() > deadline
         last = epoch == im.epochs or out_of_time
         if validator is not None and (epoch % im.validate_every == 0 or last):
-            metrics.update(validator.run(agent).metrics)
+            metrics.update(validator.run(policy).metrics)
             if metrics["val/policy_mean"] > best:
                 best = metrics["val/policy_mean"]
-                save_agent(agent, ckpt / "best", cfg.env, {"epoch": epoch, "val": metrics, "source": "imitation"})
+                save_agent(policy, ckpt / "best", cfg.env, {"epoch": epoch, "val": metrics, "source": "imitation"})
         if im.dagger_every and epoch % im.dagger_every == 0 and not last:
-            metrics.update(data.add_policy_states(agent, im.dagger_instances, im.dagger_beam, rng))
+            metrics.update(data.add_policy_states(policy, im.dagger_instances, im.dagger_beam, rng))
         metrics["wall_s"] = time.perf_counter() - t0
         history.append({"epoch": epoch, **metrics})
         mlflow.log_metrics(metrics, step=epoch)
@@ -119,9 +128,10 @@ def run(cfg: PretrainConfig) -> dict:
         if out_of_time:
             print(f"[pretrain] time budget of {im.time_budget:.0f} s reached", flush=True)
             break
-    save_agent(agent, ckpt / "last", cfg.env, {"epoch": history[-1]["epoch"], "source": "imitation"})
+    policy = average.model if average is not None else agent
+    save_agent(policy, ckpt / "last", cfg.env, {"epoch": history[-1]["epoch"], "source": "imitation"})
     if validator is None:
-        save_agent(agent, ckpt / "best", cfg.env, {"epoch": history[-1]["epoch"], "source": "imitation"})
+        save_agent(policy, ckpt / "best", cfg.env, {"epoch": history[-1]["epoch"], "source": "imitation"})
     png = imitation_curve(history, run_dir / "learning_curve")
     mlflow.log_artifact(str(png))
     mlflow.log_artifact(str(png.with_suffix(".svg")))

@@ -247,3 +247,48 @@ def test_pretrain_continues_a_shipped_model_and_refuses_a_missing_one(demo_shard
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "checkpoint not found" in err
     ray.shutdown()
+
+
+def test_pretrain_saves_the_weight_average_and_decays_the_learning_rate(demo_shard, tmp_path):
+    import json
+
+    import ray
+    import torch
+
+    from eosp.jobs.pretrain import main
+    from eosp.models.checkpoint import load_agent
+    from eosp.training.imitation import WeightAverage, cosine_lr
+
+    assert cosine_lr(1e-3, 0.0) == pytest.approx(1e-3) and cosine_lr(1e-3, 0.5) == pytest.approx(5e-4)
+    assert cosine_lr(1e-3, 1.0) == pytest.approx(0.0, abs=1e-12) and cosine_lr(1e-3, 3.0) == pytest.approx(0.0, abs=1e-12)
+    # the average of a parameter that moves from 0 to 1 and stays there follows it with lag, and converges
+    lin = torch.nn.Linear(1, 1, bias=False)
+    with torch.no_grad():
+        lin.weight.zero_()
+    avg = WeightAverage(lin, 0.9)
+    with torch.no_grad():
+        lin.weight.fill_(1.0)
+    seen = []
+    for _ in range(200):
+        avg.update(lin)
+        seen.append(float(avg.model.weight))
+    assert 0 < seen[0] < seen[10] < seen[-1] and seen[-1] == pytest.approx(1.0, abs=1e-6)
+    assert all(a <= b for a, b in zip(seen, seen[1:]))
+
+    run_dir = tmp_path / "runs"
+    common = ["--imitation.train-data", str(demo_shard.parent), "--imitation.val-data", "", "--env.reward", "unitary",
+              "--imitation.epochs", "3", "--imitation.run-dir", str(run_dir), "--imitation.mlflow-uri",
+              f"sqlite:///{tmp_path / 'mlflow.db'}", "--ray.num-cpus", "1", "--env.max-acquisitions", "32",
+              "--model.hidden-dim", "8", "--model.n-layers", "1"]
+    assert main([*common, "--imitation.run-name", "plain"]) == 0
+    assert main([*common, "--imitation.run-name", "avg", "--imitation.ema", "0.99", "--imitation.lr-schedule",
+                 "cosine"]) == 0
+    ray.shutdown()
+    history = json.loads((run_dir / "avg" / "history.json").read_text())["history"]
+    lrs = [h["train/lr"] for h in history]
+    assert lrs[0] <= 1e-3 and all(a > b for a, b in zip(lrs, lrs[1:])) and lrs[-1] < 0.3e-3  # 1, 0.75, 0.25 e-3
+    assert [h["train/lr"] for h in json.loads((run_dir / "plain" / "history.json").read_text())["history"]] == [1e-3] * 3
+    # same seed, same data: the two runs differ only by the schedule and what is saved (the average)
+    plain = load_agent(run_dir / "plain" / "checkpoints" / "last")[0].state_dict()
+    averaged = load_agent(run_dir / "avg" / "checkpoints" / "last")[0].state_dict()
+    assert any(not torch.equal(plain[k], averaged[k]) for k in plain)

@@ -21,6 +21,7 @@ Ray tasks; the new states join the data set (aggregation).
 
 from __future__ import annotations
 
+import math
 import time
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -248,14 +249,46 @@ class DemoData:
                 "dagger/dataset_states": len(self.samples)}
 
 
+class WeightAverage:
+    """Exponential moving average of a model's parameters and buffers (Polyak averaging): `model` holds it."""
+
+    def __init__(self, agent: EOSPAgent, decay: float):
+        import copy
+
+        self.decay = decay
+        self.model = copy.deepcopy(agent).eval()
+        self.updates = 0
+
+    @torch.no_grad()
+    def update(self, agent: EOSPAgent) -> None:
+        self.updates += 1
+        d = min(self.decay, (1 + self.updates) / (10 + self.updates))  # short warm-up: early weights fade fast
+        for avg, cur in zip(self.model.state_dict().values(), agent.state_dict().values()):
+            if avg.dtype.is_floating_point:
+                avg.mul_(d).add_(cur, alpha=1 - d)
+            else:
+                avg.copy_(cur)
+
+
+def cosine_lr(lr: float, progress: float) -> float:
+    """Half-cosine decay from `lr` at progress 0 to 0 at progress 1."""
+    return 0.5 * lr * (1.0 + math.cos(math.pi * min(max(progress, 0.0), 1.0)))
+
+
 def train_epoch(agent: EOSPAgent, opt: torch.optim.Optimizer, samples: list[Sample], batch_size: int,
                 value_coeff: float, grad_clip: float, rng: np.random.Generator,
-                deadline: float | None = None, regret_coeff: float = 0.0) -> dict[str, float]:
+                deadline: float | None = None, regret_coeff: float = 0.0, average: WeightAverage | None = None,
+                lr_at=None) -> dict[str, float]:
+    """One pass over `samples`.  `lr_at(fraction of this epoch done)`: the learning rate of each batch
+    (None: the optimizer's as it is); `average`: updated after every step."""
     agent.train()
     order = rng.permutation(len(samples))
     tot = {"policy_loss": 0.0, "value_loss": 0.0, "regret": 0.0, "accuracy": 0.0}
     batches = 0
     for start in range(0, len(order), batch_size):
+        if lr_at is not None:
+            for g in opt.param_groups:
+                g["lr"] = lr_at(start / len(order))
         obs, optm, target, regret = collate([samples[i] for i in order[start:start + batch_size]])
         parts = losses(agent, obs, optm, target, regret if regret_coeff > 0 else None)
         loss = parts["policy_loss"] + value_coeff * parts["value_loss"] + regret_coeff * parts["regret"]
@@ -263,6 +296,8 @@ def train_epoch(agent: EOSPAgent, opt: torch.optim.Optimizer, samples: list[Samp
         loss.backward()
         torch.nn.utils.clip_grad_norm_(agent.parameters(), grad_clip)
         opt.step()
+        if average is not None:
+            average.update(agent)
         for k in tot:
             tot[k] += parts[k].item()
         batches += 1
