@@ -58,6 +58,17 @@ class EdgeStructure:
         self.max_degree = int(counts.max()) if counts.numel() else 0
         self._arrays: tuple | None = None
 
+    @classmethod
+    def from_csr(cls, indptr: np.ndarray, src: np.ndarray, dst: np.ndarray, types: np.ndarray, attr: np.ndarray,
+                 max_degree: int) -> EdgeStructure:
+        """Edges already sorted by target (CSR built elsewhere, e.g. by a numba pass): no sort here."""
+        self = cls.__new__(cls)
+        self.indptr, self.src, self.dst = torch.from_numpy(indptr), torch.from_numpy(src), torch.from_numpy(dst)
+        self.types, self.attr = torch.from_numpy(types), torch.from_numpy(attr)
+        self.n_nodes, self.max_degree = indptr.shape[0] - 1, max_degree
+        self._arrays = (indptr, src, types, attr)
+        return self
+
     def arrays(self) -> tuple:
         """(indptr, src, types, attr) as numpy arrays for the kernels (CPU), converted once per forward pass."""
         if self._arrays is None:

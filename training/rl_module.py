@@ -63,7 +63,8 @@ class EOSPTorchRLModule(TorchRLModule, ValueFunctionAPI):
         return {Columns.ACTION_DIST_INPUTS: logits, Columns.EMBEDDINGS: values}
 
     def compute_values(self, batch: dict[str, Any], embeddings: Any | None = None) -> torch.Tensor:
-        if embeddings is None:
-            _, embeddings = self._run(batch)
+        if embeddings is None:  # the advantage connectors' value pass (GAE targets): no gradient ever flows back
+            with torch.no_grad():  # so the attention runs its inference kernel, nothing is kept for a backward
+                _, embeddings = self._run(batch)
         # one head: PPO's scalar value; several (lexicographic reward): all of them, [B, classes]
         return embeddings[..., 0] if embeddings.shape[-1] == 1 else embeddings
