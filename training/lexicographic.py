@@ -23,7 +23,6 @@ from typing import Any
 
 import numpy as np
 import torch
-from ray.rllib.algorithms.ppo.torch.ppo_torch_learner import PPOTorchLearner
 from ray.rllib.connectors.common.numpy_to_tensor import NumpyToTensor
 from ray.rllib.connectors.connector_v2 import ConnectorV2
 from ray.rllib.connectors.learner.general_advantage_estimation import GeneralAdvantageEstimation
@@ -34,6 +33,7 @@ from ray.rllib.utils.postprocessing.value_predictions import compute_value_targe
 
 from eosp.config import N_CLASSES
 from eosp.envs.observation import NODE_FEATURES
+from eosp.training.learner import EOSPPPOLearner
 
 LEX_EPS = 0.01
 CLASS_SLICE = slice(NODE_FEATURES.index("class_0"), NODE_FEATURES.index("class_0") + N_CLASSES)
@@ -86,7 +86,7 @@ class LexicographicGAE(ConnectorV2):
         return batch
 
 
-class LexicographicPPOLearner(PPOTorchLearner):
+class LexicographicPPOLearner(EOSPPPOLearner):
     """PPO whose GAE piece is :class:`LexicographicGAE` and whose value loss covers every head."""
 
     def build(self) -> None:

@@ -44,7 +44,9 @@ def ppo_config(cfg: RunConfig):
     env_config = to_dict(cfg.env)
     env_config["shards"] = [str(Path(t.train_data).resolve())]
     env_config["seed"] = t.seed
-    learner = {}
+    from eosp.training.learner import EOSPPPOLearner
+
+    learner = {"learner_class": EOSPPPOLearner}
     if cfg.env.reward == "lexicographic":
         from eosp.training.lexicographic import LexicographicPPOLearner
 
