@@ -6,7 +6,13 @@
 Copies ``RUN/checkpoints/best`` (weights + JSON only) to ``models/pretrained/MODE/``,
 decodes every unseen test instance greedily and compares with Greedy, RAMP and the
 exact optimum, and writes ``MODEL.md`` beside the weights: the training command (from
-the run's recorded configuration), the data sets and their seeds, and the figures.
+the run's recorded configuration; when the run started from the shipped model, that
+model's own recipe first), the data sets and their seeds, and the figures.
+
+``--baselines runs/OLD/ship-MODE.csv`` takes Greedy, RAMP and exact from an earlier
+record of the same test instances (they do not depend on the model; the exact solver
+alone takes minutes at 1000 acquisitions); ``--evaluate-only`` writes the record
+``RUN/ship-MODE.csv`` and prints the table without shipping anything.
 """
 
 from __future__ import annotations
@@ -21,7 +27,12 @@ os.environ.setdefault("OMP_NUM_THREADS", "1")
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def evaluate(agent_tuple, mode: str, tests: list[str], exact_limit: float) -> list[dict]:
+BASELINES = ("greedy", "ramp", "exact")
+
+
+def evaluate(agent_tuple, mode: str, tests: list[str], exact_limit: float, known=None) -> list[dict]:
+    """Per test instance: value and seconds of Greedy, RAMP, exact and the policy.  `known`: a record
+    (DataFrame of an earlier run of this script) whose baseline columns are taken instead of solving."""
     import numpy as np
 
     from eosp.envs.sources import expand_shards
@@ -32,7 +43,17 @@ def evaluate(agent_tuple, mode: str, tests: list[str], exact_limit: float) -> li
     for test in tests:
         for inst in read_instances(expand_shards([test])):
             r = {"test": Path(test).name, "instance": inst.name, "n": inst.n_acq}
-            for s in ("greedy", "ramp", "exact", "policy"):
+            solvers = ("greedy", "ramp", "exact", "policy")
+            if known is not None:
+                key = (r["test"], inst.name)
+                if key not in known.index:
+                    raise SystemExit(f"error: --baselines has no row for {key[0]} / {key[1]}")
+                old = known.loc[key]
+                for b in BASELINES:
+                    r[b], r[f"{b}_s"] = float(old[b]), float(old[f"{b}_s"])
+                r["exact_status"] = old["exact_status"]
+                solvers = ("policy",)
+            for s in solvers:
                 t0 = time.perf_counter()
                 kw = {"agent": agent_tuple} if s == "policy" else ({"time_limit": exact_limit} if s == "exact" else {})
                 sol = run_solver(s, inst, mode=mode, **kw)
@@ -52,6 +73,8 @@ def main() -> None:
     p.add_argument("--run", required=True, help="run directory of jobs/pretrain.py or jobs/train.py")
     p.add_argument("--tests", nargs="+", required=True)
     p.add_argument("--exact-limit", type=float, default=60.0, help="seconds of exact search per instance")
+    p.add_argument("--baselines", default="", help="an earlier ship-MODE.csv of the same tests: reuse its baselines")
+    p.add_argument("--evaluate-only", action="store_true", help="write the record and print; do not ship")
     a = p.parse_args()
 
     import pandas as pd
@@ -64,8 +87,8 @@ def main() -> None:
     run = Path(a.run)
     agent, env_cfg, meta = load_agent(run / "checkpoints" / "best")
     dest = PRE / a.mode
-    save_agent(agent, dest, env_cfg, {k: v for k, v in meta.items() if k in ("epoch", "iteration", "source")})
-    rows = evaluate((agent, env_cfg, meta), a.mode, a.tests, a.exact_limit)
+    known = pd.read_csv(a.baselines).set_index(["test", "instance"]) if a.baselines else None
+    rows = evaluate((agent, env_cfg, meta), a.mode, a.tests, a.exact_limit, known)
     df = pd.DataFrame(rows)
     per = df.groupby("test").apply(lambda g: pd.Series({
         "instances": len(g), "policy / exact": (g.policy / g.exact).mean(), "policy / RAMP": (g.policy / g.ramp).mean(),
@@ -76,8 +99,14 @@ def main() -> None:
         "policy s / instance": g.policy_s.mean()}), include_groups=False)
     for c in ("instances", "exact proven", "at optimum", "below Greedy"):
         per[c] = per[c].astype(int).astype(str)  # counts print as integers
+    df.to_csv(run / f"ship-{a.mode}.csv", index=False)
+    if a.evaluate_only:
+        print(per.to_markdown(floatfmt=".4f"))
+        return
     history = run / "history.json"
     cfg = json.loads(history.read_text())["config"] if history.exists() else {}
+    parent = _parent_recipe(cfg, dest)  # read before the new weights replace the old ones
+    save_agent(agent, dest, env_cfg, {k: v for k, v in meta.items() if k in ("epoch", "iteration", "source")})
     data_sets = cfg.get("imitation", {}).get("train_data", [])
     manifests = {}
     for d in data_sets:
@@ -86,23 +115,26 @@ def main() -> None:
             if (part / "manifest.json").exists() and part.name not in manifests:
                 m = json.loads((part / "manifest.json").read_text())["dataset"]
                 manifests[part.name] = {k: m[k] for k in ("family", "n_acquisitions", "n_instances", "seed")}
-                manifests[part.name]["instance"] = {k: v for k, v in m.get("instance", {}).items()
-                                                   if k in ("graph", "satellite")}
+                manifests[part.name]["instance"] = m.get("instance", {})
     md = [f"# Pretrained model: {a.mode} mode", "",
           f"Weights `agent.pt` (tensors only, `torch.load(weights_only=True)`) and `agent.json` "
           f"(model {json.dumps(cfg.get('model', {}))}, env reward `{env_cfg.reward}`).  Source run: "
           f"`{run.name}` ({meta.get('source', 'ppo')}, epoch/iteration {meta.get('epoch', meta.get('iteration'))}).",
-          "", "## How it was trained", "", "```bash",
-          "python experiments/expert_guided.py data      # data sets (seeds below) and expert demos:",
-          "#   jobs/build_demos.py --modes unitary --action-sets true --beam 1",
-          "#   jobs/build_demos.py --modes utility --action-sets true --beam 1 --sets-max-acquisitions 150",
-          "python jobs/pretrain.py " + " ".join(f"--{k.replace('_', '-')} {v}" for k, v in _flags(cfg)), "```", "",
-          "Training data (generated with jobs/build_shards.py; instance k of a set uses seed + k):", "",
-          "| set | family | acquisitions | instances | seed | generator settings |", "|---|---|---|---|---|---|"]
+          "", "## How it was trained", ""]
+    if parent:
+        md += ["Started from the model shipped before it (`--imitation.init-checkpoint models/pretrained/"
+               f"{a.mode}`), which was trained by:", "", "```bash", *parent, "```", "", "then:", ""]
+    md += ["```bash", "python experiments/expert_guided.py data      # data sets (seeds below) and expert demos:",
+           "#   jobs/build_demos.py --modes unitary --action-sets true --beam 1",
+           "#   jobs/build_demos.py --modes utility --action-sets true --beam 1 --sets-max-acquisitions 150"]
+    if any("train2" in str(d) for d in data_sets):
+        md.append(f"python experiments/expert_guided.py data --more --modes {a.mode}   # the second mix, train2/")
+    md += ["python jobs/pretrain.py " + " ".join(f"--{k.replace('_', '-')} {v}" for k, v in _flags(cfg)), "```", "",
+           "Training data (generated with jobs/build_shards.py; instance k of a set uses seed + k):", "",
+           "| set | family | acquisitions | instances | seed | generator settings |", "|---|---|---|---|---|---|"]
     for name, m in manifests.items():
         md.append(f"| {name} | {m['family']} | {m['n_acquisitions']} | {m['n_instances']} | {m['seed']} | "
-                  f"{json.dumps(m['instance'].get('graph', {}).get('step_s', ''))} s step, "
-                  f"{m['instance'].get('satellite', {}).get('slew_model', '')} slews |")
+                  f"{_settings(m['instance'])} |")
     md += ["", "## Figures on unseen test sets (greedy decoding)", "",
            f"`python experiments/ship_model.py --mode {a.mode} --run {a.run} --exact-limit {a.exact_limit:g} "
            f"--tests {' '.join(a.tests)}`", "",
@@ -110,16 +142,37 @@ def main() -> None:
            "('exact proven' counts the proven optima).", "",
            per.to_markdown(floatfmt=".4f"), ""]
     (dest / "MODEL.md").write_text("\n".join(md))
-    df.to_csv(run / f"ship-{a.mode}.csv", index=False)
     print("\n".join(md))
+
+
+def _settings(inst: dict) -> str:
+    """The generator settings of a data set in a few words (orbit, agility, step, durations)."""
+    orbit, sat, tg = inst.get("orbit", {}), inst.get("satellite", {}), inst.get("targets", {})
+    return (f"{inst.get('graph', {}).get('step_s', '')} s step, {sat.get('slew_model', '')} slews "
+            f"(rate {sat.get('max_rate_deg_s', '')} deg/s, accel {sat.get('max_accel_deg_s2', '')} deg/s2), "
+            f"roll <= {sat.get('roll_max_deg', '')} deg, altitude {orbit.get('altitude_km', '')} km, "
+            f"acquisitions {tg.get('duration_min_s', '')}-{tg.get('duration_max_s', '')} s")
+
+
+def _parent_recipe(cfg: dict, dest: Path) -> list[str]:
+    """The bash lines of the shipped model's recipe when this run started from it (else nothing)."""
+    init = cfg.get("imitation", {}).get("init_checkpoint", "") or cfg.get("train", {}).get("init_checkpoint", "")
+    md = dest / "MODEL.md"
+    if not init or not md.exists() or Path(init).resolve() != dest.resolve():
+        return []
+    text = md.read_text()
+    if "```bash" not in text:
+        return []
+    block = text.split("## How it was trained", 1)[-1]
+    return [line for chunk in block.split("```bash")[1:] for line in chunk.split("```", 1)[0].strip().splitlines()]
 
 
 def _flags(cfg: dict) -> list[tuple[str, str]]:
     out = []
     im = cfg.get("imitation", {})
-    for k in ("train_data", "val_data", "epochs", "time_budget", "batch_size", "lr", "dagger_every",
-              "dagger_instances", "dagger_beam", "regret_coeff", "set_tolerance", "seed"):
-        if k in im:
+    for k in ("train_data", "val_data", "init_checkpoint", "epochs", "time_budget", "batch_size", "lr", "lr_schedule",
+              "ema", "dagger_every", "dagger_instances", "dagger_beam", "regret_coeff", "set_tolerance", "seed"):
+        if k in im and not (k == "init_checkpoint" and not im[k]):
             v = im[k]
             out.append((f"imitation.{k}", " ".join(map(str, v)) if isinstance(v, list) else v))
     env = cfg.get("env", {})
