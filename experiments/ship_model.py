@@ -9,10 +9,10 @@ exact optimum, and writes ``MODEL.md`` beside the weights: the training command 
 the run's recorded configuration; when the run started from the shipped model, that
 model's own recipe first), the data sets and their seeds, and the figures.
 
-``--baselines runs/OLD/ship-MODE.csv`` takes Greedy, RAMP and exact from an earlier
+``--baselines experiments/records/ship-baselines-MODE.csv`` takes Greedy, RAMP and exact from an earlier
 record of the same test instances (they do not depend on the model; the exact solver
 alone takes minutes at 1000 acquisitions); ``--evaluate-only`` writes the record
-``RUN/ship-MODE.csv`` and prints the table without shipping anything.
+``RUN/ship-MODE-CHECKPOINT.csv`` and prints the table without shipping anything.
 """
 
 from __future__ import annotations
@@ -75,6 +75,9 @@ def main() -> None:
     p.add_argument("--exact-limit", type=float, default=60.0, help="seconds of exact search per instance")
     p.add_argument("--baselines", default="", help="an earlier ship-MODE.csv of the same tests: reuse its baselines")
     p.add_argument("--evaluate-only", action="store_true", help="write the record and print; do not ship")
+    p.add_argument("--checkpoint", default="best", choices=["best", "last"],
+                   help="which checkpoint of the run: 'best' on its validation set, or 'last' (with a cosine decay and "
+                        "a weight average the last is the settled one; a 20-instance validation cannot tell 0.5%%)")
     a = p.parse_args()
 
     import pandas as pd
@@ -85,7 +88,7 @@ def main() -> None:
 
     torch.set_num_threads(1)
     run = Path(a.run)
-    agent, env_cfg, meta = load_agent(run / "checkpoints" / "best")
+    agent, env_cfg, meta = load_agent(run / "checkpoints" / a.checkpoint)
     dest = PRE / a.mode
     known = pd.read_csv(a.baselines).set_index(["test", "instance"]) if a.baselines else None
     rows = evaluate((agent, env_cfg, meta), a.mode, a.tests, a.exact_limit, known)
@@ -99,7 +102,7 @@ def main() -> None:
         "policy s / instance": g.policy_s.mean()}), include_groups=False)
     for c in ("instances", "exact proven", "at optimum", "below Greedy"):
         per[c] = per[c].astype(int).astype(str)  # counts print as integers
-    df.to_csv(run / f"ship-{a.mode}.csv", index=False)
+    df.to_csv(run / f"ship-{a.mode}-{a.checkpoint}.csv", index=False)
     if a.evaluate_only:
         print(per.to_markdown(floatfmt=".4f"))
         return
@@ -119,7 +122,8 @@ def main() -> None:
     md = [f"# Pretrained model: {a.mode} mode", "",
           f"Weights `agent.pt` (tensors only, `torch.load(weights_only=True)`) and `agent.json` "
           f"(model {json.dumps(cfg.get('model', {}))}, env reward `{env_cfg.reward}`).  Source run: "
-          f"`{run.name}` ({meta.get('source', 'ppo')}, epoch/iteration {meta.get('epoch', meta.get('iteration'))}).",
+          f"`{run.name}`, checkpoint `{a.checkpoint}` ({meta.get('source', 'ppo')}, epoch/iteration "
+          f"{meta.get('epoch', meta.get('iteration'))}).",
           "", "## How it was trained", ""]
     if parent:
         md += ["Started from the model shipped before it (`--imitation.init-checkpoint models/pretrained/"
@@ -136,8 +140,11 @@ def main() -> None:
         md.append(f"| {name} | {m['family']} | {m['n_acquisitions']} | {m['n_instances']} | {m['seed']} | "
                   f"{_settings(m['instance'])} |")
     md += ["", "## Figures on unseen test sets (greedy decoding)", "",
-           f"`python experiments/ship_model.py --mode {a.mode} --run {a.run} --exact-limit {a.exact_limit:g} "
-           f"--tests {' '.join(a.tests)}`", "",
+           f"`python experiments/ship_model.py --mode {a.mode} --run {a.run} --checkpoint {a.checkpoint} "
+           f"--exact-limit {a.exact_limit:g}" + (f" --baselines {a.baselines}" if a.baselines else "")
+           + f" --tests {' '.join(a.tests)}`" + (f" (Greedy, RAMP and exact from `{a.baselines}`, the record of an "
+                                                  "earlier run of this script on the same instances)" if a.baselines else ""),
+           "",
            "Ratios are means of per-instance ratios; 'exact' is the exact solver's best schedule within the limit "
            "('exact proven' counts the proven optima).", "",
            per.to_markdown(floatfmt=".4f"), ""]
