@@ -128,9 +128,11 @@ def main() -> None:
     if parent:
         md += ["Started from the model shipped before it (`--imitation.init-checkpoint models/pretrained/"
                f"{a.mode}`), which was trained by:", "", "```bash", *parent, "```", "", "then:", ""]
-    md += ["```bash", "python experiments/expert_guided.py data      # data sets (seeds below) and expert demos:",
-           "#   jobs/build_demos.py --modes unitary --action-sets true --beam 1",
-           "#   jobs/build_demos.py --modes utility --action-sets true --beam 1 --sets-max-acquisitions 150"]
+    md.append("```bash")
+    if not parent:  # a parent recipe already built the first mix
+        md += ["python experiments/expert_guided.py data      # data sets (seeds below) and expert demos:",
+               "#   jobs/build_demos.py --modes unitary --action-sets true --beam 1",
+               "#   jobs/build_demos.py --modes utility --action-sets true --beam 1 --sets-max-acquisitions 150"]
     if any("train2" in str(d) for d in data_sets):
         md.append(f"python experiments/expert_guided.py data --more --modes {a.mode}   # the second mix, train2/")
     md += ["python jobs/pretrain.py " + " ".join(f"--{k.replace('_', '-')} {v}" for k, v in _flags(cfg)), "```", "",
