@@ -7,7 +7,8 @@ For every unseen generated instance (seeds 900000 + ...), mode and time T (secon
 search per instance, model loading and instance preparation excluded):
 
 * policy: the shipped (or given) model's greedy decoding (one run; its own time);
-* sample, beam, mcts: the learned searches with ``time_limit=T`` (anytime);
+* sample, beam, mcts: the learned searches with ``time_limit=T`` (anytime), each complete
+  schedule they meet polished by insert/swap moves unless ``--no-polish``;
 * ramp: beam widths 1, 2, 4, ... each run to completion; the value at T is the best
   reached by a width whose run took at most T (RAMP is not anytime: a width too slow
   for T gives nothing, and its first width is reported with its own time);
@@ -39,6 +40,8 @@ def main() -> None:
     p.add_argument("--methods", nargs="+", default=["policy", "sample", "beam", "mcts", "ramp", "exact"])
     p.add_argument("--checkpoint", default="", help="agent checkpoint; default: the shipped model of each mode")
     p.add_argument("--step", type=float, default=1.0, help="time step of the generated discrete graphs (s)")
+    p.add_argument("--no-polish", dest="polish", action="store_false",
+                   help="learned searches without the insert/swap polish of their schedules (search.polish)")
     p.add_argument("--out", default="runs/anytime")
     p.add_argument("--mlflow-uri", default="")
     a = p.parse_args()
@@ -96,7 +99,7 @@ def main() -> None:
                         if method not in a.methods:
                             continue
                         for t in a.times:
-                            kw = {} if method == "exact" else {"agent": agents[mode]}
+                            kw = {} if method == "exact" else {"agent": agents[mode], "polish": a.polish}
                             if method == "sample":
                                 kw["samples"] = 16
                             if method == "beam":

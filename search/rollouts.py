@@ -14,7 +14,9 @@ step costs ONE network call for all of them.
   the W best children go on.  Anytime: the best complete schedule met is returned
   when the deadline comes.
 
-Both return actions (to replay) and the return in reward units.
+Both return actions (to replay) and the return in reward units, or, given ``improve``
+(e.g. :meth:`eosp.search.polish.Polisher.actions`), every complete episode is improved
+before it is compared and the return is the improved schedule's objective value.
 """
 
 from __future__ import annotations
@@ -31,15 +33,19 @@ EvaluateMany = Callable[[list], tuple[np.ndarray, np.ndarray]]
 
 @dataclass
 class Best:
-    """The best complete episode met so far."""
+    """The best complete episode met so far.  `improve(actions) -> (value, actions)`: applied to every episode
+    offered (then `ret` is in the improver's units, not in reward units)."""
 
     ret: float = -math.inf
     actions: list = field(default_factory=list)
     episodes: int = 0
     evaluations: int = 0
+    improve: Callable[[list], tuple[float, list]] | None = None
 
     def offer(self, ret: float, actions: list) -> None:
         self.episodes += 1
+        if self.improve is not None:
+            ret, actions = self.improve(actions)
         if not self.actions and self.ret == -math.inf or ret > self.ret + 1e-12 * max(1.0, abs(self.ret)):
             self.ret, self.actions = ret, list(actions)
 
@@ -97,7 +103,8 @@ def root_state(env, seed: int = 0) -> _State:
 
 
 def sample(env, evaluate: EvaluateMany, *, samples: int = 16, temperature: float = 1.0, seed: int = 0,
-           time_limit: float | None = None, max_rounds: int | None = None) -> Best:
+           time_limit: float | None = None, max_rounds: int | None = None,
+           improve: Callable[[list], tuple[float, list]] | None = None) -> Best:
     """Best of K episodes (the first greedy, always finished: the floor), then rounds of K sampled
     ones until the time limit.  With no time limit, one round (or `max_rounds`).  `samples` >= 1.
     """
@@ -107,7 +114,7 @@ def sample(env, evaluate: EvaluateMany, *, samples: int = 16, temperature: float
     deadline = None if time_limit is None else t0 + time_limit
     rng = np.random.default_rng(seed)
     root = root_state(env, seed)
-    best = Best()
+    best = Best(improve=improve)
     if root.done:
         best.offer(0.0, [])
         return best
@@ -125,14 +132,14 @@ def sample(env, evaluate: EvaluateMany, *, samples: int = 16, temperature: float
 
 
 def beam(env, evaluate: EvaluateMany, *, width: int = 4, expand: int = 4, seed: int = 0,
-         time_limit: float | None = None) -> Best:
+         time_limit: float | None = None, improve: Callable[[list], tuple[float, list]] | None = None) -> Best:
     """Policy-guided beam search scored by greedy rollouts (see the module docstring)."""
     if width < 1 or expand < 1:
         raise ValueError(f"beam width and expansion must be at least 1, got {width} and {expand}")
     t0 = time.perf_counter()
     deadline = None if time_limit is None else t0 + time_limit
     root = root_state(env, seed)
-    best = Best()
+    best = Best(improve=improve)
     if root.done:
         best.offer(0.0, [])
         return best

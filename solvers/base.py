@@ -91,6 +91,15 @@ class LearnedConfig(SolverConfig):
     """Trained agent (a checkpoint directory); empty: the shipped pretrained model of --mode."""
 
 
+@dataclass
+class SearchConfig(LearnedConfig):
+    """Options of the learned searches (sample, beam, mcts)."""
+
+    polish: bool = True
+    """Improve every complete schedule the search meets by insert and swap moves before comparing them
+    (eosp.search.polish; milliseconds per schedule); --polish false: the search's own schedules only."""
+
+
 def _check_type(owner: str, name: str, hint: Any, value: Any) -> None:
     args = typing.get_args(hint)
     if value is None and type(None) in args:

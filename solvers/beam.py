@@ -13,12 +13,12 @@ from dataclasses import dataclass
 from eosp.instances.instance import Instance
 from eosp.search.rollouts import beam
 from eosp.config import ranged
-from eosp.solvers.base import LearnedConfig, Solution
+from eosp.solvers.base import SearchConfig, Solution
 from eosp.solvers.policy import run_search
 
 
 @dataclass
-class BeamConfig(LearnedConfig):
+class BeamConfig(SearchConfig):
     """Policy-guided beam search with rollouts; anytime: at the time limit, the best complete schedule met."""
 
     beam_width: int = ranged(4, 1)
@@ -33,5 +33,5 @@ def solve(inst: Instance, cfg: BeamConfig | None = None, *, agent: tuple | None 
     cfg = cfg or BeamConfig()
     cfg.validate()
     return run_search("beam", inst, cfg, agent,
-                      lambda env, ev: beam(env, ev, width=cfg.beam_width, expand=cfg.expand, seed=cfg.seed,
-                                           time_limit=cfg.time_limit), beam_width=cfg.beam_width)
+                      lambda env, ev, improve: beam(env, ev, width=cfg.beam_width, expand=cfg.expand, seed=cfg.seed,
+                                                    time_limit=cfg.time_limit, improve=improve), beam_width=cfg.beam_width)

@@ -9,12 +9,12 @@ from eosp.envs.sources import prepare_instance
 from eosp.instances.instance import Instance
 from eosp.search.mcts import solve as mcts_solve
 from eosp.config import ranged
-from eosp.solvers.base import LearnedConfig, Solution
-from eosp.solvers.policy import evaluate_batch, make_env_for, resolve_agent, value_weights
+from eosp.solvers.base import SearchConfig, Solution
+from eosp.solvers.policy import evaluate_batch, make_env_for, polisher_for, resolve_agent, value_weights
 
 
 @dataclass
-class MctsConfig(LearnedConfig):
+class MctsConfig(SearchConfig):
     """MCTS guided by the trained agent; with a time limit it stops searching at the deadline and plays
     the rest of the episode from the tree and the policy."""
 
@@ -44,8 +44,8 @@ def solve(inst: Instance, cfg: MctsConfig | None = None, *, agent: tuple | None 
         budget = 1_000_000 if time_limit is not None else 100
     nodes, ret, stats = mcts_solve(env, lambda obss: evaluate_batch(model, obss, vw), num_simulations=int(budget or 0),
                                    c_puct=c_puct, batch=batch, seed=seed, time_limit=time_limit,
-                                   gumbel=gumbel)
+                                   gumbel=gumbel, improve=polisher_for(prepared, cfg))
     return Solution.from_path(inst, nodes, mode, {"solver": "mcts", "budget": budget, "simulations": stats.simulations,
-                                   "expansions": stats.expansions, "evaluations": stats.evaluations,
+                                   "polish": cfg.polish, "expansions": stats.expansions, "evaluations": stats.evaluations,
                                    "seconds": time.perf_counter() - t0,
                                    "return": ret})

@@ -15,7 +15,7 @@ from eosp.envs.sources import FixedSource, PreparedInstance, prepare_instance
 from eosp.config import CLASS_UTILITIES, EnvConfig
 from eosp.instances.instance import Instance
 from eosp.models.agent import EOSPAgent, batch_from_padded
-from eosp.solvers.base import LearnedConfig, Solution
+from eosp.solvers.base import LearnedConfig, SearchConfig, Solution, objective_weights
 
 
 def to_batch(obs: dict[str, np.ndarray]) -> dict[str, torch.Tensor]:
@@ -104,20 +104,32 @@ class PolicyConfig(LearnedConfig):
     ONE_SHOT = True
 
 
-def run_search(name: str, inst: Instance, cfg: LearnedConfig, agent: tuple | None, search, **info) -> Solution:
+def polisher_for(prepared: PreparedInstance, cfg: SearchConfig):
+    """The search's improver of complete episodes (:class:`eosp.search.polish.Polisher` on the env's graph and
+    the objective of cfg.mode), or None with ``polish`` off."""
+    if not cfg.polish:
+        return None
+    from eosp.search.polish import Polisher
+
+    return Polisher(prepared.eg, objective_weights(prepared.inst, cfg.mode)).actions
+
+
+def run_search(name: str, inst: Instance, cfg: SearchConfig, agent: tuple | None, search, **info) -> Solution:
     """The frame every rollout search shares: the agent (given, from cfg.checkpoint, or the shipped model of the
-    mode), an environment sized to the instance, ``search(env, evaluate) -> Best``, its best episode replayed
-    and scored (:mod:`eosp.search.rollouts`)."""
+    mode), an environment sized to the instance, ``search(env, evaluate, improve) -> Best``, its best episode
+    replayed and scored (:mod:`eosp.search.rollouts`)."""
     import time
 
     from eosp.search.rollouts import replay
 
     model, env_cfg, _ = resolve_agent(name, cfg.checkpoint, agent, cfg.mode)
-    env = make_env_for(prepare_instance(inst, env_cfg.prune), env_cfg)
+    prepared = prepare_instance(inst, env_cfg.prune)
+    env = make_env_for(prepared, env_cfg)
     t0 = time.perf_counter()
-    best = search(env, lambda obss: evaluate_batch(model, obss))
+    best = search(env, lambda obss: evaluate_batch(model, obss), polisher_for(prepared, cfg))
     nodes, _ = replay(env, best.actions, cfg.seed)
-    return Solution.from_path(inst, nodes, cfg.mode, {"solver": name, **info, "episodes": best.episodes,
+    return Solution.from_path(inst, nodes, cfg.mode, {"solver": name, **info, "polish": cfg.polish,
+                                                      "episodes": best.episodes,
                                                       "evaluations": best.evaluations,
                                                       "seconds": time.perf_counter() - t0})
 

@@ -12,12 +12,12 @@ from dataclasses import dataclass
 from eosp.instances.instance import Instance
 from eosp.search.rollouts import sample
 from eosp.config import ranged
-from eosp.solvers.base import LearnedConfig, Solution
+from eosp.solvers.base import SearchConfig, Solution
 from eosp.solvers.policy import run_search
 
 
 @dataclass
-class SampleConfig(LearnedConfig):
+class SampleConfig(SearchConfig):
     """Best of batched policy samples; with a time limit, rounds go on until it is reached (anytime)."""
 
     samples: int = ranged(16, 1)
@@ -32,5 +32,5 @@ def solve(inst: Instance, cfg: SampleConfig | None = None, *, agent: tuple | Non
     cfg = cfg or SampleConfig()
     cfg.validate()
     return run_search("sample", inst, cfg, agent,
-                      lambda env, ev: sample(env, ev, samples=cfg.samples, temperature=cfg.temperature, seed=cfg.seed,
-                                             time_limit=cfg.time_limit), samples=cfg.samples)
+                      lambda env, ev, improve: sample(env, ev, samples=cfg.samples, temperature=cfg.temperature,
+                                                      seed=cfg.seed, time_limit=cfg.time_limit, improve=improve), samples=cfg.samples)

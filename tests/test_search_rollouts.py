@@ -24,14 +24,16 @@ def agent():
 def test_sample_and_beam_never_below_the_policy_and_feasible(agent, family, n, seed):
     inst = generated(family, n, seed)
     policy = run_solver("policy", inst, mode="unitary", agent=agent)
-    one = run_solver("sample", inst, mode="unitary", agent=agent, samples=1)
+    one = run_solver("sample", inst, mode="unitary", agent=agent, samples=1, polish=False)
     assert one.value == policy.value and list(one.nodes) == list(policy.nodes)  # the first episode is greedy
+    polished = run_solver("sample", inst, mode="unitary", agent=agent, samples=1)
+    assert polished.value >= policy.value
     many = run_solver("sample", inst, mode="unitary", agent=agent, samples=16, seed=5)
     again = run_solver("sample", inst, mode="unitary", agent=agent, samples=16, seed=5)
     assert list(many.nodes) == list(again.nodes) and many.info["episodes"] == 16
     bm = run_solver("beam", inst, mode="unitary", agent=agent, beam_width=3)
     ramp = run_solver("ramp", inst, mode="unitary")
-    for sol in (many, bm):
+    for sol in (polished, many, bm):
         assert policy.value <= sol.value <= ramp.value + 1  # pruned-graph optimum is what RAMP finds here
         verdict = check(inst, from_internal_nodes(inst, sol.nodes))
         assert verdict.feasible and verdict.n == len(sol.nodes) == sol.value  # unitary: the value is the count

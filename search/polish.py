@@ -1,0 +1,307 @@
+"""Local improvement of a complete schedule by insert and swap moves (numba; no torch, no Ray).
+
+Why: what the learned policy still loses is one or two decisions per episode, each
+costing one acquisition in unitary mode or one low-priority acquisition in utility
+mode (docs/results.md).  Those are exactly the schedules that one insertion or one
+swap repairs, and checking a move costs a few binary searches, so every complete
+schedule a learned search meets can be polished for milliseconds before the search
+compares it with the others (``--polish``, on by default for sample, beam and mcts).
+
+A schedule is a path source -> n_1 -> ... -> n_L of the environment's discrete graph.
+Each arc goes from a node to the one node of the target acquisition it can reach
+(:func:`eosp.graphs.discrete.arc_to_acq`), so a path is fixed by its sequence of
+acquisitions.  Inserting acquisition j before position k re-reaches the nodes after
+it, one arc at a time, until a re-reached node equals the old one: from there on the
+path is unchanged.  A missing arc makes the move infeasible.  The result is a path of
+the same graph, so it replays in the environment action by action (each acquisition
+at most once, every node reached by an arc of the graph).
+
+Moves, repeated until none improves (first improvement; candidates by decreasing
+weight, then by earliest window end):
+
+* insert: an acquisition not scheduled, at the first position where it fits;
+* swap: drop the acquisition at one position, or replace it by an unscheduled one
+  (the first `max_replace` that fit), and insert unscheduled ones in the positions
+  around it (two before to two or three after, growing with each insertion); kept
+  when the weight gained exceeds the weight dropped (in unitary mode: two for one).
+
+Weights are the objective's (:func:`eosp.solvers.base.objective_weights`: the
+utility, or 1 per acquisition), so a polished schedule is never worse than its input.
+"""
+
+from __future__ import annotations
+
+import numba
+import numpy as np
+
+from eosp.graphs.discrete import arc_to_acq
+
+
+@numba.njit(cache=True)
+def _try_insert(indptr, dst, acq_ptr, node_acq, path, n, k, j, tmp):
+    """Nodes of path[:n] with acquisition j inserted before position k, as tmp[:m] replacing path[k:k+m-1];
+    returns m, or -1 when a needed arc is missing."""
+    prev = 0 if k == 0 else path[k - 1]
+    v = arc_to_acq(indptr, dst, acq_ptr, prev, j)
+    if v < 0:
+        return -1
+    tmp[0] = v
+    m = 1
+    cur = v
+    for i in range(k, n):
+        nx = arc_to_acq(indptr, dst, acq_ptr, cur, node_acq[path[i]])
+        if nx < 0:
+            return -1
+        if nx == path[i]:
+            break
+        tmp[m] = nx
+        m += 1
+        cur = nx
+    return m
+
+
+@numba.njit(cache=True)
+def _apply_insert(path, n, k, tmp, m):
+    for i in range(n, k, -1):
+        path[i] = path[i - 1]
+    for i in range(m):
+        path[k + i] = tmp[i]
+    return n + 1
+
+
+@numba.njit(cache=True)
+def _remove(indptr, dst, acq_ptr, node_acq, path, n, k, tmp):
+    """Drop position k in place; returns the new length, or -1 (path unchanged) when a needed arc is missing."""
+    cur = 0 if k == 0 else path[k - 1]
+    m = 0
+    for i in range(k + 1, n):
+        nx = arc_to_acq(indptr, dst, acq_ptr, cur, node_acq[path[i]])
+        if nx < 0:
+            return -1
+        if nx == path[i]:
+            break
+        tmp[m] = nx
+        m += 1
+        cur = nx
+    for i in range(k, n - 1):
+        path[i] = path[i + 1]
+    for i in range(m):
+        path[k + i] = tmp[i]
+    return n - 1
+
+
+@numba.njit(cache=True)
+def _first_position(node_time, path, n, t):
+    """First position p with node_time[path[p]] >= t (n when none)."""
+    lo, hi = 0, n
+    while lo < hi:
+        mid = (lo + hi) >> 1
+        if node_time[path[mid]] < t:
+            lo = mid + 1
+        else:
+            hi = mid
+    return lo
+
+
+@numba.njit(cache=True)
+def _insert_pass(indptr, dst, acq_ptr, node_acq, node_time, order, first_t, last_t, span, in_path, path, n, tmp):
+    """Insert every unscheduled acquisition (in `order`) where it first fits; returns the new length."""
+    for j in order:
+        if in_path[j]:
+            continue
+        # inserted before position p: path[p] is pushed to after j's start >= first_t[j], and a node moves
+        # at most within its window, so path[p] started no earlier than first_t[j] - span
+        p = _first_position(node_time, path, n, first_t[j] - span)
+        while p <= n:
+            if p > 0 and node_time[path[p - 1]] > last_t[j]:
+                break
+            m = _try_insert(indptr, dst, acq_ptr, node_acq, path, n, p, j, tmp)
+            if m > 0:
+                n = _apply_insert(path, n, p, tmp, m)
+                in_path[j] = True
+                break
+            p += 1
+    return n
+
+
+@numba.njit(cache=True)
+def _try_replace(indptr, dst, acq_ptr, node_acq, path, n, k, j, tmp):
+    """Nodes of path[:n] with position k's acquisition replaced by j, as tmp[:m] replacing path[k:k+m]; returns
+    m, or -1 when a needed arc is missing.  (In the pruned graph the arc that would skip position k is often
+    pruned, so a swap is tried as a replacement, not as a removal followed by an insertion.)"""
+    prev = 0 if k == 0 else path[k - 1]
+    v = arc_to_acq(indptr, dst, acq_ptr, prev, j)
+    if v < 0:
+        return -1
+    tmp[0] = v
+    m = 1
+    cur = v
+    for i in range(k + 1, n):
+        nx = arc_to_acq(indptr, dst, acq_ptr, cur, node_acq[path[i]])
+        if nx < 0:
+            return -1
+        if nx == path[i]:
+            break
+        tmp[m] = nx
+        m += 1
+        cur = nx
+    return m
+
+
+@numba.njit(cache=True)
+def _fill(indptr, dst, acq_ptr, node_acq, node_time, weight, order, first_t, last_t, span, in_path, work, wn, lo,
+          hi, skip, tmp, ins, n_ins):
+    """Insert unscheduled acquisitions (not `skip`) at positions lo..hi of work[:wn], first fit in `order`, the
+    window growing with each insertion; marks them in `in_path` and lists them in `ins`.  Returns (wn, weight
+    gained, n_ins)."""
+    gain = 0.0
+    t_lo = node_time[work[lo - 1]] if lo > 0 else -np.inf
+    for j in order:
+        if in_path[j] or j == skip or last_t[j] < t_lo:
+            continue
+        if hi < wn and first_t[j] > node_time[work[hi]] + span:
+            continue
+        for p in range(lo, hi + 1):
+            m = _try_insert(indptr, dst, acq_ptr, node_acq, work, wn, p, j, tmp)
+            if m > 0:
+                wn = _apply_insert(work, wn, p, tmp, m)
+                in_path[j] = True
+                ins[n_ins] = j
+                n_ins += 1
+                gain += weight[j]
+                hi = min(hi + 1, wn)
+                break
+    return wn, gain, n_ins
+
+
+@numba.njit(cache=True)
+def _swap_pass(indptr, dst, acq_ptr, node_acq, node_time, weight, order, first_t, last_t, span, in_path, path, n,
+               tmp, work, ins, tol, max_replace):
+    """At every position, drop its acquisition (or replace it by an unscheduled one) and insert others around
+    it; kept when the weight gained exceeds the weight dropped.  Returns the new length."""
+    k = 0
+    while k < n:
+        a = node_acq[path[k]]
+        kept = False
+        # (1) drop position k, then fill the gap
+        for i in range(n):
+            work[i] = path[i]
+        wn = _remove(indptr, dst, acq_ptr, node_acq, work, n, k, tmp)
+        n_ins = 0
+        if wn >= 0:
+            wn, gain, n_ins = _fill(indptr, dst, acq_ptr, node_acq, node_time, weight, order, first_t, last_t, span,
+                                    in_path, work, wn, max(k - 2, 0), min(k + 2, wn), a, tmp, ins, 0)
+            kept = gain - weight[a] > tol
+        # (2) replace position k by an unscheduled acquisition, then fill around it
+        t_k = node_time[path[k]]
+        tries = 0
+        for j in order:
+            if kept or tries >= max_replace:
+                break
+            if in_path[j] or last_t[j] < (node_time[path[k - 1]] if k > 0 else -np.inf) or first_t[j] > t_k + span:
+                continue
+            for q in range(n_ins):  # undo the previous attempt
+                in_path[ins[q]] = False
+            n_ins = 0
+            m = _try_replace(indptr, dst, acq_ptr, node_acq, path, n, k, j, tmp)
+            if m < 0:
+                continue
+            tries += 1
+            for i in range(n):
+                work[i] = path[i]
+            for i in range(m):
+                work[k + i] = tmp[i]
+            wn = n
+            in_path[j] = True
+            ins[0] = j
+            wn, gain, n_ins = _fill(indptr, dst, acq_ptr, node_acq, node_time, weight, order, first_t, last_t, span,
+                                    in_path, work, wn, max(k - 2, 0), min(k + 3, wn), a, tmp, ins, 1)
+            kept = weight[j] + gain - weight[a] > tol
+        if kept:
+            in_path[a] = False
+            for i in range(wn):
+                path[i] = work[i]
+            n = wn
+            k = max(k - 2, 0)  # the neighbourhood changed: look again from just before it
+        else:
+            for q in range(n_ins):
+                in_path[ins[q]] = False
+            k += 1
+    return n
+
+
+@numba.njit(cache=True)
+def _polish(indptr, dst, acq_ptr, node_acq, node_time, weight, order, first_t, last_t, span, path, n, max_rounds,
+            tol, max_replace):
+    n_acq = acq_ptr.shape[0] - 1
+    in_path = np.zeros(n_acq, dtype=np.bool_)
+    for i in range(n):
+        in_path[node_acq[path[i]]] = True
+    tmp = np.empty(n_acq + 2, dtype=path.dtype)
+    work = np.empty(n_acq + 1, dtype=path.dtype)
+    ins = np.empty(n_acq + 1, dtype=np.int64)
+    for _ in range(max_rounds):
+        value0 = 0.0
+        for i in range(n):
+            value0 += weight[node_acq[path[i]]]
+        n = _insert_pass(indptr, dst, acq_ptr, node_acq, node_time, order, first_t, last_t, span, in_path, path, n,
+                         tmp)
+        n = _swap_pass(indptr, dst, acq_ptr, node_acq, node_time, weight, order, first_t, last_t, span, in_path,
+                       path, n, tmp, work, ins, tol, max_replace)
+        value = 0.0
+        for i in range(n):
+            value += weight[node_acq[path[i]]]
+        if value <= value0 + tol:
+            break
+    return n
+
+
+class Polisher:
+    """Polish complete schedules of one instance: ``Polisher(eg, weights)(nodes) -> nodes``.
+
+    `eg`: the environment's :class:`eosp.envs.core.EnvGraph` (its arcs are the moves' arcs), `weights`:
+    float [n] objective weight per acquisition.  The per-instance orders are computed once.
+    """
+
+    def __init__(self, eg, weights: np.ndarray, max_rounds: int = 20, max_replace: int = 8):
+        self.eg = eg
+        self.weight = np.asarray(weights, dtype=np.float64)
+        acq_ptr = eg.acq_ptr
+        self.first_t = eg.node_time[acq_ptr[:-1]].astype(np.float64)
+        self.last_t = eg.node_time[acq_ptr[1:] - 1].astype(np.float64)
+        self.span = float(np.max(self.last_t - self.first_t)) if self.first_t.size else 0.0
+        self.order = np.lexsort((self.last_t, -self.weight)).astype(np.int64)
+        self.tol = 1e-9 * max(float(np.max(self.weight)) if self.weight.size else 1.0, 1e-300)
+        self.max_rounds = max_rounds
+        self.max_replace = max_replace
+
+    def __call__(self, nodes) -> np.ndarray:
+        eg = self.eg
+        n_acq = eg.acq_ptr.shape[0] - 1
+        path = np.zeros(n_acq + 1, dtype=np.int32)
+        nodes = np.asarray(nodes, dtype=np.int32)
+        path[: nodes.size] = nodes
+        n = _polish(eg.indptr, eg.dst, eg.acq_ptr, eg.node_acq, eg.node_time, self.weight, self.order, self.first_t,
+                    self.last_t, self.span, path, nodes.size, self.max_rounds, self.tol, self.max_replace)
+        return path[:n].copy()
+
+    def nodes_of(self, actions) -> np.ndarray:
+        """The path that playing acquisitions `actions` from the source follows (each one's arc)."""
+        eg = self.eg
+        out = np.empty(len(actions), dtype=np.int32)
+        cur = 0
+        for i, a in enumerate(actions):
+            cur = int(arc_to_acq(eg.indptr, eg.dst, eg.acq_ptr, cur, int(a)))
+            if cur < 0:
+                raise ValueError(f"action {i} (acquisition {a}) has no arc from the previous node")
+            out[i] = cur
+        return out
+
+    def value(self, nodes) -> float:
+        nodes = np.asarray(nodes, dtype=np.int64)
+        return float(self.weight[self.eg.node_acq[nodes]].sum()) if nodes.size else 0.0
+
+    def actions(self, actions) -> tuple[float, list]:
+        """Polish the schedule that `actions` play; its objective value and the actions that play it."""
+        nodes = self(self.nodes_of(actions))
+        return self.value(nodes), [int(a) for a in self.eg.node_acq[nodes]]
