@@ -259,8 +259,7 @@ def gumbel_search(env, root: Node, evaluate: EvaluateMany, *, num_simulations: i
 
 def solve(env, evaluate: EvaluateMany, *, num_simulations: int, c_puct: float = 1.25, batch: int = 8,
           reuse_tree: bool = True, seed: int = 0, time_limit: float | None = None,
-          gumbel: bool = False, max_considered: int = 16,
-          improve: Callable[[list], tuple[float, list]] | None = None) -> tuple[np.ndarray, float, SearchStats]:
+          gumbel: bool = False, max_considered: int = 16) -> tuple[np.ndarray, float, SearchStats]:
     """Play one episode from the env's reset state with MCTS before each decision.
 
     The greedy policy's episode is played first (one network call per decision): the answer is
@@ -269,9 +268,6 @@ def solve(env, evaluate: EvaluateMany, *, num_simulations: int, c_puct: float = 
     the time left over the decisions the greedy episode suggests remain (at most
     `num_simulations` simulations each).
     Returns the scheduled nodes, the episode's return in reward units, and search statistics.
-    With `improve(actions) -> (value, actions)` (:meth:`eosp.search.polish.Polisher.actions`), the played
-    episode and the best one met are both improved and the better is returned, its return then being the
-    improver's value.
     """
     t0 = time.perf_counter()
     stats = SearchStats()
@@ -316,18 +312,4 @@ def solve(env, evaluate: EvaluateMany, *, num_simulations: int, c_puct: float = 
         for a in stats.best_actions:
             env.step(a)
         nodes, total = env.path(), stats.best_return
-    if improve is not None:
-        options = [improve(_actions_of(env, nodes))]
-        if stats.best_actions:
-            options.append(improve(list(stats.best_actions)))
-        total, acts = max(options, key=lambda o: o[0])
-        env.reset(seed=seed)
-        for a in acts:
-            env.step(a)
-        nodes = env.path()
     return nodes, total, stats
-
-
-def _actions_of(env, nodes: np.ndarray) -> list[int]:
-    """The acquisitions of scheduled nodes: the actions that play them."""
-    return [int(a) for a in env.state.prepared.eg.node_acq[nodes]]

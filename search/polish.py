@@ -13,8 +13,10 @@ Each arc goes from a node to the one node of the target acquisition it can reach
 acquisitions.  Inserting acquisition j before position k re-reaches the nodes after
 it, one arc at a time, until a re-reached node equals the old one: from there on the
 path is unchanged.  A missing arc makes the move infeasible.  The result is a path of
-the same graph, so it replays in the environment action by action (each acquisition
-at most once, every node reached by an arc of the graph).
+the same graph, so on the environment's graph it replays in the environment action by
+action (each acquisition at most once, every node reached by an arc of the graph); on
+the unpruned graph (what the searches use when the instance has it) it is a feasible
+schedule that may use arcs the pruning removed.
 
 Moves, repeated until none improves (first improvement; candidates by decreasing
 weight, then by earliest window end):
@@ -257,14 +259,17 @@ def _polish(indptr, dst, acq_ptr, node_acq, node_time, weight, order, first_t, l
 
 
 class Polisher:
-    """Polish complete schedules of one instance: ``Polisher(eg, weights)(nodes) -> nodes``.
+    """Polish complete schedules of one instance: ``Polisher(graph, weights)(nodes) -> nodes``.
 
-    `eg`: the environment's :class:`eosp.envs.core.EnvGraph` (its arcs are the moves' arcs), `weights`:
-    float [n] objective weight per acquisition.  The per-instance orders are computed once.
+    `graph`: the arcs the moves may use, in canonical node order (a :class:`eosp.graphs.discrete.DiscreteGraph`,
+    e.g. the unpruned one, or the environment's :class:`eosp.envs.core.EnvGraph`: anything with node_acq,
+    node_time, indptr, dst, acq_ptr); `weights`: float [n] objective weight per acquisition.  The
+    per-instance orders are computed once.  The pruned graph's arcs are a subset of the unpruned graph's, so
+    a path of the environment is a path of either.
     """
 
-    def __init__(self, eg, weights: np.ndarray, max_rounds: int = 20, max_replace: int = 8):
-        self.eg = eg
+    def __init__(self, graph, weights: np.ndarray, max_rounds: int = 20, max_replace: int = 8):
+        self.eg = eg = graph
         self.weight = np.asarray(weights, dtype=np.float64)
         acq_ptr = eg.acq_ptr
         self.first_t = eg.node_time[acq_ptr[:-1]].astype(np.float64)

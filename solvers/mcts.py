@@ -44,7 +44,14 @@ def solve(inst: Instance, cfg: MctsConfig | None = None, *, agent: tuple | None 
         budget = 1_000_000 if time_limit is not None else 100
     nodes, ret, stats = mcts_solve(env, lambda obss: evaluate_batch(model, obss, vw), num_simulations=int(budget or 0),
                                    c_puct=c_puct, batch=batch, seed=seed, time_limit=time_limit,
-                                   gumbel=gumbel, improve=polisher_for(prepared, cfg))
+                                   gumbel=gumbel)
+    polisher = polisher_for(prepared, cfg)
+    if polisher is not None:  # the played episode and the best one met, both polished: the better
+        options = [polisher.actions(prepared.eg.node_acq[nodes])]
+        if stats.best_actions:
+            options.append(polisher.actions(stats.best_actions))
+        ret, acts = max(options, key=lambda o: o[0])
+        nodes = polisher.nodes_of(acts)
     return Solution.from_path(inst, nodes, mode, {"solver": "mcts", "budget": budget, "simulations": stats.simulations,
                                    "polish": cfg.polish, "expansions": stats.expansions, "evaluations": stats.evaluations,
                                    "seconds": time.perf_counter() - t0,

@@ -105,13 +105,17 @@ class PolicyConfig(LearnedConfig):
 
 
 def polisher_for(prepared: PreparedInstance, cfg: SearchConfig):
-    """The search's improver of complete episodes (:class:`eosp.search.polish.Polisher` on the env's graph and
-    the objective of cfg.mode), or None with ``polish`` off."""
+    """The search's improver of complete episodes, or None with ``polish`` off: a
+    :class:`eosp.search.polish.Polisher` for the objective of cfg.mode on the unpruned graph when the instance has
+    it (more moves: the pruned graph lacks the arc that skips a dropped acquisition, and a pruned path can end
+    in a node whose pruned arcs all lead to acquisitions already scheduled), else on the environment's graph."""
     if not cfg.polish:
         return None
     from eosp.search.polish import Polisher
 
-    return Polisher(prepared.eg, objective_weights(prepared.inst, cfg.mode)).actions
+    inst = prepared.inst
+    graph = inst.unpruned_graph if inst.unpruned_graph is not None else prepared.eg
+    return Polisher(graph, objective_weights(inst, cfg.mode))
 
 
 def run_search(name: str, inst: Instance, cfg: SearchConfig, agent: tuple | None, search, **info) -> Solution:
@@ -126,8 +130,10 @@ def run_search(name: str, inst: Instance, cfg: SearchConfig, agent: tuple | None
     prepared = prepare_instance(inst, env_cfg.prune)
     env = make_env_for(prepared, env_cfg)
     t0 = time.perf_counter()
-    best = search(env, lambda obss: evaluate_batch(model, obss), polisher_for(prepared, cfg))
-    nodes, _ = replay(env, best.actions, cfg.seed)
+    polisher = polisher_for(prepared, cfg)
+    best = search(env, lambda obss: evaluate_batch(model, obss), None if polisher is None else polisher.actions)
+    # polished actions may use arcs the environment's (pruned) graph lacks: their nodes come from the polisher
+    nodes = replay(env, best.actions, cfg.seed)[0] if polisher is None else polisher.nodes_of(best.actions)
     return Solution.from_path(inst, nodes, cfg.mode, {"solver": name, **info, "polish": cfg.polish,
                                                       "episodes": best.episodes,
                                                       "evaluations": best.evaluations,

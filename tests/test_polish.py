@@ -97,3 +97,19 @@ def test_the_swap_move_trades_one_low_utility_acquisition_for_a_higher_one():
             gains += 1
             break
     assert gains > 0
+
+
+def test_on_the_unpruned_graph_the_polish_escapes_a_pruned_dead_end():
+    """A pruned path can end at a node whose kept arcs all lead to acquisitions already scheduled (the pruning
+    ignores the exclusion); the unpruned arcs continue it, and the result is feasible for the checker."""
+    inst = generated("uniform", 60, 5)
+    prepared = prepare_instance(inst, True)
+    w = objective_weights(inst, "utility")
+    pruned, full = Polisher(prepared.eg, w), Polisher(inst.unpruned(), w)
+    ramp = run_solver("ramp", inst, mode="utility")
+    for cut in (1, 2, len(ramp.nodes) // 3):
+        head = ramp.nodes[:cut]  # a schedule stopped early, as a dead end leaves it
+        out = full(head)
+        assert check(inst, from_internal_nodes(inst, out)).feasible
+        assert full.value(out) >= pruned.value(pruned(head)) - 1e-9
+        assert full.value(out) >= 0.9 * ramp.value
