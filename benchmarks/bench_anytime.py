@@ -12,7 +12,9 @@ search per instance, model loading and instance preparation excluded):
 * ramp: beam widths 1, 2, 4, ... each run to completion; the value at T is the best
   reached by a width whose run took at most T (RAMP is not anytime: a width too slow
   for T gives nothing, and its first width is reported with its own time);
-* exact: ``time_limit=T`` (best schedule found at the limit).
+* exact: ``time_limit=T`` (best schedule found at the limit);
+* lns: the operational Greedy's schedule, polished and refined by the same moves as the
+  learned searches' (ruin and recreate) for T: what the learned start is worth.
 
 The best known value of an instance is the best over everything.  Prints the mean
 value / best known per method and T, per size, family and mode, writes
@@ -37,7 +39,7 @@ def main() -> None:
     p.add_argument("--modes", nargs="+", default=["unitary", "utility"])
     p.add_argument("--times", type=float, nargs="+", default=[0.1, 1.0, 10.0])
     p.add_argument("--instances", type=int, default=4)
-    p.add_argument("--methods", nargs="+", default=["policy", "sample", "beam", "mcts", "ramp", "exact"])
+    p.add_argument("--methods", nargs="+", default=["policy", "sample", "beam", "mcts", "ramp", "exact", "lns"])
     p.add_argument("--checkpoint", default="", help="agent checkpoint; default: the shipped model of each mode")
     p.add_argument("--step", type=float, default=1.0, help="time step of the generated discrete graphs (s)")
     p.add_argument("--no-polish", dest="polish", action="store_false",
@@ -95,11 +97,11 @@ def main() -> None:
                             v, dt, bw = ((max(r[1] for r in ok), max(r[0] for r in ok), max(r[2] for r in ok))
                                          if ok else (np.nan, runs[0][0], 1))
                             add("ramp", t, v, dt, beam=bw)
-                    for method in ("sample", "beam", "mcts", "exact"):
+                    for method in ("sample", "beam", "mcts", "exact", "lns"):
                         if method not in a.methods:
                             continue
                         for t in a.times:
-                            kw = {} if method == "exact" else {"agent": agents[mode], "polish": a.polish}
+                            kw = {} if method in ("exact", "lns") else {"agent": agents[mode], "polish": a.polish}
                             if method == "sample":
                                 kw["samples"] = 16
                             if method == "beam":

@@ -243,7 +243,7 @@ def build_parser(solver: str | None = None) -> argparse.ArgumentParser:
     s = sub.add_parser("solve", help="solve an instance and write a schedule file",
                        epilog="Each solver has its own options: eosp solve --solver NAME --help lists them.")
     s.add_argument("instance_dir", help="instance directory (or SHARD#INDEX)")
-    s.add_argument("--solver", required=True, help="random, greedy, ramp, exact, policy, sample, beam, mcts")
+    s.add_argument("--solver", required=True, help="random, greedy, ramp, exact, lns, policy, sample, beam, mcts")
     s.add_argument("--out", required=True, help="schedule file (.parquet, or .jsonl)")
     if solver is not None:
         from eosp.solvers.base import REGISTRY, SolverConfig, solver_config_class

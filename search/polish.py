@@ -258,6 +258,78 @@ def _polish(indptr, dst, acq_ptr, node_acq, node_time, weight, order, first_t, l
     return n
 
 
+@numba.njit(cache=True)
+def _ruin_recreate(indptr, dst, acq_ptr, node_acq, node_time, weight, first_t, last_t, span, path, n, iters,
+                   max_ruin, noise, seed, tol):
+    """`iters` rounds of: drop 1..max_ruin consecutive positions of the current schedule at random, refill the
+    gap (two positions either side) with unscheduled acquisitions in a random order (weights times
+    exp(noise * U[0, 1)): in unitary mode a uniformly random order), and keep the result as the current
+    schedule when it is not worse (plateaus are walked: equal-value schedules lead elsewhere).  path[:n] is
+    the start on entry and the best met on exit; returns its length."""
+    np.random.seed(seed)
+    n_acq = acq_ptr.shape[0] - 1
+    cur = path.copy()
+    work = path.copy()
+    best = path.copy()
+    in_cur = np.zeros(n_acq, dtype=np.bool_)
+    for i in range(n):
+        in_cur[node_acq[path[i]]] = True
+    in_work = in_cur.copy()
+    tmp = np.empty(n_acq + 2, dtype=path.dtype)
+    ins = np.empty(n_acq + 1, dtype=np.int64)
+    cand = np.empty(n_acq, dtype=np.int64)
+    key = np.empty(n_acq, dtype=np.float64)
+    cn, bn = n, n
+    cval = 0.0
+    for i in range(n):
+        cval += weight[node_acq[path[i]]]
+    bval = cval
+    for _ in range(iters):
+        for i in range(cn):
+            work[i] = cur[i]
+        in_work[:] = in_cur
+        wn = cn
+        s = np.random.randint(0, wn) if wn > 0 else 0
+        r = min(1 + np.random.randint(0, max_ruin), wn - s)
+        lost = 0.0
+        for _q in range(r):
+            a = node_acq[work[s]]
+            m = _remove(indptr, dst, acq_ptr, node_acq, work, wn, s, tmp)
+            if m < 0:
+                break
+            wn = m
+            in_work[a] = False
+            lost += weight[a]
+        lo = max(s - 2, 0)
+        hi = min(s + 2, wn)
+        t_lo = node_time[work[lo - 1]] if lo > 0 else -np.inf
+        t_hi = node_time[work[hi]] + span if hi < wn else np.inf
+        nc = 0
+        for j in range(n_acq):
+            if not in_work[j] and last_t[j] >= t_lo and first_t[j] <= t_hi:
+                cand[nc] = j
+                key[nc] = -weight[j] * np.exp(noise * np.random.random())
+                nc += 1
+        order = cand[:nc][np.argsort(key[:nc])]
+        wn, gain, _n = _fill(indptr, dst, acq_ptr, node_acq, node_time, weight, order, first_t, last_t, span,
+                             in_work, work, wn, lo, hi, -1, tmp, ins, 0)
+        val = cval - lost + gain
+        if val >= cval - tol:
+            for i in range(wn):
+                cur[i] = work[i]
+            cn = wn
+            in_cur[:] = in_work
+            cval = val
+            if val > bval + tol:
+                for i in range(wn):
+                    best[i] = work[i]
+                bn = wn
+                bval = val
+    for i in range(bn):
+        path[i] = best[i]
+    return bn
+
+
 class Polisher:
     """Polish complete schedules of one instance: ``Polisher(graph, weights)(nodes) -> nodes``.
 
@@ -289,6 +361,25 @@ class Polisher:
         n = _polish(eg.indptr, eg.dst, eg.acq_ptr, eg.node_acq, eg.node_time, self.weight, self.order, self.first_t,
                     self.last_t, self.span, path, nodes.size, self.max_rounds, self.tol, self.max_replace)
         return path[:n].copy()
+
+    def refine(self, nodes, *, deadline: float | None = None, iterations: int = 2000, seed: int = 0,
+               max_ruin: int = 6, noise: float = 1.0) -> np.ndarray:
+        """Ruin-and-recreate from `nodes` (see :func:`_ruin_recreate`) until `deadline` (time.perf_counter())
+        or for `iterations`, then one polish; the best schedule met (never worse than `nodes`)."""
+        import time
+
+        eg = self.eg
+        n_acq = eg.acq_ptr.shape[0] - 1
+        path = np.zeros(n_acq + 1, dtype=np.int32)
+        nodes = np.asarray(nodes, dtype=np.int32)
+        path[: nodes.size] = nodes
+        n, done, chunk = nodes.size, 0, 64
+        while (deadline is None and done < iterations) or (deadline is not None and time.perf_counter() < deadline):
+            n = _ruin_recreate(eg.indptr, eg.dst, eg.acq_ptr, eg.node_acq, eg.node_time, self.weight, self.first_t,
+                               self.last_t, self.span, path, n, chunk, max_ruin, noise, seed + done, self.tol)
+            done += chunk
+        self.rounds = done
+        return self(path[:n])
 
     def nodes_of(self, actions) -> np.ndarray:
         """The path that playing acquisitions `actions` from the source follows (each one's arc)."""

@@ -6,7 +6,7 @@ or of :class:`LearnedConfig` for the solvers that play a trained agent) and one 
 options, so a misspelled option is an error naming the valid ones, never ignored; the
 CLI builds its flags from the same config (:func:`eosp.args.add_config_args`).
 
-Time limits: the searching solvers (ramp, exact, sample, beam, mcts) honour
+Time limits: the searching solvers (ramp, exact, lns, sample, beam, mcts) honour
 ``time_limit``; the one-shot constructions (random, greedy, policy) always finish in
 one pass and refuse a limit (``ONE_SHOT``), so a caller never believes it bounded them.
 """
@@ -57,7 +57,7 @@ class SolverConfig:
     mode: str = choice("utility", "utility", "unitary")
     """'utility' (sum of utilities) or 'unitary' (count acquisitions)."""
     time_limit: float | None = ranged(None, 0)
-    """Seconds the search may run (ramp, exact, sample, beam, mcts); unset: no limit (0 on the command line
+    """Seconds the search may run (ramp, exact, lns, sample, beam, mcts); unset: no limit (0 on the command line
     means unset).  The one-shot solvers (random, greedy, policy) always finish in one pass and refuse it."""
     seed: int = ranged(0, 0)
     """Seed of the random choices (random walk, sampled policy, sample, beam, mcts)."""
@@ -98,6 +98,9 @@ class SearchConfig(LearnedConfig):
     polish: bool = True
     """Improve every complete schedule the search meets by insert and swap moves before comparing them
     (eosp.search.polish; milliseconds per schedule); --polish false: the search's own schedules only."""
+    refine: float = ranged(0.5, 0.0, 1.0)
+    """With polish and a time limit: the share of the time limit spent refining the best schedule found by ruin
+    and recreate (drop a few consecutive acquisitions, refill, keep when not worse); 0: search until the limit."""
 
 
 def _check_type(owner: str, name: str, hint: Any, value: Any) -> None:
@@ -135,6 +138,7 @@ REGISTRY: dict[str, SolverEntry] = {
     "greedy": SolverEntry("eosp.solvers.greedy:solve", "eosp.solvers.greedy:GreedyConfig"),
     "ramp": SolverEntry("eosp.solvers.ramp:solve", "eosp.solvers.ramp:RampConfig"),
     "exact": SolverEntry("eosp.solvers.exact:solve", "eosp.solvers.exact:ExactConfig"),
+    "lns": SolverEntry("eosp.solvers.lns:solve", "eosp.solvers.lns:LnsConfig"),
 }
 
 

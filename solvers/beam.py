@@ -33,5 +33,5 @@ def solve(inst: Instance, cfg: BeamConfig | None = None, *, agent: tuple | None 
     cfg = cfg or BeamConfig()
     cfg.validate()
     return run_search("beam", inst, cfg, agent,
-                      lambda env, ev, improve: beam(env, ev, width=cfg.beam_width, expand=cfg.expand, seed=cfg.seed,
-                                                    time_limit=cfg.time_limit, improve=improve), beam_width=cfg.beam_width)
+                      lambda env, ev, improve, limit: beam(env, ev, width=cfg.beam_width, expand=cfg.expand,
+                                                           seed=cfg.seed, time_limit=limit, improve=improve), beam_width=cfg.beam_width)

@@ -10,7 +10,8 @@ from eosp.instances.instance import Instance
 from eosp.search.mcts import solve as mcts_solve
 from eosp.config import ranged
 from eosp.solvers.base import SearchConfig, Solution
-from eosp.solvers.policy import evaluate_batch, make_env_for, polisher_for, resolve_agent, value_weights
+from eosp.solvers.policy import (evaluate_batch, finish, make_env_for, polisher_for, resolve_agent,
+                                 search_time, value_weights)
 
 
 @dataclass
@@ -43,7 +44,7 @@ def solve(inst: Instance, cfg: MctsConfig | None = None, *, agent: tuple | None 
     if budget is None:  # with a time limit, bounded by it only
         budget = 1_000_000 if time_limit is not None else 100
     nodes, ret, stats = mcts_solve(env, lambda obss: evaluate_batch(model, obss, vw), num_simulations=int(budget or 0),
-                                   c_puct=c_puct, batch=batch, seed=seed, time_limit=time_limit,
+                                   c_puct=c_puct, batch=batch, seed=seed, time_limit=search_time(cfg),
                                    gumbel=gumbel)
     polisher = polisher_for(prepared, cfg)
     if polisher is not None:  # the played episode and the best one met, both polished: the better
@@ -51,8 +52,8 @@ def solve(inst: Instance, cfg: MctsConfig | None = None, *, agent: tuple | None 
         if stats.best_actions:
             options.append(polisher.actions(stats.best_actions))
         ret, acts = max(options, key=lambda o: o[0])
-        nodes = polisher.nodes_of(acts)
+        nodes = finish(polisher, polisher.nodes_of(acts), cfg, t0)
     return Solution.from_path(inst, nodes, mode, {"solver": "mcts", "budget": budget, "simulations": stats.simulations,
-                                   "polish": cfg.polish, "expansions": stats.expansions, "evaluations": stats.evaluations,
+                                   "polish": cfg.polish, "refine": cfg.refine, "expansions": stats.expansions, "evaluations": stats.evaluations,
                                    "seconds": time.perf_counter() - t0,
                                    "return": ret})

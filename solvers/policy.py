@@ -118,10 +118,25 @@ def polisher_for(prepared: PreparedInstance, cfg: SearchConfig):
     return Polisher(graph, objective_weights(inst, cfg.mode))
 
 
+def search_time(cfg: SearchConfig) -> float | None:
+    """The part of cfg.time_limit the learned search itself gets: the rest goes to refining (cfg.refine)."""
+    if cfg.time_limit is None or not cfg.polish:
+        return cfg.time_limit
+    return cfg.time_limit * (1.0 - cfg.refine)
+
+
+def finish(polisher, nodes: np.ndarray, cfg: SearchConfig, t0: float) -> np.ndarray:
+    """The search's best schedule, refined by ruin and recreate until t0 + cfg.time_limit when refining."""
+    if polisher is None or cfg.time_limit is None or cfg.refine <= 0:
+        return nodes
+    return polisher.refine(nodes, deadline=t0 + cfg.time_limit, seed=cfg.seed)
+
+
 def run_search(name: str, inst: Instance, cfg: SearchConfig, agent: tuple | None, search, **info) -> Solution:
     """The frame every rollout search shares: the agent (given, from cfg.checkpoint, or the shipped model of the
-    mode), an environment sized to the instance, ``search(env, evaluate, improve) -> Best``, its best episode
-    replayed and scored (:mod:`eosp.search.rollouts`)."""
+    mode), an environment sized to the instance, ``search(env, evaluate, improve, time_limit) -> Best`` (the
+    time limit less the refining share), its best episode replayed and scored (:mod:`eosp.search.rollouts`),
+    then refined for the rest of the time (:func:`finish`)."""
     import time
 
     from eosp.search.rollouts import replay
@@ -131,11 +146,13 @@ def run_search(name: str, inst: Instance, cfg: SearchConfig, agent: tuple | None
     env = make_env_for(prepared, env_cfg)
     t0 = time.perf_counter()
     polisher = polisher_for(prepared, cfg)
-    best = search(env, lambda obss: evaluate_batch(model, obss), None if polisher is None else polisher.actions)
+    best = search(env, lambda obss: evaluate_batch(model, obss), None if polisher is None else polisher.actions,
+                  search_time(cfg))
     # polished actions may use arcs the environment's (pruned) graph lacks: their nodes come from the polisher
     nodes = replay(env, best.actions, cfg.seed)[0] if polisher is None else polisher.nodes_of(best.actions)
+    nodes = finish(polisher, nodes, cfg, t0)
     return Solution.from_path(inst, nodes, cfg.mode, {"solver": name, **info, "polish": cfg.polish,
-                                                      "episodes": best.episodes,
+                                                      "refine": cfg.refine, "episodes": best.episodes,
                                                       "evaluations": best.evaluations,
                                                       "seconds": time.perf_counter() - t0})
 

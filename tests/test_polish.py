@@ -113,3 +113,51 @@ def test_on_the_unpruned_graph_the_polish_escapes_a_pruned_dead_end():
         assert check(inst, from_internal_nodes(inst, out)).feasible
         assert full.value(out) >= pruned.value(pruned(head)) - 1e-9
         assert full.value(out) >= 0.9 * ramp.value
+
+
+@pytest.mark.parametrize("mode", ["unitary", "utility"])
+def test_refine_is_never_worse_feasible_and_deterministic(mode):
+    inst = generated("conflict", 60, 6)
+    pol = Polisher(inst.unpruned(), objective_weights(inst, mode))
+    greedy = run_solver("greedy", inst, mode=mode)
+    a = pol.refine(greedy.nodes, iterations=640, seed=3)
+    b = pol.refine(greedy.nodes, iterations=640, seed=3)
+    assert list(a) == list(b)
+    assert pol.value(a) >= greedy.value - 1e-9
+    assert check(inst, from_internal_nodes(inst, a)).feasible
+
+
+def test_lns_solver_beats_greedy_within_its_time_limit():
+    import time
+
+    inst = generated("conflict", 80, 7)
+    greedy = run_solver("greedy", inst, mode="unitary")
+    t0 = time.perf_counter()
+    sol = run_solver("lns", inst, mode="unitary", time_limit=1.0)
+    assert time.perf_counter() - t0 < 1.0 + 1.0
+    assert check(inst, from_internal_nodes(inst, sol.nodes)).feasible
+    assert sol.value >= greedy.value and sol.info["rounds"] > 0
+    exact = run_solver("exact", inst, mode="unitary")
+    assert sol.value <= exact.value
+
+
+def test_learned_searches_refine_within_the_time_limit():
+    """With a time limit the searches leave `refine` of it to ruin and recreate: the answer is feasible, at
+    least the unrefined search's, and the limit holds."""
+    import time
+
+    import torch
+
+    from eosp.config import ModelConfig
+    from eosp.models.agent import EOSPAgent
+
+    torch.manual_seed(0)
+    agent = EOSPAgent(ModelConfig(hidden_dim=8, n_layers=2, heads=1)), EnvConfig(reward="unitary"), {}
+    inst = generated("uniform", 60, 8)
+    for name in ("sample", "beam", "mcts"):
+        t0 = time.perf_counter()
+        sol = run_solver(name, inst, mode="unitary", agent=agent, time_limit=1.0)
+        assert time.perf_counter() - t0 < 1.0 + 1.5
+        assert check(inst, from_internal_nodes(inst, sol.nodes)).feasible
+        plain = run_solver(name, inst, mode="unitary", agent=agent, time_limit=1.0, refine=0.0)
+        assert sol.value >= plain.value - 1  # another search time, but refining rarely loses what it had

@@ -292,7 +292,7 @@ def test_every_solver_has_a_typed_config_and_unknown_options_are_errors():
         run_solver("nope", inst)
 
 
-@pytest.mark.parametrize("name", ["random", "greedy", "ramp", "exact", "policy", "sample", "beam", "mcts"])
+@pytest.mark.parametrize("name", ["random", "greedy", "ramp", "exact", "lns", "policy", "sample", "beam", "mcts"])
 def test_time_limit_is_refused_by_the_one_shot_solvers_and_taken_by_the_searches(name):
     """random, greedy and policy build their schedule in one pass: a limit is refused, not ignored.  The
     searches take it (honoured: here for ramp and exact, tests/test_search_rollouts.py for the learned ones)."""
