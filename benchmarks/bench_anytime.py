@@ -3,7 +3,7 @@
     python benchmarks/bench_anytime.py --sizes 100 300 --families uniform conflict \\
         --modes unitary utility --times 0.1 1 10 --instances 4 --out runs/anytime
 
-For every unseen generated instance (seeds 900000 + ...), mode and time T (seconds of
+For every unseen generated instance (seeds --seed-base, default 900000, + ...), mode and time T (seconds of
 search per instance, model loading and instance preparation excluded):
 
 * policy: the shipped (or given) model's greedy decoding (one run; its own time);
@@ -41,6 +41,8 @@ def main() -> None:
     p.add_argument("--instances", type=int, default=4)
     p.add_argument("--methods", nargs="+", default=["policy", "sample", "beam", "mcts", "ramp", "exact", "lns"])
     p.add_argument("--checkpoint", default="", help="agent checkpoint; default: the shipped model of each mode")
+    p.add_argument("--seed-base", type=int, default=900_000,
+                   help="instance seeds: BASE + 1000 * size + 100 * family index + k (another base: other instances)")
     p.add_argument("--step", type=float, default=1.0, help="time step of the generated discrete graphs (s)")
     p.add_argument("--no-polish", dest="polish", action="store_false",
                    help="learned searches without the insert/swap polish of their schedules (search.polish)")
@@ -67,7 +69,7 @@ def main() -> None:
     for size in a.sizes:
         for family in a.families:
             for k in range(a.instances):
-                seed = 900_000 + 1000 * size + 100 * a.families.index(family) + k
+                seed = a.seed_base + 1000 * size + 100 * a.families.index(family) + k
                 inst = generate(family_config(family, size, seed, graph={"step_s": a.step}))
                 inst.pruned()
                 for mode in a.modes:
