@@ -348,7 +348,9 @@ class Polisher:
         self.last_t = eg.node_time[acq_ptr[1:] - 1].astype(np.float64)
         self.span = float(np.max(self.last_t - self.first_t)) if self.first_t.size else 0.0
         self.order = np.lexsort((self.last_t, -self.weight)).astype(np.int64)
-        self.tol = 1e-9 * max(float(np.max(self.weight)) if self.weight.size else 1.0, 1e-300)
+        # gains below this are not gains: 1e-12 of the largest weight (1e-4 for a top class of 1e8) still sees
+        # the differences between two class-6 acquisitions (utilities ~1 that differ in the third decimal)
+        self.tol = 1e-12 * max(float(np.max(self.weight)) if self.weight.size else 1.0, 1e-300)
         self.max_rounds = max_rounds
         self.max_replace = max_replace
         self.rounds = 0
