@@ -40,17 +40,12 @@ from eosp.graphs.discrete import arc_to_acq
 
 
 @numba.njit(cache=True)
-def _try_insert(indptr, dst, acq_ptr, node_acq, path, n, k, j, tmp):
-    """Nodes of path[:n] with acquisition j inserted before position k, as tmp[:m] replacing path[k:k+m-1];
-    returns m, or -1 when a needed arc is missing."""
-    prev = 0 if k == 0 else path[k - 1]
-    v = arc_to_acq(indptr, dst, acq_ptr, prev, j)
-    if v < 0:
-        return -1
-    tmp[0] = v
-    m = 1
-    cur = v
-    for i in range(k, n):
+def _rechain(indptr, dst, acq_ptr, node_acq, path, n, i0, cur, tmp, m):
+    """From node `cur`, re-reach the acquisitions of path[i0:n] one arc at a time, writing the new nodes to
+    tmp[m:], until one equals the old node (from there the path is unchanged: an arc's destination depends
+    only on its source and target acquisition).  Returns the end of tmp's new nodes, or -1 when an arc is
+    missing."""
+    for i in range(i0, n):
         nx = arc_to_acq(indptr, dst, acq_ptr, cur, node_acq[path[i]])
         if nx < 0:
             return -1
@@ -60,6 +55,17 @@ def _try_insert(indptr, dst, acq_ptr, node_acq, path, n, k, j, tmp):
         m += 1
         cur = nx
     return m
+
+
+@numba.njit(cache=True)
+def _try_insert(indptr, dst, acq_ptr, node_acq, path, n, k, j, tmp):
+    """Nodes of path[:n] with acquisition j inserted before position k, as tmp[:m] replacing path[k:k+m-1];
+    returns m, or -1 when a needed arc is missing."""
+    v = arc_to_acq(indptr, dst, acq_ptr, 0 if k == 0 else path[k - 1], j)
+    if v < 0:
+        return -1
+    tmp[0] = v
+    return _rechain(indptr, dst, acq_ptr, node_acq, path, n, k, v, tmp, 1)
 
 
 @numba.njit(cache=True)
@@ -74,17 +80,9 @@ def _apply_insert(path, n, k, tmp, m):
 @numba.njit(cache=True)
 def _remove(indptr, dst, acq_ptr, node_acq, path, n, k, tmp):
     """Drop position k in place; returns the new length, or -1 (path unchanged) when a needed arc is missing."""
-    cur = 0 if k == 0 else path[k - 1]
-    m = 0
-    for i in range(k + 1, n):
-        nx = arc_to_acq(indptr, dst, acq_ptr, cur, node_acq[path[i]])
-        if nx < 0:
-            return -1
-        if nx == path[i]:
-            break
-        tmp[m] = nx
-        m += 1
-        cur = nx
+    m = _rechain(indptr, dst, acq_ptr, node_acq, path, n, k + 1, 0 if k == 0 else path[k - 1], tmp, 0)
+    if m < 0:
+        return -1
     for i in range(k, n - 1):
         path[i] = path[i + 1]
     for i in range(m):
@@ -131,23 +129,11 @@ def _try_replace(indptr, dst, acq_ptr, node_acq, path, n, k, j, tmp):
     """Nodes of path[:n] with position k's acquisition replaced by j, as tmp[:m] replacing path[k:k+m]; returns
     m, or -1 when a needed arc is missing.  (In the pruned graph the arc that would skip position k is often
     pruned, so a swap is tried as a replacement, not as a removal followed by an insertion.)"""
-    prev = 0 if k == 0 else path[k - 1]
-    v = arc_to_acq(indptr, dst, acq_ptr, prev, j)
+    v = arc_to_acq(indptr, dst, acq_ptr, 0 if k == 0 else path[k - 1], j)
     if v < 0:
         return -1
     tmp[0] = v
-    m = 1
-    cur = v
-    for i in range(k + 1, n):
-        nx = arc_to_acq(indptr, dst, acq_ptr, cur, node_acq[path[i]])
-        if nx < 0:
-            return -1
-        if nx == path[i]:
-            break
-        tmp[m] = nx
-        m += 1
-        cur = nx
-    return m
+    return _rechain(indptr, dst, acq_ptr, node_acq, path, n, k + 1, v, tmp, 1)
 
 
 @numba.njit(cache=True)
