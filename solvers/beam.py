@@ -34,4 +34,5 @@ def solve(inst: Instance, cfg: BeamConfig | None = None, *, agent: tuple | None 
     cfg.validate()
     return run_search("beam", inst, cfg, agent,
                       lambda env, ev, improve, limit: beam(env, ev, width=cfg.beam_width, expand=cfg.expand,
-                                                           seed=cfg.seed, time_limit=limit, improve=improve), beam_width=cfg.beam_width)
+                                                           seed=cfg.seed, time_limit=limit, improve=improve),
+                      beam_width=cfg.beam_width)

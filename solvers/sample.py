@@ -33,4 +33,5 @@ def solve(inst: Instance, cfg: SampleConfig | None = None, *, agent: tuple | Non
     cfg.validate()
     return run_search("sample", inst, cfg, agent,
                       lambda env, ev, improve, limit: sample(env, ev, samples=cfg.samples, temperature=cfg.temperature,
-                                                             seed=cfg.seed, time_limit=limit, improve=improve), samples=cfg.samples)
+                                                             seed=cfg.seed, time_limit=limit, improve=improve),
+                      samples=cfg.samples)
