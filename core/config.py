@@ -488,11 +488,11 @@ class EvalConfig:
     data: tuple[str, ...] = ("data/demo/val",)
     """Data set directories or shard files; instances are grouped by size in the report."""
     solvers: tuple[str, ...] = ("greedy", "ramp")
-    """Any of: random, greedy, ramp, exact, policy, mcts, sample, beam."""
+    """Any of: random, greedy, ramp, exact, lns, policy, mcts, sample, beam."""
     mode: str = choice("utility", "utility", "unitary")
     """'utility' or 'unitary' (count acquisitions)."""
     time_limit: float = ranged(60.0, 0, lo_open=True)
-    """Seconds per instance for the searching solvers (ramp, exact)."""
+    """Seconds per instance for the searching solvers (ramp, exact, lns)."""
     search_time: float = 0.0
     """Seconds of search per instance for the learned searches (sample, beam); 0: no limit (one round of
     samples, the whole beam)."""
@@ -500,6 +500,10 @@ class EvalConfig:
     """Episodes per batched round of the sample solver."""
     beam_width: int = 4
     """Partial schedules kept by the beam solver."""
+    polish: bool = True
+    """Learned searches (sample, beam, mcts): polish every complete schedule met (insert and swap moves)."""
+    refine: float = ranged(0.5, 0.0, 1.0)
+    """Learned searches with a time limit: the share of it spent refining the best schedule (ruin and recreate)."""
     checkpoint: str = ""
     """Agent checkpoint for the policy, mcts, sample and beam solvers; empty: the shipped pretrained model of --mode."""
     budgets: tuple[int, ...] = ranged((0, 10, 100, 1000), 0)

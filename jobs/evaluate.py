@@ -65,6 +65,8 @@ class SolverWorker:
             options.update({"samples": cfg.samples} if solver == "sample" else {"beam_width": cfg.beam_width})
         if solver == "mcts":
             options["budget"] = budget
+        if solver in ("sample", "beam", "mcts"):
+            options.update(polish=cfg.polish, refine=cfg.refine)
         t0 = time.perf_counter()
         sol = run_solver(solver, inst, agent=agent, **options)
         seconds = time.perf_counter() - t0
@@ -96,7 +98,8 @@ class SolverWorker:
 LEARNED = ("policy", "mcts", "sample", "beam")
 
 
-RESUME_KEYS = ("mode", "time_limit", "checkpoint", "save_schedules")  # settings a kept result depends on
+RESUME_KEYS = ("mode", "time_limit", "search_time", "samples", "beam_width", "polish", "refine", "checkpoint",
+               "save_schedules")  # settings a kept result depends on
 
 
 def _job_file(partial: Path, job: tuple) -> Path:
