@@ -58,14 +58,16 @@ def _rechain(indptr, dst, acq_ptr, node_acq, path, n, i0, cur, tmp, m):
 
 
 @numba.njit(cache=True)
-def _try_insert(indptr, dst, acq_ptr, node_acq, path, n, k, j, tmp):
-    """Nodes of path[:n] with acquisition j inserted before position k, as tmp[:m] replacing path[k:k+m-1];
-    returns m, or -1 when a needed arc is missing."""
+def _try_put(indptr, dst, acq_ptr, node_acq, path, n, k, j, tmp, drop):
+    """Nodes of path[:n] with acquisition j put at position k, as tmp[:m]: inserted before position k (drop 0:
+    tmp replaces path[k:k+m-1]) or replacing position k's acquisition (drop 1: tmp replaces path[k:k+m]; in
+    the pruned graph the arc that would skip position k is often pruned, so a swap is tried as a replacement,
+    not as a removal followed by an insertion).  Returns m, or -1 when a needed arc is missing."""
     v = arc_to_acq(indptr, dst, acq_ptr, 0 if k == 0 else path[k - 1], j)
     if v < 0:
         return -1
     tmp[0] = v
-    return _rechain(indptr, dst, acq_ptr, node_acq, path, n, k, v, tmp, 1)
+    return _rechain(indptr, dst, acq_ptr, node_acq, path, n, k + drop, v, tmp, 1)
 
 
 @numba.njit(cache=True)
@@ -115,25 +117,13 @@ def _insert_pass(indptr, dst, acq_ptr, node_acq, node_time, order, first_t, last
         while p <= n:
             if p > 0 and node_time[path[p - 1]] > last_t[j]:
                 break
-            m = _try_insert(indptr, dst, acq_ptr, node_acq, path, n, p, j, tmp)
+            m = _try_put(indptr, dst, acq_ptr, node_acq, path, n, p, j, tmp, 0)
             if m > 0:
                 n = _apply_insert(path, n, p, tmp, m)
                 in_path[j] = True
                 break
             p += 1
     return n
-
-
-@numba.njit(cache=True)
-def _try_replace(indptr, dst, acq_ptr, node_acq, path, n, k, j, tmp):
-    """Nodes of path[:n] with position k's acquisition replaced by j, as tmp[:m] replacing path[k:k+m]; returns
-    m, or -1 when a needed arc is missing.  (In the pruned graph the arc that would skip position k is often
-    pruned, so a swap is tried as a replacement, not as a removal followed by an insertion.)"""
-    v = arc_to_acq(indptr, dst, acq_ptr, 0 if k == 0 else path[k - 1], j)
-    if v < 0:
-        return -1
-    tmp[0] = v
-    return _rechain(indptr, dst, acq_ptr, node_acq, path, n, k + 1, v, tmp, 1)
 
 
 @numba.njit(cache=True)
@@ -150,7 +140,7 @@ def _fill(indptr, dst, acq_ptr, node_acq, node_time, weight, order, first_t, las
         if hi < wn and first_t[j] > node_time[work[hi]] + span:
             continue
         for p in range(lo, hi + 1):
-            m = _try_insert(indptr, dst, acq_ptr, node_acq, work, wn, p, j, tmp)
+            m = _try_put(indptr, dst, acq_ptr, node_acq, work, wn, p, j, tmp, 0)
             if m > 0:
                 wn = _apply_insert(work, wn, p, tmp, m)
                 in_path[j] = True
@@ -191,7 +181,7 @@ def _swap_pass(indptr, dst, acq_ptr, node_acq, node_time, weight, order, first_t
             for q in range(n_ins):  # undo the previous attempt
                 in_path[ins[q]] = False
             n_ins = 0
-            m = _try_replace(indptr, dst, acq_ptr, node_acq, path, n, k, j, tmp)
+            m = _try_put(indptr, dst, acq_ptr, node_acq, path, n, k, j, tmp, 1)
             if m < 0:
                 continue
             tries += 1
@@ -316,6 +306,19 @@ def _ruin_recreate(indptr, dst, acq_ptr, node_acq, node_time, weight, first_t, l
     return bn
 
 
+@numba.njit(cache=True)
+def _walk(indptr, dst, acq_ptr, actions, out):
+    """out[i] = the node playing actions[i] reaches from out[i - 1] (the source first); returns the index of
+    the first action with no arc, or -1 when all have one."""
+    cur = 0
+    for i in range(actions.shape[0]):
+        cur = arc_to_acq(indptr, dst, acq_ptr, cur, actions[i])
+        if cur < 0:
+            return i
+        out[i] = cur
+    return -1
+
+
 class Polisher:
     """Polish complete schedules of one instance: ``Polisher(graph, weights)(nodes) -> nodes``.
 
@@ -345,6 +348,7 @@ class Polisher:
         empty = np.zeros(1, dtype=np.int32)
         _polish(eg.indptr, eg.dst, eg.acq_ptr, eg.node_acq, eg.node_time, self.weight, self.order, self.first_t,
                 self.last_t, self.span, empty, 0, 0, self.tol, 1)
+        _walk(eg.indptr, eg.dst, eg.acq_ptr, np.zeros(0, dtype=np.int64), empty)
         _ruin_recreate(eg.indptr, eg.dst, eg.acq_ptr, eg.node_acq, eg.node_time, self.weight, self.first_t,
                        self.last_t, self.span, empty, 0, 0, 1, 1.0, 0, self.tol)
 
@@ -380,13 +384,11 @@ class Polisher:
     def nodes_of(self, actions) -> np.ndarray:
         """The path that playing acquisitions `actions` from the source follows (each one's arc)."""
         eg = self.eg
-        out = np.empty(len(actions), dtype=np.int32)
-        cur = 0
-        for i, a in enumerate(actions):
-            cur = int(arc_to_acq(eg.indptr, eg.dst, eg.acq_ptr, cur, int(a)))
-            if cur < 0:
-                raise ValueError(f"action {i} (acquisition {a}) has no arc from the previous node")
-            out[i] = cur
+        actions = np.asarray(actions, dtype=np.int64)
+        out = np.empty(actions.shape[0], dtype=np.int32)
+        bad = _walk(eg.indptr, eg.dst, eg.acq_ptr, actions, out)
+        if bad >= 0:
+            raise ValueError(f"action {bad} (acquisition {actions[bad]}) has no arc from the previous node")
         return out
 
     def value(self, nodes) -> float:
