@@ -8,7 +8,8 @@ search per instance, model loading and instance preparation excluded):
 
 * policy: the shipped (or given) model's greedy decoding (one run; its own time);
 * sample, beam, mcts: the learned searches with ``time_limit=T`` (anytime), each complete
-  schedule they meet polished by insert/swap moves unless ``--no-polish``;
+  schedule they meet polished by insert/swap moves unless ``--no-polish``, the best one refined
+  (ruin and recreate alternating with window re-planning unless ``--no-windows``);
 * ramp: beam widths 1, 2, 4, ... each run to completion; the value at T is the best
   reached by a width whose run took at most T (RAMP is not anytime: a width too slow
   for T gives nothing, and its first width is reported with its own time);
@@ -46,6 +47,8 @@ def main() -> None:
     p.add_argument("--step", type=float, default=1.0, help="time step of the generated discrete graphs (s)")
     p.add_argument("--no-polish", dest="polish", action="store_false",
                    help="learned searches without the insert/swap polish of their schedules (search.polish)")
+    p.add_argument("--no-windows", dest="windows", action="store_false",
+                   help="refinement (learned searches and lns) without window re-planning (search.repair)")
     p.add_argument("--out", default="runs/anytime")
     p.add_argument("--mlflow-uri", default="")
     p.add_argument("--report", default="", metavar="DIR",
@@ -111,7 +114,8 @@ def main() -> None:
                         if method not in a.methods:
                             continue
                         for t in a.times:
-                            kw = {} if method in ("exact", "lns") else {"agent": agents[mode], "polish": a.polish}
+                            kw = ({} if method == "exact" else {"windows": a.windows} if method == "lns" else
+                                  {"agent": agents[mode], "polish": a.polish, "windows": a.windows})
                             if method == "sample":
                                 kw["samples"] = 16
                             if method == "beam":

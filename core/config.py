@@ -504,6 +504,8 @@ class EvalConfig:
     """Learned searches (sample, beam, mcts): polish every complete schedule met (insert and swap moves)."""
     refine: float = ranged(0.5, 0.0, 1.0)
     """Learned searches with a time limit: the share of it spent refining the best schedule (ruin and recreate)."""
+    windows: bool = True
+    """Learned searches, while refining: also re-plan windows of consecutive acquisitions (eosp.search.repair)."""
     checkpoint: str = ""
     """Agent checkpoint for the policy, mcts, sample and beam solvers; empty: the shipped pretrained model of --mode."""
     budgets: tuple[int, ...] = ranged((0, 10, 100, 1000), 0)

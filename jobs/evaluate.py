@@ -66,7 +66,7 @@ class SolverWorker:
         if solver == "mcts":
             options["budget"] = budget
         if solver in ("sample", "beam", "mcts"):
-            options.update(polish=cfg.polish, refine=cfg.refine)
+            options.update(polish=cfg.polish, refine=cfg.refine, windows=cfg.windows)
         t0 = time.perf_counter()
         sol = run_solver(solver, inst, agent=agent, **options)
         seconds = time.perf_counter() - t0
@@ -98,8 +98,8 @@ class SolverWorker:
 LEARNED = ("policy", "mcts", "sample", "beam")
 
 
-RESUME_KEYS = ("mode", "time_limit", "search_time", "samples", "beam_width", "polish", "refine", "checkpoint",
-               "save_schedules")  # settings a kept result depends on
+RESUME_KEYS = ("mode", "time_limit", "search_time", "samples", "beam_width", "polish", "refine", "windows",
+               "checkpoint", "save_schedules")  # settings a kept result depends on
 
 
 def _job_file(partial: Path, job: tuple) -> Path:

@@ -27,6 +27,10 @@ weight, then by earliest window end):
   around it (two before to two or three after, growing with each insertion); kept
   when the weight gained exceeds the weight dropped (in unitary mode: two for one).
 
+The refinement (:meth:`Polisher.refine`) alternates ruin and recreate with window re-planning
+(:mod:`eosp.search.repair`: a stretch of the schedule planned again by a label sweep, which finds
+the sequences a first-fit refill misses).
+
 Weights are the objective's (:func:`eosp.solvers.base.objective_weights`: the
 utility, or 1 per acquisition), so a polished schedule is never worse than its input.
 """
@@ -319,6 +323,10 @@ def _walk(indptr, dst, acq_ptr, actions, out):
     return -1
 
 
+def n_acq_of(graph) -> int:
+    return int(graph.acq_ptr.shape[0] - 1)
+
+
 class Polisher:
     """Polish complete schedules of one instance: ``Polisher(graph, weights)(nodes) -> nodes``.
 
@@ -329,8 +337,10 @@ class Polisher:
     a path of the environment is a path of either.
     """
 
-    def __init__(self, graph, weights: np.ndarray, max_rounds: int = 20, max_replace: int = 8):
+    def __init__(self, graph, weights: np.ndarray, max_rounds: int = 20, max_replace: int = 8, window: int = 16,
+                 window_beam: int = 4):
         self.eg = eg = graph
+        self.window, self.window_beam = window, window_beam
         self.weight = np.asarray(weights, dtype=np.float64)
         acq_ptr = eg.acq_ptr
         self.first_t = eg.node_time[acq_ptr[:-1]].astype(np.float64)
@@ -351,6 +361,15 @@ class Polisher:
         _walk(eg.indptr, eg.dst, eg.acq_ptr, np.zeros(0, dtype=np.int64), empty)
         _ruin_recreate(eg.indptr, eg.dst, eg.acq_ptr, eg.node_acq, eg.node_time, self.weight, self.first_t,
                        self.last_t, self.span, empty, 0, 0, 1, 1.0, 0, self.tol)
+        # window re-planning (search/repair.py, which builds on this module's kernels): nodes by time, and a
+        # random 64-bit key per acquisition whose XOR over a label's acquisitions tells equal sets apart
+        from eosp.search import repair
+
+        self._repair = repair._repair
+        self.by_time = (np.argsort(eg.node_time[1:], kind="stable") + 1).astype(np.int32)
+        self.sorted_t = eg.node_time[self.by_time].astype(np.float64)
+        self.key = np.random.default_rng(0).integers(1, 2**63, size=n_acq_of(eg), dtype=np.uint64)
+        self._run_windows(empty, 0, 0, 0)
 
     def __call__(self, nodes) -> np.ndarray:
         eg = self.eg
@@ -363,9 +382,14 @@ class Polisher:
         return path[:n].copy()
 
     def refine(self, nodes, *, deadline: float | None = None, iterations: int = 2000, seed: int = 0,
-               max_ruin: int = 6, noise: float = 1.0) -> np.ndarray:
+               max_ruin: int = 6, noise: float = 1.0, windows: bool = True) -> np.ndarray:
         """Ruin-and-recreate from `nodes` (see :func:`_ruin_recreate`) until `deadline` (time.perf_counter())
-        or for `iterations`, then one polish; the best schedule met (never worse than `nodes`)."""
+        or for `iterations`, then one polish; the best schedule met (never worse than `nodes`).
+
+        With `windows`, rounds of window re-planning (:mod:`eosp.search.repair`) alternate with the ruin
+        and recreate, given as much time as it (or as many rounds when there is no deadline), until a
+        whole round of them was too costly to plan (graphs of hundreds of arcs per node), then no more.
+        """
         import time
 
         eg = self.eg
@@ -374,12 +398,39 @@ class Polisher:
         nodes = np.asarray(nodes, dtype=np.int32)
         path[: nodes.size] = nodes
         n, done, chunk = nodes.size, 0, 64
+        t_rr = t_win = 0.0
+        w_chunk, use_windows, span = 16, windows, self.window
+        self.window_rounds = 0
         while (deadline is None and done < iterations) or (deadline is not None and time.perf_counter() < deadline):
+            t0 = time.perf_counter()
             n = _ruin_recreate(eg.indptr, eg.dst, eg.acq_ptr, eg.node_acq, eg.node_time, self.weight, self.first_t,
                                self.last_t, self.span, path, n, chunk, max_ruin, noise, seed + done, self.tol)
+            t1 = time.perf_counter()
+            t_rr += t1 - t0
+            # without a deadline: a fixed number of windows per round (deterministic); with one: as much time
+            # as the ruin and recreate, in rounds sized from the last one's time per window
+            if use_windows and (deadline is None or (t_win <= t_rr and t1 < deadline)):
+                n, aborted = self._run_windows(path, n, w_chunk, seed + done, span)
+                dt = time.perf_counter() - t1
+                t_win += dt
+                self.window_rounds += w_chunk
+                if 2 * aborted > w_chunk:  # most windows too costly to plan: shorter ones, or none
+                    use_windows = span > 1
+                    span = max(1, span // 2)
+                if deadline is not None:
+                    per = max(dt / w_chunk, 1e-6)
+                    w_chunk = int(max(1, min(256, (t1 - t0) / per, 0.5 * (deadline - time.perf_counter()) / per)))
             done += chunk
         self.rounds = done
         return self(path[:n])
+
+    def _run_windows(self, path, n, count, seed, span=1):
+        from eosp.search.repair import MAX_WORK
+
+        eg = self.eg
+        return self._repair(eg.indptr, eg.dst, eg.acq_ptr, eg.node_acq, eg.node_time, self.weight, self.key,
+                            self.by_time, self.sorted_t, path, n, span, self.window_beam, count, seed,
+                            self.tol, MAX_WORK)
 
     def nodes_of(self, actions) -> np.ndarray:
         """The path that playing acquisitions `actions` from the source follows (each one's arc)."""

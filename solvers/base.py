@@ -101,6 +101,9 @@ class SearchConfig(LearnedConfig):
     refine: float = ranged(0.5, 0.0, 1.0)
     """With polish and a time limit: the share of the time limit spent refining the best schedule found by ruin
     and recreate (drop a few consecutive acquisitions, refill, keep when not worse); 0: search until the limit."""
+    windows: bool = True
+    """While refining, also re-plan windows of up to 16 consecutive acquisitions by a label sweep over the time
+    between their neighbours (eosp.search.repair), for as much time as the ruin and recreate."""
 
 
 def _check_type(owner: str, name: str, hint: Any, value: Any) -> None:

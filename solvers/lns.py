@@ -26,6 +26,8 @@ class LnsConfig(SolverConfig):
 
     iterations: int = ranged(20_000, 1)
     """Ruin-and-recreate rounds when no time limit is given."""
+    windows: bool = True
+    """Alternate window re-planning with the ruin and recreate (eosp.search.repair), as the learned searches do."""
 
     NAME = "lns"
 
@@ -37,7 +39,9 @@ def solve(inst: Instance, cfg: LnsConfig | None = None) -> Solution:
     t0 = time.perf_counter()
     start = greedy(inst, GreedyConfig(mode=cfg.mode))
     deadline = None if cfg.time_limit is None else t0 + cfg.time_limit
-    nodes = polisher.refine(polisher(start.nodes), deadline=deadline, iterations=cfg.iterations, seed=cfg.seed)
+    nodes = polisher.refine(polisher(start.nodes), deadline=deadline, iterations=cfg.iterations, seed=cfg.seed,
+                            windows=cfg.windows)
     return Solution.from_path(inst, nodes, cfg.mode, {"solver": "lns", "greedy": start.value,
                                                       "rounds": polisher.rounds,
+                                                      "windows": polisher.window_rounds,
                                                       "seconds": time.perf_counter() - t0})

@@ -129,7 +129,7 @@ def finish(polisher, nodes: np.ndarray, cfg: SearchConfig, t0: float) -> np.ndar
     """The search's best schedule, refined by ruin and recreate until t0 + cfg.time_limit when refining."""
     if polisher is None or cfg.time_limit is None or cfg.refine <= 0:
         return nodes
-    return polisher.refine(nodes, deadline=t0 + cfg.time_limit, seed=cfg.seed)
+    return polisher.refine(nodes, deadline=t0 + cfg.time_limit, seed=cfg.seed, windows=cfg.windows)
 
 
 def run_search(name: str, inst: Instance, cfg: SearchConfig, agent: tuple | None, search, **info) -> Solution:
@@ -152,7 +152,8 @@ def run_search(name: str, inst: Instance, cfg: SearchConfig, agent: tuple | None
     nodes = replay(env, best.actions, cfg.seed)[0] if polisher is None else polisher.nodes_of(best.actions)
     nodes = finish(polisher, nodes, cfg, t0)
     return Solution.from_path(inst, nodes, cfg.mode, {"solver": name, **info, "polish": cfg.polish,
-                                                      "refine": cfg.refine, "episodes": best.episodes,
+                                                      "refine": cfg.refine, "windows": cfg.windows,
+                                                      "episodes": best.episodes,
                                                       "evaluations": best.evaluations,
                                                       "seconds": time.perf_counter() - t0})
 

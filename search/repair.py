@@ -1,0 +1,229 @@
+"""Window repair: re-plan a stretch of a schedule exactly-ish by a label sweep (numba; no torch, no Ray).
+
+Why: the insert/swap moves and the ruin-and-recreate of :mod:`eosp.search.polish` refill a gap
+greedily, one acquisition at a time, in some order.  At 1000-1500 acquisitions the schedules the
+policy leaves are one or two acquisitions short of RAMP's, and the missing ones need a different
+*sequence* over several consecutive positions (a gap in unitary mode is often won by replacing three
+acquisitions with four others), which a first-fit refill rarely finds.  RAMP finds it because its label
+sweep compares all sequences through every node.  This module runs the same kind of sweep, but only
+over the time between two kept nodes of a schedule, so it costs milliseconds and can be repeated over
+every window of the schedule and then at random ones until the time limit.
+
+The window between anchors u = path[s - 1] (the source when s = 0) and e = path[s + r] (none when the
+window reaches the end) is re-planned as the best path from u through acquisitions not scheduled
+outside the window, ending at a node from which e's acquisition is reached no later than e (then the
+rest of the schedule re-chains no later than before: a node's arc to an acquisition depends only on the
+node and reaches no later from an earlier node of the same acquisition in the graphs of this project;
+the re-chaining checks it and refuses the move otherwise).  The sweep visits the nodes of the window by
+increasing time (arcs go forward in time) and keeps the `beam` best labels per node (value, parent);
+a label's acquisitions are its chain, checked for repeats by walking it (windows are short).  With a
+large enough beam it is exact within the window; the default keeps it a heuristic like RAMP's.
+"""
+
+from __future__ import annotations
+
+import numba
+import numpy as np
+
+from eosp.graphs.discrete import arc_to_acq
+from eosp.search.polish import _rechain
+
+MAX_WORK = 3_000_000  # arcs a window may look at (~10 ms)
+
+
+@numba.njit(cache=True, inline="always")
+def _in_chain(lab_node, lab_par, node_acq, l, k):
+    """Is acquisition k in label l's chain (its start label excluded)?"""
+    while l >= 0 and lab_par[l] >= 0:
+        if node_acq[lab_node[l]] == k:
+            return True
+        l = lab_par[l]
+    return False
+
+
+@numba.njit(cache=True)
+def _window(indptr, dst, acq_ptr, node_acq, node_time, weight, key, by_time, sorted_t, blocked, u, e, beam,
+            lab_node, lab_par, lab_val, lab_key, slot, cnt, stamp, call, out, tol, max_work):
+    """Best path from node u (exclusive) through unblocked acquisitions that reaches e's acquisition no
+    later than e (e < 0: no end condition).  Writes its nodes to `out`; returns (length, value), length
+    -1 when the label memory ran out or more than `max_work` arcs were looked at (no answer: the cost of a
+    window is bounded, so a time limit is kept even on graphs of hundreds of arcs per node).  `slot` [N, beam], `cnt` [N], `stamp` [N] are scratch
+    kept between calls (stamp == call marks this call's entries)."""
+    cap = lab_node.shape[0]
+    t_u = node_time[u] if u > 0 else -np.inf
+    t_e = node_time[e] if e >= 0 else np.inf
+    acq_e = node_acq[e] if e >= 0 else -1
+    # nodes strictly between the anchors' times, by time
+    lo = np.searchsorted(sorted_t, t_u, side="right")
+    hi = np.searchsorted(sorted_t, t_e, side="left")
+    n_lab = 1
+    lab_node[0] = u
+    lab_par[0] = -1
+    lab_val[0] = 0.0
+    lab_key[0] = 0
+    best_l = -1
+    best_v = -np.inf
+    work = 0
+    for idx in range(lo - 1, hi):
+        if idx < lo:
+            v = u
+            stamp[v] = call
+            cnt[v] = 1
+            slot[v, 0] = 0
+        else:
+            v = by_time[idx]
+            if stamp[v] != call or cnt[v] == 0:
+                continue
+        for q in range(cnt[v]):
+            l = slot[v, q]
+            lv = lab_val[l]
+            # can this label end the window?
+            if e >= 0:
+                x = arc_to_acq(indptr, dst, acq_ptr, v, acq_e)
+                ok = x >= 0 and node_time[x] <= t_e
+            else:
+                ok = True
+            if ok and lv > best_v + tol:
+                best_v = lv
+                best_l = l
+            work += indptr[v + 1] - indptr[v]
+            if work > max_work:
+                return -1, 0.0
+            for a in range(indptr[v], indptr[v + 1]):
+                w = dst[a]
+                if node_time[w] >= t_e:
+                    continue
+                k = node_acq[w]
+                if blocked[k] or _in_chain(lab_node, lab_par, node_acq, l, k):
+                    continue
+                nv = lv + weight[k]
+                nk = lab_key[l] ^ key[k]
+                if stamp[w] != call:
+                    stamp[w] = call
+                    cnt[w] = 0
+                c = cnt[w]
+                worst = -1
+                dup = False
+                for z in range(c):
+                    o = slot[w, z]
+                    if lab_key[o] == nk:  # the same acquisitions (up to a 64-bit hash collision): the same futures
+                        dup = True
+                        break
+                    if worst < 0 or lab_val[o] < lab_val[slot[w, worst]]:
+                        worst = z
+                if dup:
+                    continue
+                if c >= beam and nv <= lab_val[slot[w, worst]] + tol:
+                    continue
+                if n_lab >= cap:
+                    return -1, 0.0
+                lab_node[n_lab] = w
+                lab_par[n_lab] = l
+                lab_val[n_lab] = nv
+                lab_key[n_lab] = nk
+                if c < beam:
+                    slot[w, c] = n_lab
+                    cnt[w] = c + 1
+                else:
+                    slot[w, worst] = n_lab
+                n_lab += 1
+    if best_l < 0:
+        return 0, -np.inf
+    m = 0
+    x = best_l
+    while lab_par[x] >= 0:
+        m += 1
+        x = lab_par[x]
+    x = best_l
+    for i in range(m - 1, -1, -1):
+        out[i] = lab_node[x]
+        x = lab_par[x]
+    return m, best_v
+
+
+@numba.njit(cache=True)
+def _splice(indptr, dst, acq_ptr, node_acq, path, n, s, r, seg, m, tmp, work):
+    """path[:s] + seg[:m] + path[s + r:n] re-chained from the segment's last node, into work; returns the
+    new length, or -1 when the re-chaining misses an arc."""
+    cur = seg[m - 1] if m > 0 else (path[s - 1] if s > 0 else 0)
+    k = _rechain(indptr, dst, acq_ptr, node_acq, path, n, s + r, cur, tmp, 0)
+    if k < 0:
+        return -1
+    for i in range(s):
+        work[i] = path[i]
+    for i in range(m):
+        work[s + i] = seg[i]
+    for i in range(k):
+        work[s + m + i] = tmp[i]
+    j = s + m + k
+    for i in range(s + r + k, n):
+        work[j] = path[i]
+        j += 1
+    return j
+
+
+@numba.njit(cache=True)
+def _try(indptr, dst, acq_ptr, node_acq, node_time, weight, key, by_time, sorted_t, path, n, s, r, plateau, beam,
+         blocked, lab_node, lab_par, lab_val, lab_key, slot, cnt, stamp, call, seg, tmp, work, tol, max_work):
+    """Re-plan positions s..s+r-1 of path[:n]; applied in place when it gains (or, with `plateau`, when it
+    does not lose).  Returns (new length, gained, aborted: the window was too costly to plan)."""
+    old = 0.0
+    for i in range(s, s + r):
+        blocked[node_acq[path[i]]] = False
+        old += weight[node_acq[path[i]]]
+    u = path[s - 1] if s > 0 else 0
+    e = path[s + r] if s + r < n else -1
+    m, val = _window(indptr, dst, acq_ptr, node_acq, node_time, weight, key, by_time, sorted_t, blocked, u, e,
+                     beam, lab_node, lab_par, lab_val, lab_key, slot, cnt, stamp, call, seg, tol, max_work)
+    wn = -1
+    aborted = m < 0
+    if m >= 0 and (val > old + tol or (plateau and val >= old - tol)):
+        wn = _splice(indptr, dst, acq_ptr, node_acq, path, n, s, r, seg, m, tmp, work)
+    if wn < 0:
+        for i in range(s, s + r):
+            blocked[node_acq[path[i]]] = True
+        return n, False, aborted
+    for i in range(wn):
+        path[i] = work[i]
+    for i in range(s, s + m):
+        blocked[node_acq[path[i]]] = True
+    return wn, val > old + tol, False
+
+
+@numba.njit(cache=True)
+def _repair(indptr, dst, acq_ptr, node_acq, node_time, weight, key, by_time, sorted_t, path, n, window, beam, iters,
+            seed, tol, max_work):
+    """Re-plan `iters` windows of path[:n] in place, each 1..window consecutive positions at random; a window's
+    new plan is kept when it is not worse (plateaus are walked: equal-value schedules lead elsewhere), so the
+    value never drops.  Returns (new length, windows aborted for their cost)."""
+    np.random.seed(seed)
+    n_nodes = node_acq.shape[0]
+    n_acq = acq_ptr.shape[0] - 1
+    max_deg = 0
+    for v in range(n_nodes):
+        max_deg = max(max_deg, indptr[v + 1] - indptr[v])
+    cap = max_work + max_deg + 2  # a label per arc looked at, at most
+    slot = np.empty((n_nodes, beam), dtype=np.int32)
+    cnt = np.zeros(n_nodes, dtype=np.int32)
+    stamp = np.full(n_nodes, -1, dtype=np.int64)
+    lab_node = np.empty(cap, dtype=np.int32)
+    lab_par = np.empty(cap, dtype=np.int32)
+    lab_val = np.empty(cap, dtype=np.float64)
+    lab_key = np.empty(cap, dtype=np.uint64)
+    seg = np.empty(n_acq + 1, dtype=path.dtype)
+    tmp = np.empty(n_acq + 2, dtype=path.dtype)
+    work = np.empty(n_acq + 1, dtype=path.dtype)
+    blocked = np.zeros(n_acq, dtype=np.bool_)
+    for i in range(n):
+        blocked[node_acq[path[i]]] = True
+    aborted = 0
+    for call in range(iters):
+        if n == 0:
+            break
+        r = min(1 + np.random.randint(0, window), n)
+        s = np.random.randint(0, n - r + 1)
+        n, _g, a = _try(indptr, dst, acq_ptr, node_acq, node_time, weight, key, by_time, sorted_t, path, n, s, r,
+                        True, beam, blocked, lab_node, lab_par, lab_val, lab_key, slot, cnt, stamp, call, seg, tmp,
+                        work, tol, max_work)
+        aborted += a
+    return n, aborted
