@@ -369,7 +369,7 @@ class Polisher:
         self.by_time = (np.argsort(eg.node_time[1:], kind="stable") + 1).astype(np.int32)
         self.sorted_t = eg.node_time[self.by_time].astype(np.float64)
         self.key = np.random.default_rng(0).integers(1, 2**63, size=n_acq_of(eg), dtype=np.uint64)
-        self._run_windows(empty, 0, 0, 0)
+        self._run_windows(empty, 0, 0, 0, 0)
 
     def __call__(self, nodes) -> np.ndarray:
         eg = self.eg
@@ -399,7 +399,7 @@ class Polisher:
         path[: nodes.size] = nodes
         n, done, chunk = nodes.size, 0, 64
         t_rr = t_win = 0.0
-        w_chunk, use_windows, span = 16, windows, self.window
+        use_windows, span, rate = windows, self.window, 0.0  # rate: arcs looked at per second of windows
         self.window_rounds = 0
         while (deadline is None and done < iterations) or (deadline is not None and time.perf_counter() < deadline):
             t0 = time.perf_counter()
@@ -407,30 +407,35 @@ class Polisher:
                                self.last_t, self.span, path, n, chunk, max_ruin, noise, seed + done, self.tol)
             t1 = time.perf_counter()
             t_rr += t1 - t0
-            # without a deadline: a fixed number of windows per round (deterministic); with one: as much time
-            # as the ruin and recreate, in rounds sized from the last one's time per window
+            # without a deadline: 16 windows per round (deterministic); with one: as much time as the ruin and
+            # recreate, each round's arcs budgeted from the rate measured so far (one window's worth first)
             if use_windows and (deadline is None or (t_win <= t_rr and t1 < deadline)):
-                n, aborted = self._run_windows(path, n, w_chunk, seed + done, span)
+                from eosp.search.repair import MAX_WORK
+
+                if deadline is None:
+                    count, budget = 16, np.iinfo(np.int64).max
+                else:
+                    count = 1 << 20
+                    budget = MAX_WORK if rate == 0.0 else int(rate * min(t1 - t0, 0.5 * (deadline - t1)))
+                n, tried, aborted, arcs = self._run_windows(path, n, count, budget, seed + done, span)
                 dt = time.perf_counter() - t1
                 t_win += dt
-                self.window_rounds += w_chunk
-                if 2 * aborted > w_chunk:  # most windows too costly to plan: shorter ones, or none
+                rate = arcs / max(dt, 1e-6) if arcs > 0 else rate
+                self.window_rounds += tried
+                if tried and 2 * aborted > tried:  # most windows too costly to plan: shorter ones, or none
                     use_windows = span > 1
                     span = max(1, span // 2)
-                if deadline is not None:
-                    per = max(dt / w_chunk, 1e-6)
-                    w_chunk = int(max(1, min(256, (t1 - t0) / per, 0.5 * (deadline - time.perf_counter()) / per)))
             done += chunk
         self.rounds = done
         return self(path[:n])
 
-    def _run_windows(self, path, n, count, seed, span=1):
+    def _run_windows(self, path, n, count, budget, seed, span=1):
         from eosp.search.repair import MAX_WORK
 
         eg = self.eg
         return self._repair(eg.indptr, eg.dst, eg.acq_ptr, eg.node_acq, eg.node_time, self.weight, self.key,
                             self.by_time, self.sorted_t, path, n, span, self.window_beam, count, seed,
-                            self.tol, MAX_WORK)
+                            self.tol, MAX_WORK, budget)
 
     def nodes_of(self, actions) -> np.ndarray:
         """The path that playing acquisitions `actions` from the source follows (each one's arc)."""

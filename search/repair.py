@@ -43,12 +43,13 @@ def _in_chain(lab_node, lab_par, node_acq, l, k):
 
 @numba.njit(cache=True)
 def _window(indptr, dst, acq_ptr, node_acq, node_time, weight, key, by_time, sorted_t, blocked, u, e, beam,
-            lab_node, lab_par, lab_val, lab_key, slot, cnt, stamp, call, out, tol, max_work):
+            lab_node, lab_par, lab_val, lab_key, slot, cnt, stamp, call, out, tol, max_work, tally):
     """Best path from node u (exclusive) through unblocked acquisitions that reaches e's acquisition no
     later than e (e < 0: no end condition).  Writes its nodes to `out`; returns (length, value), length
     -1 when the label memory ran out or more than `max_work` arcs were looked at (no answer: the cost of a
-    window is bounded, so a time limit is kept even on graphs of hundreds of arcs per node).  `slot` [N, beam], `cnt` [N], `stamp` [N] are scratch
-    kept between calls (stamp == call marks this call's entries)."""
+    window is bounded, so a time limit is kept even on graphs of hundreds of arcs per node).  `slot` [N, beam],
+    `cnt` [N], `stamp` [N] are scratch kept between calls (stamp == call marks this call's entries); tally[0]
+    grows by the arcs looked at."""
     cap = lab_node.shape[0]
     t_u = node_time[u] if u > 0 else -np.inf
     t_e = node_time[e] if e >= 0 else np.inf
@@ -74,19 +75,20 @@ def _window(indptr, dst, acq_ptr, node_acq, node_time, weight, key, by_time, sor
             v = by_time[idx]
             if stamp[v] != call or cnt[v] == 0:
                 continue
+        # can the labels of v end the window (reach e's acquisition no later than e)?
+        if e >= 0:
+            x = arc_to_acq(indptr, dst, acq_ptr, v, acq_e)
+            ends = x >= 0 and node_time[x] <= t_e
+        else:
+            ends = True
         for q in range(cnt[v]):
             l = slot[v, q]
             lv = lab_val[l]
-            # can this label end the window?
-            if e >= 0:
-                x = arc_to_acq(indptr, dst, acq_ptr, v, acq_e)
-                ok = x >= 0 and node_time[x] <= t_e
-            else:
-                ok = True
-            if ok and lv > best_v + tol:
+            if ends and lv > best_v + tol:  # ties: the earliest end, which leaves the most room after it
                 best_v = lv
                 best_l = l
             work += indptr[v + 1] - indptr[v]
+            tally[0] += indptr[v + 1] - indptr[v]
             if work > max_work:
                 return -1, 0.0
             for a in range(indptr[v], indptr[v + 1]):
@@ -164,7 +166,7 @@ def _splice(indptr, dst, acq_ptr, node_acq, path, n, s, r, seg, m, tmp, work):
 
 @numba.njit(cache=True)
 def _try(indptr, dst, acq_ptr, node_acq, node_time, weight, key, by_time, sorted_t, path, n, s, r, plateau, beam,
-         blocked, lab_node, lab_par, lab_val, lab_key, slot, cnt, stamp, call, seg, tmp, work, tol, max_work):
+         blocked, lab_node, lab_par, lab_val, lab_key, slot, cnt, stamp, call, seg, tmp, work, tol, max_work, tally):
     """Re-plan positions s..s+r-1 of path[:n]; applied in place when it gains (or, with `plateau`, when it
     does not lose).  Returns (new length, gained, aborted: the window was too costly to plan)."""
     old = 0.0
@@ -174,7 +176,7 @@ def _try(indptr, dst, acq_ptr, node_acq, node_time, weight, key, by_time, sorted
     u = path[s - 1] if s > 0 else 0
     e = path[s + r] if s + r < n else -1
     m, val = _window(indptr, dst, acq_ptr, node_acq, node_time, weight, key, by_time, sorted_t, blocked, u, e,
-                     beam, lab_node, lab_par, lab_val, lab_key, slot, cnt, stamp, call, seg, tol, max_work)
+                     beam, lab_node, lab_par, lab_val, lab_key, slot, cnt, stamp, call, seg, tol, max_work, tally)
     wn = -1
     aborted = m < 0
     if m >= 0 and (val > old + tol or (plateau and val >= old - tol)):
@@ -192,10 +194,12 @@ def _try(indptr, dst, acq_ptr, node_acq, node_time, weight, key, by_time, sorted
 
 @numba.njit(cache=True)
 def _repair(indptr, dst, acq_ptr, node_acq, node_time, weight, key, by_time, sorted_t, path, n, window, beam, iters,
-            seed, tol, max_work):
-    """Re-plan `iters` windows of path[:n] in place, each 1..window consecutive positions at random; a window's
-    new plan is kept when it is not worse (plateaus are walked: equal-value schedules lead elsewhere), so the
-    value never drops.  Returns (new length, windows aborted for their cost)."""
+            seed, tol, max_work, budget):
+    """Re-plan up to `iters` windows of path[:n] in place, each 1..window consecutive positions at random,
+    until `budget` arcs were looked at in all (the caller turns a time into arcs at the rate it measured); a
+    window's new plan is kept when it is not worse (plateaus are walked: equal-value schedules lead
+    elsewhere), so the value never drops.  Returns (new length, windows tried, windows aborted for their
+    cost, arcs looked at)."""
     np.random.seed(seed)
     n_nodes = node_acq.shape[0]
     n_acq = acq_ptr.shape[0] - 1
@@ -217,13 +221,16 @@ def _repair(indptr, dst, acq_ptr, node_acq, node_time, weight, key, by_time, sor
     for i in range(n):
         blocked[node_acq[path[i]]] = True
     aborted = 0
+    tally = np.zeros(1, dtype=np.int64)
+    tried = 0
     for call in range(iters):
-        if n == 0:
+        if n == 0 or tally[0] >= budget:
             break
+        tried += 1
         r = min(1 + np.random.randint(0, window), n)
         s = np.random.randint(0, n - r + 1)
         n, _g, a = _try(indptr, dst, acq_ptr, node_acq, node_time, weight, key, by_time, sorted_t, path, n, s, r,
                         True, beam, blocked, lab_node, lab_par, lab_val, lab_key, slot, cnt, stamp, call, seg, tmp,
-                        work, tol, max_work)
+                        work, tol, max_work, tally)
         aborted += a
-    return n, aborted
+    return n, tried, aborted, tally[0]

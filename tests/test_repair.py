@@ -24,7 +24,7 @@ def _plan(pol: Polisher, u: int, e: int, blocked: np.ndarray, beam: int, max_wor
                        pol.sorted_t, blocked, u, e, beam, np.empty(1 << 22, np.int32), np.empty(1 << 22, np.int32),
                        np.empty(1 << 22, np.float64), np.empty(1 << 22, np.uint64),
                        np.empty((n_nodes, beam), np.int32), np.zeros(n_nodes, np.int32),
-                       np.full(n_nodes, -1, np.int64), 1, out, pol.tol, max_work)
+                       np.full(n_nodes, -1, np.int64), 1, out, pol.tol, max_work, np.zeros(1, np.int64))
     return out[:m], value
 
 
@@ -65,8 +65,10 @@ def test_a_window_respects_its_anchors_and_the_blocked_acquisitions():
 @settings(max_examples=20, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(family=st.sampled_from(["uniform", "clusters", "conflict"]), seed=st.integers(0, 3),
        walk=st.integers(0, 10_000), mode=st.sampled_from(["unitary", "utility"]), span=st.integers(1, 8),
-       beam=st.integers(1, 6), max_work=st.sampled_from([50, 5_000, 3_000_000]))
-def test_window_rounds_keep_random_schedules_feasible_and_never_worse(family, seed, walk, mode, span, beam, max_work):
+       beam=st.integers(1, 6), max_work=st.sampled_from([50, 5_000, 3_000_000]),
+       budget=st.sampled_from([0, 20_000, 10**12]))
+def test_window_rounds_keep_random_schedules_feasible_and_never_worse(family, seed, walk, mode, span, beam, max_work,
+                                                                      budget):
     """Random windows (some aborted for their cost) over random complete episodes: the result is a path of the
     graph (the walk from its acquisitions gives it back), each acquisition at most once, feasible for the
     independent checker, and its value never below the start's."""
@@ -77,10 +79,13 @@ def test_window_rounds_keep_random_schedules_feasible_and_never_worse(family, se
     path = np.zeros(inst.n_acq + 1, dtype=np.int32)
     path[: nodes.size] = nodes
     g = pol.eg
-    n, aborted = pol._repair(g.indptr, g.dst, g.acq_ptr, g.node_acq, g.node_time, pol.weight, pol.key, pol.by_time,
-                             pol.sorted_t, path, nodes.size, span, beam, 200, walk, pol.tol, max_work)
+    n, tried, aborted, arcs = pol._repair(g.indptr, g.dst, g.acq_ptr, g.node_acq, g.node_time, pol.weight, pol.key,
+                                          pol.by_time, pol.sorted_t, path, nodes.size, span, beam, 200, walk, pol.tol,
+                                          max_work, budget)
     out = path[:n]
-    assert 0 <= aborted <= 200
+    assert 0 <= aborted <= tried <= 200 and arcs >= 0
+    if budget < 10**9:  # the arcs budget stops the round (after the window that crossed it)
+        assert tried == 200 or arcs >= budget
     assert pol.value(out) >= pol.value(nodes) - 1e-9
     assert len(set(inst.node_acq[out].tolist())) == n
     assert list(pol.nodes_of(inst.node_acq[out])) == list(out)
