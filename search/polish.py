@@ -323,10 +323,6 @@ def _walk(indptr, dst, acq_ptr, actions, out):
     return -1
 
 
-def n_acq_of(graph) -> int:
-    return int(graph.acq_ptr.shape[0] - 1)
-
-
 class Polisher:
     """Polish complete schedules of one instance: ``Polisher(graph, weights)(nodes) -> nodes``.
 
@@ -365,10 +361,10 @@ class Polisher:
         # random 64-bit key per acquisition whose XOR over a label's acquisitions tells equal sets apart
         from eosp.search import repair
 
-        self._repair = repair._repair
+        self._repair, self._max_work = repair._repair, repair.MAX_WORK
         self.by_time = (np.argsort(eg.node_time[1:], kind="stable") + 1).astype(np.int32)
         self.sorted_t = eg.node_time[self.by_time].astype(np.float64)
-        self.key = np.random.default_rng(0).integers(1, 2**63, size=n_acq_of(eg), dtype=np.uint64)
+        self.key = np.random.default_rng(0).integers(1, 2**63, size=eg.acq_ptr.shape[0] - 1, dtype=np.uint64)
         self._run_windows(empty, 0, 0, 0, 0)
 
     def __call__(self, nodes) -> np.ndarray:
@@ -387,8 +383,9 @@ class Polisher:
         or for `iterations`, then one polish; the best schedule met (never worse than `nodes`).
 
         With `windows`, rounds of window re-planning (:mod:`eosp.search.repair`) alternate with the ruin
-        and recreate, given as much time as it (or as many rounds when there is no deadline), until a
-        whole round of them was too costly to plan (graphs of hundreds of arcs per node), then no more.
+        and recreate, given as much time as it (16 windows a round when there is no deadline); when most
+        windows of a round were too costly to plan (graphs of hundreds of arcs per node), the stretches
+        are halved, down to none.
         """
         import time
 
@@ -410,13 +407,11 @@ class Polisher:
             # without a deadline: 16 windows per round (deterministic); with one: as much time as the ruin and
             # recreate, each round's arcs budgeted from the rate measured so far (one window's worth first)
             if use_windows and (deadline is None or (t_win <= t_rr and t1 < deadline)):
-                from eosp.search.repair import MAX_WORK
-
                 if deadline is None:
                     count, budget = 16, np.iinfo(np.int64).max
-                else:
+                else:  # as many windows as the budget allows
                     count = 1 << 20
-                    budget = MAX_WORK if rate == 0.0 else int(rate * min(t1 - t0, 0.5 * (deadline - t1)))
+                    budget = self._max_work if rate == 0.0 else int(rate * min(t1 - t0, 0.5 * (deadline - t1)))
                 n, tried, aborted, arcs = self._run_windows(path, n, count, budget, seed + done, span)
                 dt = time.perf_counter() - t1
                 t_win += dt
@@ -430,12 +425,11 @@ class Polisher:
         return self(path[:n])
 
     def _run_windows(self, path, n, count, budget, seed, span=1):
-        from eosp.search.repair import MAX_WORK
-
+        """`count` windows of 1..span positions at most, until `budget` arcs: (length, tried, aborted, arcs)."""
         eg = self.eg
         return self._repair(eg.indptr, eg.dst, eg.acq_ptr, eg.node_acq, eg.node_time, self.weight, self.key,
                             self.by_time, self.sorted_t, path, n, span, self.window_beam, count, seed,
-                            self.tol, MAX_WORK, budget)
+                            self.tol, self._max_work, budget)
 
     def nodes_of(self, actions) -> np.ndarray:
         """The path that playing acquisitions `actions` from the source follows (each one's arc)."""
