@@ -362,6 +362,7 @@ class Polisher:
         from eosp.search import repair
 
         self._repair, self._max_work = repair._repair, repair.MAX_WORK
+        self._scratch = repair.scratch(eg, window_beam, repair.MAX_WORK)
         self.by_time = (np.argsort(eg.node_time[1:], kind="stable") + 1).astype(np.int32)
         self.sorted_t = eg.node_time[self.by_time].astype(np.float64)
         self.key = np.random.default_rng(0).integers(1, 2**63, size=eg.acq_ptr.shape[0] - 1, dtype=np.uint64)
@@ -428,8 +429,8 @@ class Polisher:
         """`count` windows of 1..span positions at most, until `budget` arcs: (length, tried, aborted, arcs)."""
         eg = self.eg
         return self._repair(eg.indptr, eg.dst, eg.acq_ptr, eg.node_acq, eg.node_time, self.weight, self.key,
-                            self.by_time, self.sorted_t, path, n, span, self.window_beam, count, seed,
-                            self.tol, self._max_work, budget)
+                            self.by_time, self.sorted_t, path, n, span, count, seed, self.tol, self._max_work,
+                            budget, self._scratch)
 
     def nodes_of(self, actions) -> np.ndarray:
         """The path that playing acquisitions `actions` from the source follows (each one's arc)."""

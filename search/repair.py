@@ -1,13 +1,13 @@
-"""Window repair: re-plan a stretch of a schedule exactly-ish by a label sweep (numba; no torch, no Ray).
+"""Window repair: re-plan a stretch of a schedule by a label sweep (numba; no torch, no Ray).
 
 Why: the insert/swap moves and the ruin-and-recreate of :mod:`eosp.search.polish` refill a gap
-greedily, one acquisition at a time, in some order.  At 1000-1500 acquisitions the schedules the
-policy leaves are one or two acquisitions short of RAMP's, and the missing ones need a different
-*sequence* over several consecutive positions (a gap in unitary mode is often won by replacing three
-acquisitions with four others), which a first-fit refill rarely finds.  RAMP finds it because its label
-sweep compares all sequences through every node.  This module runs the same kind of sweep, but only
-over the time between two kept nodes of a schedule, so it costs milliseconds and can be repeated over
-every window of the schedule and then at random ones until the time limit.
+greedily, one acquisition at a time, in some order.  The schedules they leave are often one
+acquisition (or one low-class utility) short of RAMP's, and the better one needs a different
+*sequence* over several consecutive positions (four acquisitions where there were three), which a
+first-fit refill rarely builds.  RAMP finds it because its label sweep compares all sequences
+through every node.  This module runs the same kind of sweep, but only over the time between two
+kept nodes of a schedule, so at 100 acquisitions a window costs well under a millisecond and the
+refinement repeats it at random stretches until its time is up.
 
 The window between anchors u = path[s - 1] (the source when s = 0) and e = path[s + r] (none when the
 window reaches the end) is re-planned as the best path from u through acquisitions not scheduled
@@ -16,10 +16,11 @@ rest of the schedule re-chains no later than before: a node's arc to an acquisit
 node and reaches no later from an earlier node of the same acquisition in the graphs of this project;
 the re-chaining checks it and refuses the move otherwise).  The sweep visits the nodes of the window by
 increasing time (arcs go forward in time) and keeps the `beam` best labels per node (value, parent);
-a label's acquisitions are its chain, checked for repeats by walking it (windows are short).  With a
-large enough beam it is exact within the window; the default keeps it a heuristic like RAMP's.
+a label's acquisitions are its chain, checked for repeats by walking it (windows are short), and equal
+sets at one node are told apart by the XOR of random 64-bit keys.  With a large enough beam it is exact
+within the window; the default keeps it a heuristic like RAMP's.  A window stops (no answer) after
+`MAX_WORK` arcs, so its cost is bounded on graphs of hundreds of arcs per node.
 """
-
 from __future__ import annotations
 
 import numba
@@ -192,45 +193,48 @@ def _try(indptr, dst, acq_ptr, node_acq, node_time, weight, key, by_time, sorted
     return wn, val > old + tol, False
 
 
+def scratch(graph, beam: int, max_work: int = MAX_WORK) -> tuple:
+    """The working arrays of :func:`_repair` for one graph, allocated once (a search's refinement runs
+    thousands of rounds; fresh arrays each round cost ~1 ms of page faults at 100 acquisitions): slot
+    [N, beam], cnt [N], stamp [N] (stamp == a window's id marks its entries, so nothing is cleared between
+    windows), the label arrays (one label per arc looked at at most), the path buffers, the blocked flags
+    and the window counter."""
+    n_nodes, n_acq = graph.node_acq.shape[0], graph.acq_ptr.shape[0] - 1
+    cap = max_work + int(np.max(np.diff(graph.indptr), initial=0)) + 2
+    return (np.empty((n_nodes, beam), dtype=np.int32), np.zeros(n_nodes, dtype=np.int32),
+            np.full(n_nodes, -1, dtype=np.int64), np.empty(cap, dtype=np.int32), np.empty(cap, dtype=np.int32),
+            np.empty(cap, dtype=np.float64), np.empty(cap, dtype=np.uint64), np.empty(n_acq + 1, dtype=np.int32),
+            np.empty(n_acq + 2, dtype=np.int32), np.empty(n_acq + 1, dtype=np.int32),
+            np.zeros(n_acq, dtype=np.bool_), np.zeros(1, dtype=np.int64))
+
+
 @numba.njit(cache=True)
-def _repair(indptr, dst, acq_ptr, node_acq, node_time, weight, key, by_time, sorted_t, path, n, window, beam, iters,
-            seed, tol, max_work, budget):
-    """Re-plan up to `iters` windows of path[:n] in place, each 1..window consecutive positions at random,
-    until `budget` arcs were looked at in all (the caller turns a time into arcs at the rate it measured); a
-    window's new plan is kept when it is not worse (plateaus are walked: equal-value schedules lead
-    elsewhere), so the value never drops.  Returns (new length, windows tried, windows aborted for their
-    cost, arcs looked at)."""
+def _repair(indptr, dst, acq_ptr, node_acq, node_time, weight, key, by_time, sorted_t, path, n, window, iters,
+            seed, tol, max_work, budget, scratch):
+    """Re-plan up to `iters` windows of path[:n] (int32) in place, each 1..window consecutive positions at
+    random, until `budget` arcs were looked at in all (the caller turns a time into arcs at the rate it
+    measured); a window's new plan is kept when it is not worse (plateaus are walked: equal-value schedules
+    lead elsewhere), so the value never drops.  `scratch`: :func:`scratch` of this graph (its beam is the
+    labels kept per node).  Returns (new length, windows tried, windows aborted for their cost, arcs
+    looked at)."""
     np.random.seed(seed)
-    n_nodes = node_acq.shape[0]
-    n_acq = acq_ptr.shape[0] - 1
-    max_deg = 0
-    for v in range(n_nodes):
-        max_deg = max(max_deg, indptr[v + 1] - indptr[v])
-    cap = max_work + max_deg + 2  # a label per arc looked at, at most
-    slot = np.empty((n_nodes, beam), dtype=np.int32)
-    cnt = np.zeros(n_nodes, dtype=np.int32)
-    stamp = np.full(n_nodes, -1, dtype=np.int64)
-    lab_node = np.empty(cap, dtype=np.int32)
-    lab_par = np.empty(cap, dtype=np.int32)
-    lab_val = np.empty(cap, dtype=np.float64)
-    lab_key = np.empty(cap, dtype=np.uint64)
-    seg = np.empty(n_acq + 1, dtype=path.dtype)
-    tmp = np.empty(n_acq + 2, dtype=path.dtype)
-    work = np.empty(n_acq + 1, dtype=path.dtype)
-    blocked = np.zeros(n_acq, dtype=np.bool_)
+    slot, cnt, stamp, lab_node, lab_par, lab_val, lab_key, seg, tmp, work, blocked, calls = scratch
+    beam = slot.shape[1]
+    blocked[:] = False
     for i in range(n):
         blocked[node_acq[path[i]]] = True
     aborted = 0
     tally = np.zeros(1, dtype=np.int64)
     tried = 0
-    for call in range(iters):
+    for _ in range(iters):
         if n == 0 or tally[0] >= budget:
             break
         tried += 1
+        calls[0] += 1
         r = min(1 + np.random.randint(0, window), n)
         s = np.random.randint(0, n - r + 1)
         n, _g, a = _try(indptr, dst, acq_ptr, node_acq, node_time, weight, key, by_time, sorted_t, path, n, s, r,
-                        True, beam, blocked, lab_node, lab_par, lab_val, lab_key, slot, cnt, stamp, call, seg, tmp,
-                        work, tol, max_work, tally)
+                        True, beam, blocked, lab_node, lab_par, lab_val, lab_key, slot, cnt, stamp, calls[0], seg,
+                        tmp, work, tol, max_work, tally)
         aborted += a
     return n, tried, aborted, tally[0]

@@ -54,7 +54,8 @@ def solve(inst: Instance, cfg: MctsConfig | None = None, *, agent: tuple | None 
         ret, acts = max(options, key=lambda o: o[0])
         nodes = finish(polisher, polisher.nodes_of(acts), cfg, t0)
     return Solution.from_path(inst, nodes, mode, {"solver": "mcts", "budget": budget, "simulations": stats.simulations,
-                                   "polish": cfg.polish, "refine": cfg.refine, "expansions": stats.expansions,
+                                   "polish": cfg.polish, "refine": cfg.refine, "windows": cfg.windows,
+                                   "expansions": stats.expansions,
                                    "evaluations": stats.evaluations,
                                    "seconds": time.perf_counter() - t0,
                                    "return": ret})

@@ -126,7 +126,8 @@ def search_time(cfg: SearchConfig) -> float | None:
 
 
 def finish(polisher, nodes: np.ndarray, cfg: SearchConfig, t0: float) -> np.ndarray:
-    """The search's best schedule, refined by ruin and recreate until t0 + cfg.time_limit when refining."""
+    """The search's best schedule, refined (ruin and recreate, and window re-planning with cfg.windows) until
+    t0 + cfg.time_limit when refining."""
     if polisher is None or cfg.time_limit is None or cfg.refine <= 0:
         return nodes
     return polisher.refine(nodes, deadline=t0 + cfg.time_limit, seed=cfg.seed, windows=cfg.windows)

@@ -10,7 +10,7 @@ from hypothesis import strategies as st
 from eosp.envs.sources import prepare_instance
 from eosp.instances.schedule import check, from_internal_nodes
 from eosp.search.polish import Polisher
-from eosp.search.repair import _window
+from eosp.search.repair import _window, scratch
 from eosp.solvers.base import objective_weights, run_solver
 from tests.conftest import generated
 from tests.test_polish import _random_episode
@@ -80,8 +80,8 @@ def test_window_rounds_keep_random_schedules_feasible_and_never_worse(family, se
     path[: nodes.size] = nodes
     g = pol.eg
     n, tried, aborted, arcs = pol._repair(g.indptr, g.dst, g.acq_ptr, g.node_acq, g.node_time, pol.weight, pol.key,
-                                          pol.by_time, pol.sorted_t, path, nodes.size, span, beam, 200, walk, pol.tol,
-                                          max_work, budget)
+                                          pol.by_time, pol.sorted_t, path, nodes.size, span, 200, walk, pol.tol,
+                                          max_work, budget, scratch(g, beam, max_work))
     out = path[:n]
     assert 0 <= aborted <= tried <= 200 and arcs >= 0
     if budget < 10**9:  # the arcs budget stops the round (after the window that crossed it)
