@@ -47,6 +47,8 @@ def main() -> None:
     p.add_argument("--step", type=float, default=1.0, help="time step of the generated discrete graphs (s)")
     p.add_argument("--no-polish", dest="polish", action="store_false",
                    help="learned searches without the insert/swap polish of their schedules (search.polish)")
+    p.add_argument("--window-graph", choices=("pruned", "unpruned"), default="pruned",
+                   help="the arcs the refinement's windows sweep (learned searches and lns)")
     p.add_argument("--no-windows", dest="windows", action="store_false",
                    help="refinement (learned searches and lns) without window re-planning (search.repair)")
     p.add_argument("--out", default="runs/anytime")
@@ -114,8 +116,9 @@ def main() -> None:
                         if method not in a.methods:
                             continue
                         for t in a.times:
-                            kw = ({} if method == "exact" else {"windows": a.windows} if method == "lns" else
-                                  {"agent": agents[mode], "polish": a.polish, "windows": a.windows})
+                            refine = {"windows": a.windows, "window_graph": a.window_graph}
+                            kw = ({} if method == "exact" else refine if method == "lns" else
+                                  {"agent": agents[mode], "polish": a.polish, **refine})
                             if method == "sample":
                                 kw["samples"] = 16
                             if method == "beam":

@@ -506,6 +506,8 @@ class EvalConfig:
     """Learned searches with a time limit: the share of it spent refining the best schedule (ruin and recreate)."""
     windows: bool = True
     """Learned searches, while refining: also re-plan windows of consecutive acquisitions (eosp.search.repair)."""
+    window_graph: str = choice("pruned", "pruned", "unpruned")
+    """Learned searches: the arcs a window's label sweep looks at, the pruned graph's or the unpruned graph's."""
     checkpoint: str = ""
     """Agent checkpoint for the policy, mcts, sample and beam solvers; empty: the shipped pretrained model of --mode."""
     budgets: tuple[int, ...] = ranged((0, 10, 100, 1000), 0)

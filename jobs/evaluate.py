@@ -66,7 +66,7 @@ class SolverWorker:
         if solver == "mcts":
             options["budget"] = budget
         if solver in ("sample", "beam", "mcts"):
-            options.update(polish=cfg.polish, refine=cfg.refine, windows=cfg.windows)
+            options.update(polish=cfg.polish, refine=cfg.refine, windows=cfg.windows, window_graph=cfg.window_graph)
         t0 = time.perf_counter()
         sol = run_solver(solver, inst, agent=agent, **options)
         seconds = time.perf_counter() - t0
@@ -98,7 +98,7 @@ class SolverWorker:
 LEARNED = ("policy", "mcts", "sample", "beam")
 
 
-RESUME_KEYS = ("mode", "time_limit", "search_time", "samples", "beam_width", "polish", "refine", "windows",
+RESUME_KEYS = ("mode", "time_limit", "search_time", "samples", "beam_width", "polish", "refine", "windows", "window_graph",
                "checkpoint", "save_schedules")  # settings a kept result depends on
 
 

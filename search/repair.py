@@ -166,17 +166,20 @@ def _splice(indptr, dst, acq_ptr, node_acq, path, n, s, r, seg, m, tmp, work):
 
 
 @numba.njit(cache=True)
-def _try(indptr, dst, acq_ptr, node_acq, node_time, weight, key, by_time, sorted_t, path, n, s, r, plateau, beam,
-         blocked, lab_node, lab_par, lab_val, lab_key, slot, cnt, stamp, call, seg, tmp, work, tol, max_work, tally):
+def _try(indptr, dst, w_indptr, w_dst, acq_ptr, node_acq, node_time, weight, key, by_time, sorted_t, path, n, s, r,
+         plateau, beam, blocked, lab_node, lab_par, lab_val, lab_key, slot, cnt, stamp, call, seg, tmp, work, tol,
+         max_work, tally):
     """Re-plan positions s..s+r-1 of path[:n]; applied in place when it gains (or, with `plateau`, when it
-    does not lose).  Returns (new length, gained, aborted: the window was too costly to plan)."""
+    does not lose).  The window is planned over the arcs (w_indptr, w_dst), a subset of (indptr, dst) on the
+    same nodes (e.g. the pruned graph's), the rest of the path re-chained over (indptr, dst).  Returns (new
+    length, gained, aborted: the window was too costly to plan)."""
     old = 0.0
     for i in range(s, s + r):
         blocked[node_acq[path[i]]] = False
         old += weight[node_acq[path[i]]]
     u = path[s - 1] if s > 0 else 0
     e = path[s + r] if s + r < n else -1
-    m, val = _window(indptr, dst, acq_ptr, node_acq, node_time, weight, key, by_time, sorted_t, blocked, u, e,
+    m, val = _window(w_indptr, w_dst, acq_ptr, node_acq, node_time, weight, key, by_time, sorted_t, blocked, u, e,
                      beam, lab_node, lab_par, lab_val, lab_key, slot, cnt, stamp, call, seg, tol, max_work, tally)
     wn = -1
     aborted = m < 0
@@ -209,14 +212,14 @@ def scratch(graph, beam: int, max_work: int = MAX_WORK) -> tuple:
 
 
 @numba.njit(cache=True)
-def _repair(indptr, dst, acq_ptr, node_acq, node_time, weight, key, by_time, sorted_t, path, n, window, iters,
-            seed, tol, max_work, budget, scratch):
+def _repair(indptr, dst, w_indptr, w_dst, acq_ptr, node_acq, node_time, weight, key, by_time, sorted_t, path, n,
+            window, iters, seed, tol, max_work, budget, scratch):
     """Re-plan up to `iters` windows of path[:n] (int32) in place, each 1..window consecutive positions at
     random, until `budget` arcs were looked at in all (the caller turns a time into arcs at the rate it
     measured); a window's new plan is kept when it is not worse (plateaus are walked: equal-value schedules
     lead elsewhere), so the value never drops.  `scratch`: :func:`scratch` of this graph (its beam is the
     labels kept per node).  Returns (new length, windows tried, windows aborted for their cost, arcs
-    looked at)."""
+    looked at).  Windows are planned over the arcs (w_indptr, w_dst) (:func:`_try`)."""
     np.random.seed(seed)
     slot, cnt, stamp, lab_node, lab_par, lab_val, lab_key, seg, tmp, work, blocked, calls = scratch
     beam = slot.shape[1]
@@ -233,8 +236,8 @@ def _repair(indptr, dst, acq_ptr, node_acq, node_time, weight, key, by_time, sor
         calls[0] += 1
         r = min(1 + np.random.randint(0, window), n)
         s = np.random.randint(0, n - r + 1)
-        n, _g, a = _try(indptr, dst, acq_ptr, node_acq, node_time, weight, key, by_time, sorted_t, path, n, s, r,
-                        True, beam, blocked, lab_node, lab_par, lab_val, lab_key, slot, cnt, stamp, calls[0], seg,
+        n, _g, a = _try(indptr, dst, w_indptr, w_dst, acq_ptr, node_acq, node_time, weight, key, by_time, sorted_t,
+                        path, n, s, r, True, beam, blocked, lab_node, lab_par, lab_val, lab_key, slot, cnt, stamp, calls[0], seg,
                         tmp, work, tol, max_work, tally)
         aborted += a
     return n, tried, aborted, tally[0]

@@ -104,6 +104,11 @@ class SearchConfig(LearnedConfig):
     windows: bool = True
     """While refining, also re-plan windows of up to 16 consecutive acquisitions by a label sweep over the time
     between their neighbours (eosp.search.repair), for as much time as the ruin and recreate."""
+    window_graph: str = choice("pruned", "pruned", "unpruned")
+    """The arcs a window's label sweep looks at: the pruned graph's (RAMP's: 6-170 arcs per node against 50-770
+    unpruned from 100 to 1500 acquisitions, so many more windows per second where schedules are long) or the
+    unpruned graph's (every arc; windows there mostly exceed their work bound from ~500 acquisitions on).  The
+    schedule itself may keep using every arc."""
 
 
 def _check_type(owner: str, name: str, hint: Any, value: Any) -> None:

@@ -55,6 +55,7 @@ def solve(inst: Instance, cfg: MctsConfig | None = None, *, agent: tuple | None 
         nodes = finish(polisher, polisher.nodes_of(acts), cfg, t0)
     return Solution.from_path(inst, nodes, mode, {"solver": "mcts", "budget": budget, "simulations": stats.simulations,
                                    "polish": cfg.polish, "refine": cfg.refine, "windows": cfg.windows,
+                                   "window_graph": cfg.window_graph,
                                    "expansions": stats.expansions,
                                    "evaluations": stats.evaluations,
                                    "seconds": time.perf_counter() - t0,

@@ -108,14 +108,17 @@ def polisher_for(prepared: PreparedInstance, cfg: SearchConfig):
     """The search's improver of complete episodes, or None with ``polish`` off: a
     :class:`eosp.search.polish.Polisher` for the objective of cfg.mode on the unpruned graph when the instance has
     it (more moves: the pruned graph lacks the arc that skips a dropped acquisition, and a pruned path can end
-    in a node whose pruned arcs all lead to acquisitions already scheduled), else on the environment's graph."""
+    in a node whose pruned arcs all lead to acquisitions already scheduled), its windows sweeping the pruned graph's
+    arcs (cfg.window_graph), else on the environment's graph."""
     if not cfg.polish:
         return None
     from eosp.search.polish import Polisher
 
     inst = prepared.inst
-    graph = inst.unpruned_graph if inst.unpruned_graph is not None else prepared.eg
-    return Polisher(graph, objective_weights(inst, cfg.mode))
+    if inst.unpruned_graph is None:  # the environment's (pruned) graph for everything
+        return Polisher(prepared.eg, objective_weights(inst, cfg.mode))
+    return Polisher(inst.unpruned_graph, objective_weights(inst, cfg.mode),
+                    window_graph=inst.pruned() if cfg.window_graph == "pruned" else None)
 
 
 def search_time(cfg: SearchConfig) -> float | None:
@@ -154,6 +157,7 @@ def run_search(name: str, inst: Instance, cfg: SearchConfig, agent: tuple | None
     nodes = finish(polisher, nodes, cfg, t0)
     return Solution.from_path(inst, nodes, cfg.mode, {"solver": name, **info, "polish": cfg.polish,
                                                       "refine": cfg.refine, "windows": cfg.windows,
+                                                      "window_graph": cfg.window_graph,
                                                       "episodes": best.episodes,
                                                       "evaluations": best.evaluations,
                                                       "seconds": time.perf_counter() - t0})

@@ -66,22 +66,24 @@ def test_a_window_respects_its_anchors_and_the_blocked_acquisitions():
 @given(family=st.sampled_from(["uniform", "clusters", "conflict"]), seed=st.integers(0, 3),
        walk=st.integers(0, 10_000), mode=st.sampled_from(["unitary", "utility"]), span=st.integers(1, 8),
        beam=st.integers(1, 6), max_work=st.sampled_from([50, 5_000, 3_000_000]),
-       budget=st.sampled_from([0, 20_000, 10**12]))
+       budget=st.sampled_from([0, 20_000, 10**12]), pruned_windows=st.booleans())
 def test_window_rounds_keep_random_schedules_feasible_and_never_worse(family, seed, walk, mode, span, beam, max_work,
-                                                                      budget):
-    """Random windows (some aborted for their cost) over random complete episodes: the result is a path of the
-    graph (the walk from its acquisitions gives it back), each acquisition at most once, feasible for the
-    independent checker, and its value never below the start's."""
+                                                                      budget, pruned_windows):
+    """Random windows (some aborted for their cost) over random complete episodes, planned over the unpruned or
+    the pruned graph's arcs: the result is a path of the unpruned graph (the walk from its acquisitions gives it
+    back), each acquisition at most once, feasible for the independent checker, and its value never below the
+    start's."""
     inst = generated(family, 40, seed)
     prepared = prepare_instance(inst, True)
-    pol = Polisher(inst.unpruned(), objective_weights(inst, mode), window=span, window_beam=beam)
+    pol = Polisher(inst.unpruned(), objective_weights(inst, mode), window=span, window_beam=beam,
+                   window_graph=inst.pruned() if pruned_windows else None)
     nodes = _random_episode(prepared, np.random.default_rng(walk))
     path = np.zeros(inst.n_acq + 1, dtype=np.int32)
     path[: nodes.size] = nodes
-    g = pol.eg
-    n, tried, aborted, arcs = pol._repair(g.indptr, g.dst, g.acq_ptr, g.node_acq, g.node_time, pol.weight, pol.key,
-                                          pol.by_time, pol.sorted_t, path, nodes.size, span, 200, walk, pol.tol,
-                                          max_work, budget, scratch(g, beam, max_work))
+    g, w = pol.eg, pol.wg
+    n, tried, aborted, arcs = pol._repair(g.indptr, g.dst, w.indptr, w.dst, g.acq_ptr, g.node_acq, g.node_time,
+                                          pol.weight, pol.key, pol.by_time, pol.sorted_t, path, nodes.size, span,
+                                          200, walk, pol.tol, max_work, budget, scratch(w, beam, max_work))
     out = path[:n]
     assert 0 <= aborted <= tried <= 200 and arcs >= 0
     if budget < 10**9:  # the arcs budget stops the round (after the window that crossed it)
@@ -93,9 +95,11 @@ def test_window_rounds_keep_random_schedules_feasible_and_never_worse(family, se
     assert verdict.feasible, verdict.reason
 
 
-def test_refine_with_windows_is_deterministic_and_at_least_as_good_on_a_conflict_instance():
+@pytest.mark.parametrize("pruned_windows", [False, True])
+def test_refine_with_windows_is_deterministic_and_at_least_as_good_on_a_conflict_instance(pruned_windows):
     inst = generated("conflict", 60, 6)
-    pol = Polisher(inst.unpruned(), objective_weights(inst, "unitary"))
+    pol = Polisher(inst.unpruned(), objective_weights(inst, "unitary"),
+                   window_graph=inst.pruned() if pruned_windows else None)
     greedy = run_solver("greedy", inst, mode="unitary")
     a = pol.refine(greedy.nodes, iterations=256, seed=1, windows=True)
     assert pol.window_rounds > 0
