@@ -98,8 +98,8 @@ class SolverWorker:
 LEARNED = ("policy", "mcts", "sample", "beam")
 
 
-RESUME_KEYS = ("mode", "time_limit", "search_time", "samples", "beam_width", "polish", "refine", "windows", "window_graph",
-               "checkpoint", "save_schedules")  # settings a kept result depends on
+RESUME_KEYS = ("mode", "time_limit", "search_time", "samples", "beam_width", "polish", "refine", "windows",
+               "window_graph", "checkpoint", "save_schedules")  # settings a kept result depends on
 
 
 def _job_file(partial: Path, job: tuple) -> Path:

@@ -338,7 +338,7 @@ class Polisher:
                  window_beam: int = 4, window_graph=None):
         self.eg = eg = graph
         # the arcs window re-planning sweeps: `graph`'s, or a subset of them on the same nodes (the pruned
-        # graph's, 3-9x fewer: what makes windows affordable where the unpruned graph has hundreds of arcs per
+        # graph's, 3-10x fewer: what makes windows affordable where the unpruned graph has hundreds of arcs per
         # node); the moves and the re-chaining after a window use `graph`'s
         self.wg = wg = graph if window_graph is None else window_graph
         assert wg.node_acq.shape == eg.node_acq.shape, "the window graph must have the same nodes"

@@ -237,7 +237,7 @@ def _repair(indptr, dst, w_indptr, w_dst, acq_ptr, node_acq, node_time, weight, 
         r = min(1 + np.random.randint(0, window), n)
         s = np.random.randint(0, n - r + 1)
         n, _g, a = _try(indptr, dst, w_indptr, w_dst, acq_ptr, node_acq, node_time, weight, key, by_time, sorted_t,
-                        path, n, s, r, True, beam, blocked, lab_node, lab_par, lab_val, lab_key, slot, cnt, stamp, calls[0], seg,
-                        tmp, work, tol, max_work, tally)
+                        path, n, s, r, True, beam, blocked, lab_node, lab_par, lab_val, lab_key, slot, cnt, stamp,
+                        calls[0], seg, tmp, work, tol, max_work, tally)
         aborted += a
     return n, tried, aborted, tally[0]
