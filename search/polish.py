@@ -367,7 +367,7 @@ class Polisher:
         # random 64-bit key per acquisition whose XOR over a label's acquisitions tells equal sets apart
         from eosp.search import repair
 
-        self._repair, self._max_work = repair._repair, repair.MAX_WORK
+        self._repair, self._max_work, self._first_work = repair._repair, repair.MAX_WORK, repair.FIRST_WORK
         self._scratch = repair.scratch(wg, window_beam, repair.MAX_WORK)
         self.by_time = (np.argsort(eg.node_time[1:], kind="stable") + 1).astype(np.int32)
         self.sorted_t = eg.node_time[self.by_time].astype(np.float64)
@@ -390,7 +390,8 @@ class Polisher:
         or for `iterations`, then one polish; the best schedule met (never worse than `nodes`).
 
         With `windows`, rounds of window re-planning (:mod:`eosp.search.repair`) alternate with the ruin
-        and recreate, given as much time as it (16 windows a round when there is no deadline); when most
+        and recreate, given as much time as it (16 windows a round when there is no deadline); half of the
+        windows are long ones (up to the whole schedule, one label per node); when most
         windows of a round were too costly to plan (graphs of hundreds of arcs per node), the stretches
         are halved, down to none.
         """
@@ -403,7 +404,8 @@ class Polisher:
         path[: nodes.size] = nodes
         n, done, chunk = nodes.size, 0, 64
         t_rr = t_win = 0.0
-        use_windows, span, rate = windows, self.window, 0.0  # rate: arcs looked at per second of windows
+        # rate: arcs looked at per second of windows; long windows may span the whole schedule
+        use_windows, span, long_span, rate = windows, self.window, n_acq, 0.0
         self.window_rounds = 0
         while (deadline is None and done < iterations) or (deadline is not None and time.perf_counter() < deadline):
             t0 = time.perf_counter()
@@ -412,31 +414,37 @@ class Polisher:
             t1 = time.perf_counter()
             t_rr += t1 - t0
             # without a deadline: 16 windows per round (deterministic); with one: as much time as the ruin and
-            # recreate, each round's arcs budgeted from the rate measured so far (one window's worth first)
+            # recreate, each round's arcs budgeted from the rate measured so far (a small first round), and one
+            # window given a tenth of the time left at most, so that the limit holds
             if use_windows and (deadline is None or (t_win <= t_rr and t1 < deadline)):
                 if deadline is None:
-                    count, budget = 16, np.iinfo(np.int64).max
+                    count, budget, work = 16, np.iinfo(np.int64).max, self._max_work
+                elif rate == 0.0:
+                    count, budget, work = 1 << 20, self._first_work, self._first_work
                 else:  # as many windows as the budget allows
                     count = 1 << 20
-                    budget = self._max_work if rate == 0.0 else int(rate * min(t1 - t0, 0.5 * (deadline - t1)))
-                n, tried, aborted, arcs = self._run_windows(path, n, count, budget, seed + done, span)
+                    budget = int(rate * min(t1 - t0, 0.5 * (deadline - t1)))
+                    work = int(min(self._max_work, max(rate * 0.1 * (deadline - t1), 1.0)))
+                n, tried, aborted, arcs = self._run_windows(path, n, count, budget, seed + done, span, long_span,
+                                                            work)
                 dt = time.perf_counter() - t1
                 t_win += dt
                 rate = arcs / max(dt, 1e-6) if arcs > 0 else rate
                 self.window_rounds += tried
                 if tried and 2 * aborted > tried:  # most windows too costly to plan: shorter ones, or none
                     use_windows = span > 1
-                    span = max(1, span // 2)
+                    span, long_span = max(1, span // 2), long_span // 2
             done += chunk
         self.rounds = done
         return self(path[:n])
 
-    def _run_windows(self, path, n, count, budget, seed, span=1):
-        """`count` windows of 1..span positions at most, until `budget` arcs: (length, tried, aborted, arcs)."""
+    def _run_windows(self, path, n, count, budget, seed, span=1, long_span=0, max_work=None):
+        """`count` windows of 1..span positions at most (or, half of them, 1..long_span with one label per node:
+        :func:`eosp.search.repair._repair`), until `budget` arcs: (length, tried, aborted, arcs)."""
         eg, wg = self.eg, self.wg
         return self._repair(eg.indptr, eg.dst, wg.indptr, wg.dst, eg.acq_ptr, eg.node_acq, eg.node_time, self.weight,
-                            self.key, self.by_time, self.sorted_t, path, n, span, count, seed, self.tol,
-                            self._max_work, budget, self._scratch)
+                            self.key, self.by_time, self.sorted_t, path, n, span, long_span, count, seed, self.tol,
+                            self._max_work if max_work is None else max_work, budget, self._scratch)
 
     def nodes_of(self, actions) -> np.ndarray:
         """The path that playing acquisitions `actions` from the source follows (each one's arc)."""

@@ -29,14 +29,21 @@ import numpy as np
 from eosp.graphs.discrete import arc_to_acq
 from eosp.search.polish import _rechain
 
-MAX_WORK = 3_000_000  # arcs a window may look at (~10 ms)
+MAX_WORK = 30_000_000  # arcs a window may look at (~0.1-0.3 s at 1500 acquisitions)
+FIRST_WORK = 3_000_000  # arcs of a refinement's first round of windows, before their rate is known (~10 ms)
+MAX_LABELS = 3_000_000  # labels a window may create (72 MB of scratch); a window that needs more stops
 
 
 @numba.njit(cache=True, inline="always")
-def _in_chain(lab_node, lab_par, node_acq, l, k):
-    """Is acquisition k in label l's chain (its start label excluded)?"""
+def _in_chain(lab_node, lab_par, node_acq, node_time, l, k, t_first):
+    """Is acquisition k, whose first node is at time `t_first`, in label l's chain (its start label excluded)?
+    The chain runs backwards in time, so the walk stops at the first node earlier than k's first node: only
+    the last few nodes (those within k's visibility window) are looked at, however long the window."""
     while l >= 0 and lab_par[l] >= 0:
-        if node_acq[lab_node[l]] == k:
+        v = lab_node[l]
+        if node_time[v] < t_first:
+            return False
+        if node_acq[v] == k:
             return True
         l = lab_par[l]
     return False
@@ -97,7 +104,7 @@ def _window(indptr, dst, acq_ptr, node_acq, node_time, weight, key, by_time, sor
                 if node_time[w] >= t_e:
                     continue
                 k = node_acq[w]
-                if blocked[k] or _in_chain(lab_node, lab_par, node_acq, l, k):
+                if blocked[k] or _in_chain(lab_node, lab_par, node_acq, node_time, l, k, node_time[acq_ptr[k]]):
                     continue
                 nv = lv + weight[k]
                 nk = lab_key[l] ^ key[k]
@@ -200,10 +207,10 @@ def scratch(graph, beam: int, max_work: int = MAX_WORK) -> tuple:
     """The working arrays of :func:`_repair` for one graph, allocated once (a search's refinement runs
     thousands of rounds; fresh arrays each round cost ~1 ms of page faults at 100 acquisitions): slot
     [N, beam], cnt [N], stamp [N] (stamp == a window's id marks its entries, so nothing is cleared between
-    windows), the label arrays (one label per arc looked at at most), the path buffers, the blocked flags
-    and the window counter."""
+    windows), the label arrays (at most one label per arc looked at, and at most MAX_LABELS), the path
+    buffers, the blocked flags and the window counter."""
     n_nodes, n_acq = graph.node_acq.shape[0], graph.acq_ptr.shape[0] - 1
-    cap = max_work + int(np.max(np.diff(graph.indptr), initial=0)) + 2
+    cap = min(max_work, MAX_LABELS) + int(np.max(np.diff(graph.indptr), initial=0)) + 2
     return (np.empty((n_nodes, beam), dtype=np.int32), np.zeros(n_nodes, dtype=np.int32),
             np.full(n_nodes, -1, dtype=np.int64), np.empty(cap, dtype=np.int32), np.empty(cap, dtype=np.int32),
             np.empty(cap, dtype=np.float64), np.empty(cap, dtype=np.uint64), np.empty(n_acq + 1, dtype=np.int32),
@@ -213,9 +220,12 @@ def scratch(graph, beam: int, max_work: int = MAX_WORK) -> tuple:
 
 @numba.njit(cache=True)
 def _repair(indptr, dst, w_indptr, w_dst, acq_ptr, node_acq, node_time, weight, key, by_time, sorted_t, path, n,
-            window, iters, seed, tol, max_work, budget, scratch):
+            window, long_window, iters, seed, tol, max_work, budget, scratch):
     """Re-plan up to `iters` windows of path[:n] (int32) in place, each 1..window consecutive positions at
-    random, until `budget` arcs were looked at in all (the caller turns a time into arcs at the rate it
+    random with the scratch's beam, or (every other window on average, when `long_window` > window)
+    1..long_window positions with one label per node: a long stretch swept like RAMP's beam-1 sweep, which
+    finds what a different sequence over much of the schedule gains (at 1000-1500 acquisitions the short
+    windows stop one or two acquisitions short of RAMP); until `budget` arcs were looked at in all (the caller turns a time into arcs at the rate it
     measured); a window's new plan is kept when it is not worse (plateaus are walked: equal-value schedules
     lead elsewhere), so the value never drops.  `scratch`: :func:`scratch` of this graph (its beam is the
     labels kept per node).  Returns (new length, windows tried, windows aborted for their cost, arcs
@@ -234,10 +244,14 @@ def _repair(indptr, dst, w_indptr, w_dst, acq_ptr, node_acq, node_time, weight, 
             break
         tried += 1
         calls[0] += 1
-        r = min(1 + np.random.randint(0, window), n)
+        b = beam
+        if long_window > window and np.random.random() < 0.5:
+            r, b = min(1 + np.random.randint(0, long_window), n), 1
+        else:
+            r = min(1 + np.random.randint(0, window), n)
         s = np.random.randint(0, n - r + 1)
         n, _g, a = _try(indptr, dst, w_indptr, w_dst, acq_ptr, node_acq, node_time, weight, key, by_time, sorted_t,
-                        path, n, s, r, True, beam, blocked, lab_node, lab_par, lab_val, lab_key, slot, cnt, stamp,
+                        path, n, s, r, True, b, blocked, lab_node, lab_par, lab_val, lab_key, slot, cnt, stamp,
                         calls[0], seg, tmp, work, tol, max_work, tally)
         aborted += a
     return n, tried, aborted, tally[0]

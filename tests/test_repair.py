@@ -66,11 +66,11 @@ def test_a_window_respects_its_anchors_and_the_blocked_acquisitions():
 @given(family=st.sampled_from(["uniform", "clusters", "conflict"]), seed=st.integers(0, 3),
        walk=st.integers(0, 10_000), mode=st.sampled_from(["unitary", "utility"]), span=st.integers(1, 8),
        beam=st.integers(1, 6), max_work=st.sampled_from([50, 5_000, 3_000_000]),
-       budget=st.sampled_from([0, 20_000, 10**12]), pruned_windows=st.booleans())
+       budget=st.sampled_from([0, 20_000, 10**12]), pruned_windows=st.booleans(), long_span=st.sampled_from([0, 40]))
 def test_window_rounds_keep_random_schedules_feasible_and_never_worse(family, seed, walk, mode, span, beam, max_work,
-                                                                      budget, pruned_windows):
-    """Random windows (some aborted for their cost) over random complete episodes, planned over the unpruned or
-    the pruned graph's arcs: the result is a path of the unpruned graph (the walk from its acquisitions gives it
+                                                                      budget, pruned_windows, long_span):
+    """Random windows (some aborted for their cost; with `long_span`, half of them long ones with one label per
+    node) over random complete episodes, planned over the unpruned or the pruned graph's arcs: the result is a path of the unpruned graph (the walk from its acquisitions gives it
     back), each acquisition at most once, feasible for the independent checker, and its value never below the
     start's."""
     inst = generated(family, 40, seed)
@@ -83,7 +83,7 @@ def test_window_rounds_keep_random_schedules_feasible_and_never_worse(family, se
     g, w = pol.eg, pol.wg
     n, tried, aborted, arcs = pol._repair(g.indptr, g.dst, w.indptr, w.dst, g.acq_ptr, g.node_acq, g.node_time,
                                           pol.weight, pol.key, pol.by_time, pol.sorted_t, path, nodes.size, span,
-                                          200, walk, pol.tol, max_work, budget, scratch(w, beam, max_work))
+                                          long_span, 200, walk, pol.tol, max_work, budget, scratch(w, beam, max_work))
     out = path[:n]
     assert 0 <= aborted <= tried <= 200 and arcs >= 0
     if budget < 10**9:  # the arcs budget stops the round (after the window that crossed it)
