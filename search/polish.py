@@ -415,7 +415,7 @@ class Polisher:
             t_rr += t1 - t0
             # without a deadline: 16 windows per round (deterministic); with one: as much time as the ruin and
             # recreate, each round's arcs budgeted from the rate measured so far (a small first round), and one
-            # window given a tenth of the time left at most, so that the limit holds
+            # window given a twentieth of the time left at most, so that the limit holds
             if use_windows and (deadline is None or (t_win <= t_rr and t1 < deadline)):
                 if deadline is None:
                     count, budget, work = 16, np.iinfo(np.int64).max, self._max_work
@@ -424,23 +424,28 @@ class Polisher:
                 else:  # as many windows as the budget allows
                     count = 1 << 20
                     budget = int(rate * min(t1 - t0, 0.5 * (deadline - t1)))
-                    work = int(min(self._max_work, max(rate * 0.1 * (deadline - t1), 1.0)))
-                n, tried, aborted, arcs = self._run_windows(path, n, count, budget, seed + done, span, long_span,
+                    work = int(min(self._max_work, max(rate * 0.05 * (deadline - t1), 1.0)))
+                n, tried, aborted, arcs, long_tried, long_aborted = self._run_windows(path, n, count, budget, seed + done, span, long_span,
                                                             work)
                 dt = time.perf_counter() - t1
                 t_win += dt
                 rate = arcs / max(dt, 1e-6) if arcs > 0 else rate
                 self.window_rounds += tried
-                if tried and 2 * aborted > tried:  # most windows too costly to plan: shorter ones, or none
+                # most windows of a kind too costly to plan: shorter ones (the short and the long ones apart:
+                # long ones that stop at their bound must not shrink the short ones), or none
+                short_tried, short_aborted = tried - long_tried, aborted - long_aborted
+                if long_tried and 2 * long_aborted > long_tried:
+                    long_span //= 2
+                if short_tried and 2 * short_aborted > short_tried:
                     use_windows = span > 1
-                    span, long_span = max(1, span // 2), long_span // 2
+                    span = max(1, span // 2)
             done += chunk
         self.rounds = done
         return self(path[:n])
 
     def _run_windows(self, path, n, count, budget, seed, span=1, long_span=0, max_work=None):
         """`count` windows of 1..span positions at most (or, half of them, 1..long_span with one label per node:
-        :func:`eosp.search.repair._repair`), until `budget` arcs: (length, tried, aborted, arcs)."""
+        :func:`eosp.search.repair._repair`), until `budget` arcs: (length, tried, aborted, arcs, long tried, long aborted)."""
         eg, wg = self.eg, self.wg
         return self._repair(eg.indptr, eg.dst, wg.indptr, wg.dst, eg.acq_ptr, eg.node_acq, eg.node_time, self.weight,
                             self.key, self.by_time, self.sorted_t, path, n, span, long_span, count, seed, self.tol,

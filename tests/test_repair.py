@@ -81,11 +81,13 @@ def test_window_rounds_keep_random_schedules_feasible_and_never_worse(family, se
     path = np.zeros(inst.n_acq + 1, dtype=np.int32)
     path[: nodes.size] = nodes
     g, w = pol.eg, pol.wg
-    n, tried, aborted, arcs = pol._repair(g.indptr, g.dst, w.indptr, w.dst, g.acq_ptr, g.node_acq, g.node_time,
-                                          pol.weight, pol.key, pol.by_time, pol.sorted_t, path, nodes.size, span,
-                                          long_span, 200, walk, pol.tol, max_work, budget, scratch(w, beam, max_work))
+    n, tried, aborted, arcs, long_tried, long_aborted = pol._repair(
+        g.indptr, g.dst, w.indptr, w.dst, g.acq_ptr, g.node_acq, g.node_time, pol.weight, pol.key, pol.by_time,
+        pol.sorted_t, path, nodes.size, span, long_span, 200, walk, pol.tol, max_work, budget, scratch(w, beam, max_work))
     out = path[:n]
     assert 0 <= aborted <= tried <= 200 and arcs >= 0
+    assert 0 <= long_aborted <= long_tried <= tried and long_aborted <= aborted
+    assert long_span > span or long_tried == 0
     if budget < 10**9:  # the arcs budget stops the round (after the window that crossed it)
         assert tried == 200 or arcs >= budget
     assert pol.value(out) >= pol.value(nodes) - 1e-9
