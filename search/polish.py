@@ -368,6 +368,7 @@ class Polisher:
         from eosp.search import repair
 
         self._repair, self._max_work, self._first_work = repair._repair, repair.MAX_WORK, repair.FIRST_WORK
+        self.window_time = 0.5  # the share of the time left one window may take at most
         self._scratch = repair.scratch(wg, window_beam, repair.MAX_WORK)
         self.by_time = (np.argsort(eg.node_time[1:], kind="stable") + 1).astype(np.int32)
         self.sorted_t = eg.node_time[self.by_time].astype(np.float64)
@@ -415,7 +416,8 @@ class Polisher:
             t_rr += t1 - t0
             # without a deadline: 16 windows per round (deterministic); with one: as much time as the ruin and
             # recreate, each round's arcs budgeted from the rate measured so far (a small first round), and one
-            # window given a twentieth of the time left at most, so that the limit holds
+            # window given half of the time left at most (a long window over a 1500-acquisition schedule needs
+            # ~1 s), so that the limit holds
             if use_windows and (deadline is None or (t_win <= t_rr and t1 < deadline)):
                 if deadline is None:
                     count, budget, work = 16, np.iinfo(np.int64).max, self._max_work
@@ -424,7 +426,7 @@ class Polisher:
                 else:  # as many windows as the budget allows
                     count = 1 << 20
                     budget = int(rate * min(t1 - t0, 0.5 * (deadline - t1)))
-                    work = int(min(self._max_work, max(rate * 0.05 * (deadline - t1), 1.0)))
+                    work = int(min(self._max_work, max(rate * self.window_time * (deadline - t1), 1.0)))
                 n, tried, aborted, arcs, long_tried, long_aborted = self._run_windows(path, n, count, budget, seed + done, span, long_span,
                                                             work)
                 dt = time.perf_counter() - t1

@@ -37,7 +37,7 @@ import numpy as np
 from eosp.graphs.discrete import arc_to_acq
 from eosp.search.polish import _rechain
 
-MAX_WORK = 30_000_000  # arcs a window may look at (~0.1-0.3 s at 1500 acquisitions)
+MAX_WORK = 100_000_000  # arcs a window may look at (~1 s; the refinement also caps it by the time left)
 FIRST_WORK = 3_000_000  # arcs of a refinement's first round of windows, before their rate is known (~10 ms)
 MAX_LABELS = 3_000_000  # labels a window may create (72 MB of scratch); a window that needs more stops
 
