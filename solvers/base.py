@@ -102,8 +102,9 @@ class SearchConfig(LearnedConfig):
     """With polish and a time limit: the share of the time limit spent refining the best schedule found by ruin
     and recreate (drop a few consecutive acquisitions, refill, keep when not worse); 0: search until the limit."""
     windows: bool = True
-    """While refining, also re-plan windows of up to 16 consecutive acquisitions by a label sweep over the time
-    between their neighbours (eosp.search.repair), for as much time as the ruin and recreate."""
+    """While refining, also re-plan windows of consecutive acquisitions by a label sweep over the time between
+    their neighbours (eosp.search.repair: up to 16 with 4 labels per node, or up to the whole schedule with one),
+    for as much time as the ruin and recreate."""
     window_graph: str = choice("pruned", "pruned", "unpruned")
     """The arcs a window's label sweep looks at: the pruned graph's (RAMP's: 6-170 arcs per node against 50-770
     unpruned from 100 to 1500 acquisitions, so many more windows per second where schedules are long) or the
