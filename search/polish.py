@@ -420,15 +420,17 @@ class Polisher:
             # ~1 s), so that the limit holds
             if use_windows and (deadline is None or (t_win <= t_rr and t1 < deadline)):
                 if deadline is None:
-                    count, budget, work = 16, np.iinfo(np.int64).max, self._max_work
+                    # of the first round's size: nothing else bounds them, and a refinement without a time limit
+                    # (lns's default) costs what it did before the long windows (3M arcs a window at most)
+                    count, budget, work = 16, np.iinfo(np.int64).max, self._first_work
                 elif rate == 0.0:
                     count, budget, work = 1 << 20, self._first_work, self._first_work
                 else:  # as many windows as the budget allows
                     count = 1 << 20
                     budget = int(rate * min(t1 - t0, 0.5 * (deadline - t1)))
                     work = int(min(self._max_work, max(rate * self.window_time * (deadline - t1), 1.0)))
-                n, tried, aborted, arcs, long_tried, long_aborted = self._run_windows(path, n, count, budget, seed + done, span, long_span,
-                                                            work)
+                n, tried, aborted, arcs, long_tried, long_aborted = self._run_windows(
+                    path, n, count, budget, seed + done, span, long_span, work)
                 dt = time.perf_counter() - t1
                 t_win += dt
                 rate = arcs / max(dt, 1e-6) if arcs > 0 else rate
@@ -447,7 +449,8 @@ class Polisher:
 
     def _run_windows(self, path, n, count, budget, seed, span=1, long_span=0, max_work=None):
         """`count` windows of 1..span positions at most (or, half of them, 1..long_span with one label per node:
-        :func:`eosp.search.repair._repair`), until `budget` arcs: (length, tried, aborted, arcs, long tried, long aborted)."""
+        :func:`eosp.search.repair._repair`), until `budget` arcs: (length, tried, aborted, arcs, long tried,
+        long aborted)."""
         eg, wg = self.eg, self.wg
         return self._repair(eg.indptr, eg.dst, wg.indptr, wg.dst, eg.acq_ptr, eg.node_acq, eg.node_time, self.weight,
                             self.key, self.by_time, self.sorted_t, path, n, span, long_span, count, seed, self.tol,
