@@ -234,10 +234,11 @@ def _repair(indptr, dst, w_indptr, w_dst, acq_ptr, node_acq, node_time, weight, 
     1..long_window positions with one label per node: a long stretch swept like RAMP's beam-1 sweep, which
     finds what a different sequence over much of the schedule gains (at 1000-1500 acquisitions the short
     windows stop one or two acquisitions short of RAMP); until `budget` arcs were looked at in all (the
-    caller turns a time into arcs at the rate it measured); a window's new plan is kept when it is not worse (plateaus are walked: equal-value schedules
-    lead elsewhere), so the value never drops.  `scratch`: :func:`scratch` of this graph (its beam is the
-    labels kept per node).  Returns (new length, windows tried, windows aborted for their cost, arcs
-    looked at, long windows tried, long windows aborted).  Windows are planned over the arcs (w_indptr, w_dst) (:func:`_try`)."""
+    caller turns a time into arcs at the rate it measured).  A window's new plan is kept when it is not worse
+    (plateaus are walked: equal-value schedules lead elsewhere), so the value never drops.  Windows are
+    planned over the arcs (w_indptr, w_dst) (:func:`_try`).  `scratch`: :func:`scratch` of that graph (its
+    beam is the labels kept per node in short windows).  Returns (new length, windows tried, windows
+    aborted for their cost, arcs looked at, long windows tried, long windows aborted)."""
     np.random.seed(seed)
     slot, cnt, stamp, lab_node, lab_par, lab_val, lab_key, seg, tmp, work, blocked, calls = scratch
     beam = slot.shape[1]

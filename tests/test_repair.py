@@ -70,8 +70,8 @@ def test_a_window_respects_its_anchors_and_the_blocked_acquisitions():
 def test_window_rounds_keep_random_schedules_feasible_and_never_worse(family, seed, walk, mode, span, beam, max_work,
                                                                       budget, pruned_windows, long_span):
     """Random windows (some aborted for their cost; with `long_span`, half of them long ones with one label per
-    node) over random complete episodes, planned over the unpruned or the pruned graph's arcs: the result is a path of the unpruned graph (the walk from its acquisitions gives it
-    back), each acquisition at most once, feasible for the independent checker, and its value never below the
+    node) over random complete episodes, planned over the unpruned or the pruned graph's arcs: the result is a
+    path of the unpruned graph (the walk from its acquisitions gives it back), each acquisition at most once, feasible for the independent checker, and its value never below the
     start's."""
     inst = generated(family, 40, seed)
     prepared = prepare_instance(inst, True)
@@ -83,7 +83,8 @@ def test_window_rounds_keep_random_schedules_feasible_and_never_worse(family, se
     g, w = pol.eg, pol.wg
     n, tried, aborted, arcs, long_tried, long_aborted = pol._repair(
         g.indptr, g.dst, w.indptr, w.dst, g.acq_ptr, g.node_acq, g.node_time, pol.weight, pol.key, pol.by_time,
-        pol.sorted_t, path, nodes.size, span, long_span, 200, walk, pol.tol, max_work, budget, scratch(w, beam, max_work))
+        pol.sorted_t, path, nodes.size, span, long_span, 200, walk, pol.tol, max_work, budget,
+        scratch(w, beam, max_work))
     out = path[:n]
     assert 0 <= aborted <= tried <= 200 and arcs >= 0
     assert 0 <= long_aborted <= long_tried <= tried and long_aborted <= aborted
