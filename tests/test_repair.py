@@ -71,8 +71,8 @@ def test_window_rounds_keep_random_schedules_feasible_and_never_worse(family, se
                                                                       budget, pruned_windows, long_span):
     """Random windows (some aborted for their cost; with `long_span`, half of them long ones with one label per
     node) over random complete episodes, planned over the unpruned or the pruned graph's arcs: the result is a
-    path of the unpruned graph (the walk from its acquisitions gives it back), each acquisition at most once, feasible for the independent checker, and its value never below the
-    start's."""
+    path of the unpruned graph (the walk from its acquisitions gives it back), each acquisition at most once,
+    feasible for the independent checker, and its value never below the start's."""
     inst = generated(family, 40, seed)
     prepared = prepare_instance(inst, True)
     pol = Polisher(inst.unpruned(), objective_weights(inst, mode), window=span, window_beam=beam,
