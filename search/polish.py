@@ -369,7 +369,11 @@ class Polisher:
 
         self._repair, self._max_work, self._first_work = repair._repair, repair.MAX_WORK, repair.FIRST_WORK
         self.window_time = 0.5  # the share of the time left one window may take at most
-        self._scratch = repair.scratch(wg, window_beam, repair.MAX_WORK)
+        # window re-planning's time over the ruin and recreate's: at 1000-1500 acquisitions the windows find
+        # what is left (a long window takes ~0.5-1.3 s there), the ruin and recreate little
+        self.window_ratio = 3.0
+        self.long_beam = repair.LONG_BEAM  # the most labels per node of a long window
+        self._scratch = repair.scratch(wg, max(window_beam, self.long_beam), repair.MAX_WORK)
         self.by_time = (np.argsort(eg.node_time[1:], kind="stable") + 1).astype(np.int32)
         self.sorted_t = eg.node_time[self.by_time].astype(np.float64)
         self.key = np.random.default_rng(0).integers(1, 2**63, size=eg.acq_ptr.shape[0] - 1, dtype=np.uint64)
@@ -405,8 +409,11 @@ class Polisher:
         path[: nodes.size] = nodes
         n, done, chunk = nodes.size, 0, 64
         t_rr = t_win = 0.0
-        # rate: arcs looked at per second of windows; long windows may span the whole schedule
-        use_windows, span, long_span, rate = windows, self.window, n_acq, 0.0
+        # rate: arcs looked at per second of windows (all rounds so far: one round's short or long windows alone
+        # may sweep at half or twice the mean rate, and a long window given too few arcs stops); long windows may span the whole schedule, with one label
+        # per node at first, more (up to beam_cap) when a round of windows leaves the schedule as it was
+        use_windows, span, long_span, rate, all_arcs = windows, self.window, n_acq, 0.0, 0
+        long_beam, beam_cap, last = 1, self.long_beam, self.value(nodes)
         self.window_rounds = 0
         while (deadline is None and done < iterations) or (deadline is not None and time.perf_counter() < deadline):
             t0 = time.perf_counter()
@@ -418,7 +425,7 @@ class Polisher:
             # recreate, each round's arcs budgeted from the rate measured so far (a small first round), and one
             # window given half of the time left at most (a long window over a 1500-acquisition schedule needs
             # ~1 s), so that the limit holds
-            if use_windows and (deadline is None or (t_win <= t_rr and t1 < deadline)):
+            if use_windows and (deadline is None or (t_win <= self.window_ratio * t_rr and t1 < deadline)):
                 if deadline is None:
                     # of the first round's size: nothing else bounds them, and a refinement without a time limit
                     # (lns's default) costs what it did before the long windows (3M arcs a window at most)
@@ -430,16 +437,27 @@ class Polisher:
                     budget = int(rate * min(t1 - t0, 0.5 * (deadline - t1)))
                     work = int(min(self._max_work, max(rate * self.window_time * (deadline - t1), 1.0)))
                 n, tried, aborted, arcs, long_tried, long_aborted = self._run_windows(
-                    path, n, count, budget, seed + done, span, long_span, work)
+                    path, n, count, budget, seed + done, span, long_span, work, long_beam)
                 dt = time.perf_counter() - t1
                 t_win += dt
-                rate = arcs / max(dt, 1e-6) if arcs > 0 else rate
+                all_arcs += arcs
+                rate = all_arcs / max(t_win, 1e-6) if all_arcs > 0 else rate
                 self.window_rounds += tried
                 # most windows of a kind too costly to plan: shorter ones (the short and the long ones apart:
                 # long ones that stop at their bound must not shrink the short ones), or none
+                # (a long window too costly at some beam: back to half of it for good, then shorter ones); long
+                # windows that all ran and left the value as it was: twice the labels per node (at 1000-1500
+                # acquisitions the last utility RAMP finds needs a sweep of two labels per node, as RAMP's own)
                 short_tried, short_aborted = tried - long_tried, aborted - long_aborted
+                value = self.value(path[:n])
                 if long_tried and 2 * long_aborted > long_tried:
-                    long_span //= 2
+                    if long_beam > 1:
+                        long_beam = beam_cap = long_beam // 2
+                    else:
+                        long_span //= 2
+                elif long_tried and long_aborted == 0 and value <= last + self.tol:
+                    long_beam = min(2 * long_beam, beam_cap)
+                last = value
                 if short_tried and 2 * short_aborted > short_tried:
                     use_windows = span > 1
                     span = max(1, span // 2)
@@ -447,13 +465,14 @@ class Polisher:
         self.rounds = done
         return self(path[:n])
 
-    def _run_windows(self, path, n, count, budget, seed, span=1, long_span=0, max_work=None):
-        """`count` windows of 1..span positions at most (or, half of them, 1..long_span with one label per node:
-        :func:`eosp.search.repair._repair`), until `budget` arcs: (length, tried, aborted, arcs, long tried,
-        long aborted)."""
+    def _run_windows(self, path, n, count, budget, seed, span=1, long_span=0, max_work=None, long_beam=1):
+        """`count` windows of 1..span positions at most (or, half of them, 1..long_span with `long_beam` labels
+        per node: :func:`eosp.search.repair._repair`), until `budget` arcs: (length, tried, aborted, arcs, long
+        tried, long aborted)."""
         eg, wg = self.eg, self.wg
         return self._repair(eg.indptr, eg.dst, wg.indptr, wg.dst, eg.acq_ptr, eg.node_acq, eg.node_time, self.weight,
-                            self.key, self.by_time, self.sorted_t, path, n, span, long_span, count, seed, self.tol,
+                            self.key, self.span, self.by_time, self.sorted_t, path, n, span, self.window_beam,
+                            long_span, long_beam, count, seed, self.tol,
                             self._max_work if max_work is None else max_work, budget, self._scratch)
 
     def nodes_of(self, actions) -> np.ndarray:

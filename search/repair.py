@@ -40,6 +40,7 @@ from eosp.search.polish import _rechain
 MAX_WORK = 100_000_000  # arcs a window may look at (~1 s; the refinement also caps it by the time left)
 FIRST_WORK = 3_000_000  # arcs of a refinement's first round of windows, before their rate is known (~10 ms)
 MAX_LABELS = 3_000_000  # labels a window may create (72 MB of scratch); a window that needs more stops
+LONG_BEAM = 16  # labels per node a long window may keep at most (the refinement widens them when stuck)
 
 
 @numba.njit(cache=True, inline="always")
@@ -57,15 +58,35 @@ def _in_chain(lab_node, lab_par, node_acq, node_time, l, k, t_first):
     return False
 
 
+@numba.njit(cache=True, inline="always")
+def _open_key(lab_node, lab_par, node_acq, node_time, acq_ptr, key, l, k, t_w, span):
+    """XOR of the keys of the acquisitions still open at time t_w (with a node later than t_w: the only ones a
+    later extension could repeat) among k and label l's chain: two labels at one node with the same open set
+    have the same futures, as in RAMP.  The chain is walked back only over the last `span` seconds (the
+    longest visibility window: an acquisition visited earlier has closed)."""
+    h = key[k] if node_time[acq_ptr[k + 1] - 1] > t_w else np.uint64(0)
+    t_min = t_w - span
+    while l >= 0 and lab_par[l] >= 0:
+        v = lab_node[l]
+        if node_time[v] < t_min:
+            break
+        j = node_acq[v]
+        if node_time[acq_ptr[j + 1] - 1] > t_w:
+            h ^= key[j]
+        l = lab_par[l]
+    return h
+
+
 @numba.njit(cache=True)
-def _window(indptr, dst, acq_ptr, node_acq, node_time, weight, key, by_time, sorted_t, blocked, u, e, beam,
+def _window(indptr, dst, acq_ptr, node_acq, node_time, weight, key, span, by_time, sorted_t, blocked, u, e, beam,
             lab_node, lab_par, lab_val, lab_key, slot, cnt, stamp, call, out, tol, max_work, tally):
     """Best path from node u (exclusive) through unblocked acquisitions that reaches e's acquisition no
     later than e (e < 0: no end condition).  Writes its nodes to `out`; returns (length, value), length
     -1 when the label memory ran out or more than `max_work` arcs were looked at (no answer: the cost of a
-    window is bounded, so a time limit is kept even on graphs of hundreds of arcs per node).  `slot` [N, beam],
-    `cnt` [N], `stamp` [N] are scratch kept between calls (stamp == call marks this call's entries); tally[0]
-    grows by the arcs looked at."""
+    window is bounded, so a time limit is kept even on graphs of hundreds of arcs per node).  Keeps the `beam`
+    best labels per node with distinct open sets (:func:`_open_key`; `span`: the longest visibility window);
+    of two with the same open set, the better.  `slot` [N, >= beam], `cnt` [N], `stamp` [N] are scratch kept
+    between calls (stamp == call marks this call's entries); tally[0] grows by the arcs looked at."""
     cap = lab_node.shape[0]
     t_u = node_time[u] if u > 0 else -np.inf
     t_e = node_time[e] if e >= 0 else np.inf
@@ -115,35 +136,37 @@ def _window(indptr, dst, acq_ptr, node_acq, node_time, weight, key, by_time, sor
                 if blocked[k] or _in_chain(lab_node, lab_par, node_acq, node_time, l, k, node_time[acq_ptr[k]]):
                     continue
                 nv = lv + weight[k]
-                nk = lab_key[l] ^ key[k]
                 if stamp[w] != call:
                     stamp[w] = call
                     cnt[w] = 0
                 c = cnt[w]
                 worst = -1
-                dup = False
-                for z in range(c):
-                    o = slot[w, z]
-                    if lab_key[o] == nk:  # the same acquisitions (up to a 64-bit hash collision): the same futures
-                        dup = True
+                if c >= beam:  # a full beam: only a better label may enter
+                    for z in range(c):
+                        if worst < 0 or lab_val[slot[w, z]] < lab_val[slot[w, worst]]:
+                            worst = z
+                    if nv <= lab_val[slot[w, worst]] + tol:
+                        continue
+                nk = _open_key(lab_node, lab_par, node_acq, node_time, acq_ptr, key, l, k, node_time[w], span)
+                z = c
+                for y in range(c):
+                    if lab_key[slot[w, y]] == nk:  # the same open set (up to a 64-bit hash collision)
+                        z = y
                         break
-                    if worst < 0 or lab_val[o] < lab_val[slot[w, worst]]:
-                        worst = z
-                if dup:
-                    continue
-                if c >= beam and nv <= lab_val[slot[w, worst]] + tol:
-                    continue
+                if z < c:
+                    if nv <= lab_val[slot[w, z]] + tol:
+                        continue
+                elif c < beam:
+                    cnt[w] = c + 1
+                else:
+                    z = worst
                 if n_lab >= cap:
                     return -1, 0.0
                 lab_node[n_lab] = w
                 lab_par[n_lab] = l
                 lab_val[n_lab] = nv
                 lab_key[n_lab] = nk
-                if c < beam:
-                    slot[w, c] = n_lab
-                    cnt[w] = c + 1
-                else:
-                    slot[w, worst] = n_lab
+                slot[w, z] = n_lab
                 n_lab += 1
     if best_l < 0:
         return 0, -np.inf
@@ -181,8 +204,8 @@ def _splice(indptr, dst, acq_ptr, node_acq, path, n, s, r, seg, m, tmp, work):
 
 
 @numba.njit(cache=True)
-def _try(indptr, dst, w_indptr, w_dst, acq_ptr, node_acq, node_time, weight, key, by_time, sorted_t, path, n, s, r,
-         plateau, beam, blocked, lab_node, lab_par, lab_val, lab_key, slot, cnt, stamp, call, seg, tmp, work, tol,
+def _try(indptr, dst, w_indptr, w_dst, acq_ptr, node_acq, node_time, weight, key, span, by_time, sorted_t, path, n,
+         s, r, plateau, beam, blocked, lab_node, lab_par, lab_val, lab_key, slot, cnt, stamp, call, seg, tmp, work, tol,
          max_work, tally):
     """Re-plan positions s..s+r-1 of path[:n]; applied in place when it gains (or, with `plateau`, when it
     does not lose).  The window is planned over the arcs (w_indptr, w_dst), a subset of (indptr, dst) on the
@@ -194,8 +217,8 @@ def _try(indptr, dst, w_indptr, w_dst, acq_ptr, node_acq, node_time, weight, key
         old += weight[node_acq[path[i]]]
     u = path[s - 1] if s > 0 else 0
     e = path[s + r] if s + r < n else -1
-    m, val = _window(w_indptr, w_dst, acq_ptr, node_acq, node_time, weight, key, by_time, sorted_t, blocked, u, e,
-                     beam, lab_node, lab_par, lab_val, lab_key, slot, cnt, stamp, call, seg, tol, max_work, tally)
+    m, val = _window(w_indptr, w_dst, acq_ptr, node_acq, node_time, weight, key, span, by_time, sorted_t, blocked,
+                     u, e, beam, lab_node, lab_par, lab_val, lab_key, slot, cnt, stamp, call, seg, tol, max_work, tally)
     wn = -1
     aborted = m < 0
     if m >= 0 and (val > old + tol or (plateau and val >= old - tol)):
@@ -214,9 +237,9 @@ def _try(indptr, dst, w_indptr, w_dst, acq_ptr, node_acq, node_time, weight, key
 def scratch(graph, beam: int, max_work: int = MAX_WORK) -> tuple:
     """The working arrays of :func:`_repair` for one graph, allocated once (a search's refinement runs
     thousands of rounds; fresh arrays each round cost ~1 ms of page faults at 100 acquisitions): slot
-    [N, beam], cnt [N], stamp [N] (stamp == a window's id marks its entries, so nothing is cleared between
-    windows), the label arrays (at most one label per arc looked at, and at most MAX_LABELS), the path
-    buffers, the blocked flags and the window counter."""
+    [N, beam] (`beam`: the most labels per node any window keeps), cnt [N], stamp [N] (stamp == a window's
+    id marks its entries, so nothing is cleared between windows), the label arrays (at most one label per arc
+    looked at, and at most MAX_LABELS), the path buffers, the blocked flags and the window counter."""
     n_nodes, n_acq = graph.node_acq.shape[0], graph.acq_ptr.shape[0] - 1
     cap = min(max_work, MAX_LABELS) + int(np.max(np.diff(graph.indptr), initial=0)) + 2
     return (np.empty((n_nodes, beam), dtype=np.int32), np.zeros(n_nodes, dtype=np.int32),
@@ -227,21 +250,21 @@ def scratch(graph, beam: int, max_work: int = MAX_WORK) -> tuple:
 
 
 @numba.njit(cache=True)
-def _repair(indptr, dst, w_indptr, w_dst, acq_ptr, node_acq, node_time, weight, key, by_time, sorted_t, path, n,
-            window, long_window, iters, seed, tol, max_work, budget, scratch):
+def _repair(indptr, dst, w_indptr, w_dst, acq_ptr, node_acq, node_time, weight, key, span, by_time, sorted_t, path,
+            n, window, beam, long_window, long_beam, iters, seed, tol, max_work, budget, scratch):
     """Re-plan up to `iters` windows of path[:n] (int32) in place, each 1..window consecutive positions at
-    random with the scratch's beam, or (every other window on average, when `long_window` > window)
-    1..long_window positions with one label per node: a long stretch swept like RAMP's beam-1 sweep, which
+    random with `beam` labels per node, or (every other window on average, when `long_window` > window)
+    1..long_window positions with `long_beam` labels per node: a long stretch swept like RAMP's sweep, which
     finds what a different sequence over much of the schedule gains (at 1000-1500 acquisitions the short
     windows stop one or two acquisitions short of RAMP); until `budget` arcs were looked at in all (the
     caller turns a time into arcs at the rate it measured).  A window's new plan is kept when it is not worse
     (plateaus are walked: equal-value schedules lead elsewhere), so the value never drops.  Windows are
-    planned over the arcs (w_indptr, w_dst) (:func:`_try`).  `scratch`: :func:`scratch` of that graph (its
-    beam is the labels kept per node in short windows).  Returns (new length, windows tried, windows
+    planned over the arcs (w_indptr, w_dst) (:func:`_try`).  `scratch`: :func:`scratch` of that graph, with
+    room for max(beam, long_beam) labels per node.  Returns (new length, windows tried, windows
     aborted for their cost, arcs looked at, long windows tried, long windows aborted)."""
     np.random.seed(seed)
     slot, cnt, stamp, lab_node, lab_par, lab_val, lab_key, seg, tmp, work, blocked, calls = scratch
-    beam = slot.shape[1]
+    assert max(beam, long_beam) <= slot.shape[1]
     blocked[:] = False
     for i in range(n):
         blocked[node_acq[path[i]]] = True
@@ -255,14 +278,14 @@ def _repair(indptr, dst, w_indptr, w_dst, acq_ptr, node_acq, node_time, weight, 
         b = beam
         is_long = long_window > window and np.random.random() < 0.5
         if is_long:
-            r, b = min(1 + np.random.randint(0, long_window), n), 1
+            r, b = min(1 + np.random.randint(0, long_window), n), long_beam
             long_tried += 1
         else:
             r = min(1 + np.random.randint(0, window), n)
         s = np.random.randint(0, n - r + 1)
-        n, _g, a = _try(indptr, dst, w_indptr, w_dst, acq_ptr, node_acq, node_time, weight, key, by_time, sorted_t,
-                        path, n, s, r, True, b, blocked, lab_node, lab_par, lab_val, lab_key, slot, cnt, stamp,
-                        calls[0], seg, tmp, work, tol, max_work, tally)
+        n, _g, a = _try(indptr, dst, w_indptr, w_dst, acq_ptr, node_acq, node_time, weight, key, span, by_time,
+                        sorted_t, path, n, s, r, True, b, blocked, lab_node, lab_par, lab_val, lab_key, slot, cnt,
+                        stamp, calls[0], seg, tmp, work, tol, max_work, tally)
         aborted += a
         if a and is_long:
             long_aborted += 1

@@ -20,9 +20,9 @@ def _plan(pol: Polisher, u: int, e: int, blocked: np.ndarray, beam: int, max_wor
     g = pol.eg
     n_nodes, n_acq = g.node_acq.shape[0], g.acq_ptr.shape[0] - 1
     out = np.empty(n_acq + 1, dtype=np.int32)
-    m, value = _window(g.indptr, g.dst, g.acq_ptr, g.node_acq, g.node_time, pol.weight, pol.key, pol.by_time,
-                       pol.sorted_t, blocked, u, e, beam, np.empty(1 << 22, np.int32), np.empty(1 << 22, np.int32),
-                       np.empty(1 << 22, np.float64), np.empty(1 << 22, np.uint64),
+    m, value = _window(g.indptr, g.dst, g.acq_ptr, g.node_acq, g.node_time, pol.weight, pol.key, pol.span,
+                       pol.by_time, pol.sorted_t, blocked, u, e, beam, np.empty(1 << 22, np.int32),
+                       np.empty(1 << 22, np.int32), np.empty(1 << 22, np.float64), np.empty(1 << 22, np.uint64),
                        np.empty((n_nodes, beam), np.int32), np.zeros(n_nodes, np.int32),
                        np.full(n_nodes, -1, np.int64), 1, out, pol.tol, max_work, np.zeros(1, np.int64))
     return out[:m], value
@@ -66,13 +66,14 @@ def test_a_window_respects_its_anchors_and_the_blocked_acquisitions():
 @given(family=st.sampled_from(["uniform", "clusters", "conflict"]), seed=st.integers(0, 3),
        walk=st.integers(0, 10_000), mode=st.sampled_from(["unitary", "utility"]), span=st.integers(1, 8),
        beam=st.integers(1, 6), max_work=st.sampled_from([50, 5_000, 3_000_000]),
-       budget=st.sampled_from([0, 20_000, 10**12]), pruned_windows=st.booleans(), long_span=st.sampled_from([0, 40]))
+       budget=st.sampled_from([0, 20_000, 10**12]), pruned_windows=st.booleans(), long_span=st.sampled_from([0, 40]),
+       long_beam=st.sampled_from([1, 2, 16]))
 def test_window_rounds_keep_random_schedules_feasible_and_never_worse(family, seed, walk, mode, span, beam, max_work,
-                                                                      budget, pruned_windows, long_span):
-    """Random windows (some aborted for their cost; with `long_span`, half of them long ones with one label per
-    node) over random complete episodes, planned over the unpruned or the pruned graph's arcs: the result is a
-    path of the unpruned graph (the walk from its acquisitions gives it back), each acquisition at most once,
-    feasible for the independent checker, and its value never below the start's."""
+                                                                      budget, pruned_windows, long_span, long_beam):
+    """Random windows (some aborted for their cost; with `long_span`, half of them long ones with `long_beam`
+    labels per node) over random complete episodes, planned over the unpruned or the pruned graph's arcs: the
+    result is a path of the unpruned graph (the walk from its acquisitions gives it back), each acquisition at
+    most once, feasible for the independent checker, and its value never below the start's."""
     inst = generated(family, 40, seed)
     prepared = prepare_instance(inst, True)
     pol = Polisher(inst.unpruned(), objective_weights(inst, mode), window=span, window_beam=beam,
@@ -82,9 +83,9 @@ def test_window_rounds_keep_random_schedules_feasible_and_never_worse(family, se
     path[: nodes.size] = nodes
     g, w = pol.eg, pol.wg
     n, tried, aborted, arcs, long_tried, long_aborted = pol._repair(
-        g.indptr, g.dst, w.indptr, w.dst, g.acq_ptr, g.node_acq, g.node_time, pol.weight, pol.key, pol.by_time,
-        pol.sorted_t, path, nodes.size, span, long_span, 200, walk, pol.tol, max_work, budget,
-        scratch(w, beam, max_work))
+        g.indptr, g.dst, w.indptr, w.dst, g.acq_ptr, g.node_acq, g.node_time, pol.weight, pol.key, pol.span,
+        pol.by_time, pol.sorted_t, path, nodes.size, span, beam, long_span, long_beam, 200, walk, pol.tol, max_work,
+        budget, scratch(w, max(beam, long_beam), max_work))
     out = path[:n]
     assert 0 <= aborted <= tried <= 200 and arcs >= 0
     assert 0 <= long_aborted <= long_tried <= tried and long_aborted <= aborted
