@@ -502,7 +502,7 @@ class EvalConfig:
     """Partial schedules kept by the beam solver."""
     polish: bool = True
     """Learned searches (sample, beam, mcts): polish every complete schedule met (insert and swap moves)."""
-    refine: float = ranged(0.5, 0.0, 1.0)
+    refine: float = ranged(0.75, 0.0, 1.0)
     """Learned searches with a time limit: the share of it spent refining the best schedule (ruin and recreate)."""
     windows: bool = True
     """Learned searches, while refining: also re-plan windows of consecutive acquisitions (eosp.search.repair)."""

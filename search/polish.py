@@ -395,10 +395,11 @@ class Polisher:
         or for `iterations`, then one polish; the best schedule met (never worse than `nodes`).
 
         With `windows`, rounds of window re-planning (:mod:`eosp.search.repair`) alternate with the ruin
-        and recreate, given as much time as it (16 windows a round when there is no deadline); half of the
-        windows are long ones (up to the whole schedule, one label per node); when most
-        windows of a round were too costly to plan (graphs of hundreds of arcs per node), the stretches
-        are halved, down to none.
+        and recreate, given `window_ratio` (3) times as much time as it (16 windows a round when there is no
+        deadline); half of the windows are long ones (up to the whole schedule, with 1 label per node, then
+        twice as many after each round of them, up to `long_beam`); when most windows of a round were too
+        costly to plan (graphs of hundreds of arcs per node), long ones go back to half their labels, and the
+        stretches are halved, down to none.
         """
         import time
 
@@ -410,10 +411,11 @@ class Polisher:
         n, done, chunk = nodes.size, 0, 64
         t_rr = t_win = 0.0
         # rate: arcs looked at per second of windows (all rounds so far: one round's short or long windows alone
-        # may sweep at half or twice the mean rate, and a long window given too few arcs stops); long windows may span the whole schedule, with one label
-        # per node at first, more (up to beam_cap) when a round of windows leaves the schedule as it was
+        # may sweep at half or twice the mean rate, and a long window given too few arcs stops); long windows
+        # may span the whole schedule, with one label per node at first, twice as many after each round of them
+        # (up to beam_cap)
         use_windows, span, long_span, rate, all_arcs = windows, self.window, n_acq, 0.0, 0
-        long_beam, beam_cap, last = 1, self.long_beam, self.value(nodes)
+        long_beam, beam_cap = 1, self.long_beam
         self.window_rounds = 0
         while (deadline is None and done < iterations) or (deadline is not None and time.perf_counter() < deadline):
             t0 = time.perf_counter()
@@ -430,12 +432,13 @@ class Polisher:
                     # of the first round's size: nothing else bounds them, and a refinement without a time limit
                     # (lns's default) costs what it did before the long windows (3M arcs a window at most)
                     count, budget, work = 16, np.iinfo(np.int64).max, self._first_work
-                elif rate == 0.0:
+                elif rate == 0.0:  # a probe of the rate: its windows stop early and say nothing of their cost
                     count, budget, work = 1 << 20, self._first_work, self._first_work
                 else:  # as many windows as the budget allows
                     count = 1 << 20
                     budget = int(rate * min(t1 - t0, 0.5 * (deadline - t1)))
                     work = int(min(self._max_work, max(rate * self.window_time * (deadline - t1), 1.0)))
+                probe = deadline is not None and rate == 0.0
                 n, tried, aborted, arcs, long_tried, long_aborted = self._run_windows(
                     path, n, count, budget, seed + done, span, long_span, work, long_beam)
                 dt = time.perf_counter() - t1
@@ -446,18 +449,19 @@ class Polisher:
                 # most windows of a kind too costly to plan: shorter ones (the short and the long ones apart:
                 # long ones that stop at their bound must not shrink the short ones), or none
                 # (a long window too costly at some beam: back to half of it for good, then shorter ones); long
-                # windows that all ran and left the value as it was: twice the labels per node (at 1000-1500
-                # acquisitions the last utility RAMP finds needs a sweep of two labels per node, as RAMP's own)
-                short_tried, short_aborted = tried - long_tried, aborted - long_aborted
-                value = self.value(path[:n])
+                # windows that all ran: twice the labels per node for the next ones, as RAMP's beam is raised with
+                # the time (at 1000-1500 acquisitions the last utilities RAMP finds need sweeps of 2-8 labels per
+                # node; each width costs about twice the one before, so the widths before the last take no more
+                # time than the last)
+                short_tried, short_aborted = (0, 0) if probe else (tried - long_tried, aborted - long_aborted)
+                long_tried, long_aborted = (0, 0) if probe else (long_tried, long_aborted)
                 if long_tried and 2 * long_aborted > long_tried:
                     if long_beam > 1:
                         long_beam = beam_cap = long_beam // 2
                     else:
                         long_span //= 2
-                elif long_tried and long_aborted == 0 and value <= last + self.tol:
+                elif long_tried and long_aborted == 0:
                     long_beam = min(2 * long_beam, beam_cap)
-                last = value
                 if short_tried and 2 * short_aborted > short_tried:
                     use_windows = span > 1
                     span = max(1, span // 2)

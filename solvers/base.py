@@ -98,13 +98,14 @@ class SearchConfig(LearnedConfig):
     polish: bool = True
     """Improve every complete schedule the search meets by insert and swap moves before comparing them
     (eosp.search.polish; milliseconds per schedule); --polish false: the search's own schedules only."""
-    refine: float = ranged(0.5, 0.0, 1.0)
+    refine: float = ranged(0.75, 0.0, 1.0)
     """With polish and a time limit: the share of the time limit spent refining the best schedule found by ruin
-    and recreate (drop a few consecutive acquisitions, refill, keep when not worse); 0: search until the limit."""
+    and recreate (drop a few consecutive acquisitions, refill, keep when not worse) and windows; 0: search until
+    the limit.  0.75: at 1000-1500 acquisitions the windows need 3-4 s to reach RAMP's value (0.5 was short)."""
     windows: bool = True
     """While refining, also re-plan windows of consecutive acquisitions by a label sweep over the time between
-    their neighbours (eosp.search.repair: up to 16 with 4 labels per node, or up to the whole schedule with one),
-    for as much time as the ruin and recreate."""
+    their neighbours (eosp.search.repair: up to 16 with 4 labels per node, or up to the whole schedule with 1,
+    2, 4, ... 16 labels per node, doubled after each round), for three times as long as the ruin and recreate."""
     window_graph: str = choice("pruned", "pruned", "unpruned")
     """The arcs a window's label sweep looks at: the pruned graph's (RAMP's: 6-170 arcs per node against 50-770
     unpruned from 100 to 1500 acquisitions, so many more windows per second where schedules are long) or the

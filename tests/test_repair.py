@@ -23,8 +23,9 @@ def _plan(pol: Polisher, u: int, e: int, blocked: np.ndarray, beam: int, max_wor
     m, value = _window(g.indptr, g.dst, g.acq_ptr, g.node_acq, g.node_time, pol.weight, pol.key, pol.span,
                        pol.by_time, pol.sorted_t, blocked, u, e, beam, np.empty(1 << 22, np.int32),
                        np.empty(1 << 22, np.int32), np.empty(1 << 22, np.float64), np.empty(1 << 22, np.uint64),
-                       np.empty((n_nodes, beam), np.int32), np.zeros(n_nodes, np.int32),
-                       np.full(n_nodes, -1, np.int64), 1, out, pol.tol, max_work, np.zeros(1, np.int64))
+                       np.empty((n_nodes, beam), np.int32), np.zeros(n_nodes, np.int32), np.empty(n_nodes),
+                       np.empty(n_nodes), np.full(n_nodes, -1, np.int64), 1, out, pol.tol, max_work,
+                       np.zeros(1, np.int64))
     return out[:m], value
 
 
