@@ -90,3 +90,26 @@ def test_the_policy_refuses_a_time_limit_and_the_searches_take_one(agent):
         assert run_solver(name, inst, mode="unitary", agent=agent, time_limit=5.0).nodes.size > 0
     with pytest.raises(ValueError, match="solver 'beam' has no option 'samples'; its options: .*beam_width"):
         run_solver("beam", inst, agent=agent, samples=4)
+
+
+def test_past_its_deadline_the_best_episode_takes_no_more_episodes():
+    """Improving an episode can be slow (polishing one costs ~0.2 s at 1000 acquisitions) and the episodes of a
+    sampling round finish together: past the deadline they are neither improved nor taken, so the round does not
+    overrun the search's time; the first one is always taken (the anytime floor)."""
+    from eosp.search.rollouts import Best
+
+    improved = []
+
+    def improve(actions):
+        improved.append(list(actions))
+        return float(len(actions)), list(actions)
+
+    late = Best(improve=improve, deadline=time.perf_counter() - 1.0)
+    late.offer(1.0, [3])
+    late.offer(5.0, [1, 2, 4, 5, 6])
+    assert late.actions == [3] and late.episodes == 1 and improved == [[3]]
+    improved.clear()
+    early = Best(improve=improve, deadline=time.perf_counter() + 60.0)
+    early.offer(1.0, [3])
+    early.offer(5.0, [1, 2, 4, 5, 6])
+    assert early.actions == [1, 2, 4, 5, 6] and early.episodes == 2 and len(improved) == 2
