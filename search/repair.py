@@ -28,11 +28,11 @@ of arcs per node.
 
 Two kinds of windows: short ones (up to 16 positions, 4 labels per node) and long ones (up to the
 whole schedule: a sweep like RAMP's, anchored on the kept part, whose labels per node the refinement
-raises 1, 2, 4, ... as RAMP's beam is raised with the time).  At 100
-acquisitions the short ones do the work; at 1000-1500 the schedules that reach RAMP's value differ
-from the learned one over much of the horizon, which only the long ones reach.  The arcs swept are
-the pruned graph's by default (:class:`eosp.search.polish.Polisher` ``window_graph``), ~10x fewer
-than the unpruned graph's at 1500 acquisitions.
+raises 1, 2, 4, ... as RAMP's beam is raised with the time).  At 100 acquisitions the short ones do the
+work; at 1000-1500 the schedules that reach RAMP's value differ from the learned one over much of the
+horizon, which only the long ones reach.  The arcs swept are the pruned graph's by default
+(:class:`eosp.search.polish.Polisher` ``window_graph``), ~10x fewer than the unpruned graph's at 1500
+acquisitions.
 """
 from __future__ import annotations
 
@@ -45,7 +45,7 @@ from eosp.search.polish import _rechain
 MAX_WORK = 100_000_000  # arcs a window may look at (~1 s; the refinement also caps it by the time left)
 FIRST_WORK = 3_000_000  # arcs of a refinement's first round of windows, before their rate is known (~10 ms)
 MAX_LABELS = 3_000_000  # labels a window may create (72 MB of scratch); a window that needs more stops
-LONG_BEAM = 16  # labels per node a long window may keep at most (the refinement widens them when stuck)
+LONG_BEAM = 16  # labels per node a long window may keep at most (the refinement doubles them round by round)
 
 
 @numba.njit(cache=True, inline="always")
