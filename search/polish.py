@@ -369,8 +369,8 @@ class Polisher:
 
         self._repair, self._max_work, self._first_work = repair._repair, repair.MAX_WORK, repair.FIRST_WORK
         self.window_time = 0.5  # the share of the time left one window may take at most
-        # window re-planning's time over the ruin and recreate's: at 1000-1500 acquisitions the windows find
-        # what is left (a long window takes ~0.5-1.3 s there), the ruin and recreate little
+        # the most time window re-planning may take over the ruin and recreate's: at 1000-1500 acquisitions the
+        # windows find what is left (a long window takes ~0.5-1.3 s there), the ruin and recreate little
         self.window_ratio = 3.0
         self.long_beam = repair.LONG_BEAM  # the most labels per node of a long window
         self._scratch = repair.scratch(wg, max(window_beam, self.long_beam), repair.MAX_WORK)
@@ -395,11 +395,11 @@ class Polisher:
         or for `iterations`, then one polish; the best schedule met (never worse than `nodes`).
 
         With `windows`, rounds of window re-planning (:mod:`eosp.search.repair`) alternate with the ruin
-        and recreate, given `window_ratio` (3) times as much time as it (16 windows a round when there is no
-        deadline); half of the windows are long ones (up to the whole schedule, with 1 label per node, then
-        twice as many after each round of them, up to `long_beam`); when most windows of a round were too
-        costly to plan (graphs of hundreds of arcs per node), long ones go back to half their labels, and the
-        stretches are halved, down to none.
+        and recreate, a round after each of its rounds until the windows took `window_ratio` (3) times its
+        time (16 windows a round when there is no deadline); half of the windows are long ones (up to the whole
+        schedule, with 1 label per node, then twice as many after each round of them, up to `long_beam`); when
+        most windows of a round were too costly to plan (graphs of hundreds of arcs per node), long ones go back
+        to half their labels, and the stretches are halved, down to none.
         """
         import time
 
@@ -423,22 +423,24 @@ class Polisher:
                                self.last_t, self.span, path, n, chunk, max_ruin, noise, seed + done, self.tol)
             t1 = time.perf_counter()
             t_rr += t1 - t0
-            # without a deadline: 16 windows per round (deterministic); with one: as much time as the ruin and
-            # recreate, each round's arcs budgeted from the rate measured so far (a small first round), and one
-            # window given half of the time left at most (a long window over a 1500-acquisition schedule needs
-            # ~1 s), so that the limit holds
+            # without a deadline: 16 windows per round (deterministic); with one: a round of windows after each
+            # round of ruin and recreate, its arcs budgeted to that round's time at the rate measured so far (a
+            # small probe first), unless the windows already took window_ratio times the ruin and recreate's time
+            # (a window runs to its end, past its round's budget: a long one takes 0.5-1.3 s at 1000-1500
+            # acquisitions, a round of ruin and recreate 0.1-0.5 s); one window given half of the time left at
+            # most, so that the limit holds
+            probe = deadline is not None and rate == 0.0
             if use_windows and (deadline is None or (t_win <= self.window_ratio * t_rr and t1 < deadline)):
                 if deadline is None:
                     # of the first round's size: nothing else bounds them, and a refinement without a time limit
                     # (lns's default) costs what it did before the long windows (3M arcs a window at most)
                     count, budget, work = 16, np.iinfo(np.int64).max, self._first_work
-                elif rate == 0.0:  # a probe of the rate: its windows stop early and say nothing of their cost
+                elif probe:  # a probe of the rate: its windows stop early and say nothing of their cost
                     count, budget, work = 1 << 20, self._first_work, self._first_work
                 else:  # as many windows as the budget allows
                     count = 1 << 20
                     budget = int(rate * min(t1 - t0, 0.5 * (deadline - t1)))
                     work = int(min(self._max_work, max(rate * self.window_time * (deadline - t1), 1.0)))
-                probe = deadline is not None and rate == 0.0
                 n, tried, aborted, arcs, long_tried, long_aborted = self._run_windows(
                     path, n, count, budget, seed + done, span, long_span, work, long_beam)
                 dt = time.perf_counter() - t1
@@ -446,25 +448,24 @@ class Polisher:
                 all_arcs += arcs
                 rate = all_arcs / max(t_win, 1e-6) if all_arcs > 0 else rate
                 self.window_rounds += tried
-                # most windows of a kind too costly to plan: shorter ones (the short and the long ones apart:
-                # long ones that stop at their bound must not shrink the short ones), or none
-                # (a long window too costly at some beam: back to half of it for good, then shorter ones); long
-                # windows that all ran: twice the labels per node for the next ones, as RAMP's beam is raised with
-                # the time (at 1000-1500 acquisitions the last utilities RAMP finds need sweeps of 2-8 labels per
-                # node; each width costs about twice the one before, so the widths before the last take no more
-                # time than the last)
-                short_tried, short_aborted = (0, 0) if probe else (tried - long_tried, aborted - long_aborted)
-                long_tried, long_aborted = (0, 0) if probe else (long_tried, long_aborted)
-                if long_tried and 2 * long_aborted > long_tried:
-                    if long_beam > 1:
-                        long_beam = beam_cap = long_beam // 2
-                    else:
-                        long_span //= 2
-                elif long_tried and long_aborted == 0:
-                    long_beam = min(2 * long_beam, beam_cap)
-                if short_tried and 2 * short_aborted > short_tried:
-                    use_windows = span > 1
-                    span = max(1, span // 2)
+                # (not after the probe) most windows of a kind too costly to plan: the long ones back to half
+                # their labels per node for good, then shorter ones; the short ones shorter, then none (apart:
+                # long ones that stop at their bound must not shrink the short ones).  Long windows that all
+                # ran: twice the labels per node for the next ones, as RAMP's beam is raised with the time (at
+                # 1000-1500 acquisitions the last utilities RAMP finds need 2-8 labels per node; each width
+                # costs about twice the one before, so the widths before the last take no more than the last)
+                short_tried, short_aborted = tried - long_tried, aborted - long_aborted
+                if not probe:
+                    if long_tried and 2 * long_aborted > long_tried:
+                        if long_beam > 1:
+                            long_beam = beam_cap = long_beam // 2
+                        else:
+                            long_span //= 2
+                    elif long_tried and long_aborted == 0:
+                        long_beam = min(2 * long_beam, beam_cap)
+                    if short_tried and 2 * short_aborted > short_tried:
+                        use_windows = span > 1
+                        span = max(1, span // 2)
             done += chunk
         self.rounds = done
         return self(path[:n])

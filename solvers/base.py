@@ -105,7 +105,7 @@ class SearchConfig(LearnedConfig):
     windows: bool = True
     """While refining, also re-plan windows of consecutive acquisitions by a label sweep over the time between
     their neighbours (eosp.search.repair: up to 16 with 4 labels per node, or up to the whole schedule with 1,
-    2, 4, ... 16 labels per node, doubled after each round), for three times as long as the ruin and recreate."""
+    2, 4, ... 16 labels per node, doubled after each round), for up to three times as long as the ruin and recreate."""
     window_graph: str = choice("pruned", "pruned", "unpruned")
     """The arcs a window's label sweep looks at: the pruned graph's (RAMP's: 6-170 arcs per node against 50-770
     unpruned from 100 to 1500 acquisitions, so many more windows per second where schedules are long) or the
