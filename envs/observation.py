@@ -15,7 +15,9 @@ graph, chosen by ``obs_edges``:
   to ``max_edges``.
 
 Node features (float32, :data:`NODE_FEATURES`), times relative to the end of
-the last scheduled acquisition in units of :data:`TIME_SCALE` seconds.  Edge
+the last scheduled acquisition in units of :data:`TIME_SCALE` seconds.  The last
+three look one step ahead (:func:`lookahead`): for each allowed action, what the
+acquisitions it would remove from the graph are worth.  Edge
 features: the slack of the transition (start of the reached node minus the end
 of the source node) and a flag for edges out of the last scheduled node.
 """
@@ -29,6 +31,7 @@ import numpy as np
 
 from eosp.config import CLASS_UTILITIES, N_CLASSES
 from eosp.envs.core import EnvGraph, Episode, step
+from eosp.graphs.discrete import arc_to_acq
 
 TIME_SCALE = 300.0
 NODE_FEATURES = (
@@ -37,6 +40,7 @@ NODE_FEATURES = (
     "duration", "log_utility", "utility_share",
     *(f"class_{c}" for c in range(N_CLASSES)),
     "roll_min", "roll_max", "roll_mean", "pitch_min", "pitch_max", "pitch_mean",
+    "loses_count", "loses_top", "loses_share",
 )
 N_NODE_FEATURES = len(NODE_FEATURES)
 N_EDGE_FEATURES = 2
@@ -52,7 +56,9 @@ LATEST_START = NODE_FEATURES.index("latest_start")
 EARLIEST_START = NODE_FEATURES.index("earliest_start")
 ALIVE_FRACTION = NODE_FEATURES.index("alive_fraction")
 STATIC = NODE_FEATURES.index("duration")  # first of the N_STATIC columns of static_features, in their order
-assert STATIC == 9 and N_NODE_FEATURES == STATIC + N_STATIC
+LOSES = NODE_FEATURES.index("loses_count")  # the three lookahead features, last (checkpoints without them: zeros)
+LOOKAHEAD_S = 300.0
+assert STATIC == 9 and LOSES == STATIC + N_STATIC and N_NODE_FEATURES == LOSES + 3
 
 
 class Candidates(NamedTuple):
@@ -129,6 +135,7 @@ def build_observation(g, ep, cand, k_out, k_last_cap, full, x, edge_index, edge_
         v = dst[a]
         if alive[v]:
             x[node_acq[v], EARLIEST_START] = _clip((node_time[v] - t_now) / TIME_SCALE)
+    lookahead(g, ep, static, x)
     beyond = np.zeros(n, dtype=np.bool_)
     if horizon > 0.0:
         for i in range(n):
@@ -168,6 +175,115 @@ def build_observation(g, ep, cand, k_out, k_last_cap, full, x, edge_index, edge_
             m = _edges_from(node_acq, node_time, node_finish, indptr, dst, alive, beyond, first_alive[i], i, 0.0,
                             k_out, edge_index, edge_attr, m)
     return m
+
+
+@numba.njit(cache=True)
+def lookahead(g, ep, static, x):
+    """Fill the columns :data:`LOSES` .. +2 of x: for each allowed action a, the other acquisitions that
+    taking a would remove from the graph (all their alive nodes before a's node, or unreachable from it):
+    their number / 10, the highest log-utility feature among them, the sum of their utility shares.
+
+    Why: the policy builds its schedule in time order and sees what an action kills only through a few
+    hops of message passing; its costliest mistakes in utility mode were such actions (a class-1
+    acquisition lost to a lower one: 0.92 x the optimum).  This is the environment's step (the sweep of
+    :func:`eosp.envs.core.sweep`) for every allowed action at once, without changing the state: one pass
+    over the nodes in time order carries, per node, a bit set of the actions whose node reaches it
+    (the OR of its predecessors'; an action's own other nodes die with it).  Only nodes starting within
+    :data:`LOOKAHEAD_S` of the end of an action's node are swept for it: an acquisition with an alive
+    node later than that counts as kept (slews longer than that are rare; the feature is a hint, not
+    a bound).  Cost: one pass over the window's arcs, 64 actions to a machine word.
+    """
+    node_acq, node_time, node_finish, acq_ptr, order, pos = g.node_acq, g.node_time, g.node_finish, g.acq_ptr, \
+        g.order, g.pos
+    rindptr, rsrc, indptr, dst = g.rindptr, g.rsrc, g.indptr, g.dst
+    alive, alive_count, first_alive, mask = ep.alive, ep.alive_count, ep.first_alive, ep.mask
+    n = acq_ptr.shape[0] - 1
+    last = ep.last[0]
+    for i in range(n):
+        x[i, LOSES] = 0.0
+        x[i, LOSES + 1] = 0.0
+        x[i, LOSES + 2] = 0.0
+    # the allowed actions, their nodes, and the window
+    n_act = 0
+    for a in range(n):
+        n_act += mask[a]
+    if n_act == 0:
+        return
+    act = np.empty(n_act, dtype=np.int64)
+    target = np.empty(n_act, dtype=np.int64)
+    bit_of = np.full(n, -1, dtype=np.int64)  # acquisition -> its action's bit
+    k = 0
+    p0 = order.shape[0]
+    end = -np.inf
+    for a in range(n):
+        if mask[a] == 0:
+            continue
+        w = arc_to_acq(indptr, dst, acq_ptr, last, a)  # the node a would start at (eosp.envs.core.target_node)
+        act[k] = a
+        target[k] = w
+        bit_of[a] = k
+        p0 = min(p0, pos[w])
+        end = max(end, node_finish[w] + LOOKAHEAD_S)
+        k += 1
+    words = (n_act + 63) // 64
+    reach = np.zeros((order.shape[0] - p0, words), dtype=np.uint64)  # by time-order position - p0
+    root_of = np.full(order.shape[0] - p0, -1, dtype=np.int64)
+    for k in range(n_act):
+        root_of[pos[target[k]] - p0] = k
+    acc = np.zeros(words, dtype=np.uint64)
+    full = np.zeros(words, dtype=np.uint64)
+    for k in range(n_act):
+        full[k >> 6] |= np.uint64(1) << np.uint64(k & 63)
+    for p in range(p0, order.shape[0]):
+        v = order[p]
+        if node_time[v] > end:
+            break
+        if not alive[v]:
+            continue
+        acc[:] = 0
+        for r in range(rindptr[v], rindptr[v + 1]):  # latest first: none before the window carries a bit
+            q = rsrc[r]
+            if pos[q] < p0:
+                break
+            if alive[q]:
+                done = True
+                for c in range(words):
+                    acc[c] |= reach[pos[q] - p0, c]
+                    done = done and acc[c] == full[c]
+                if done:  # reached from every action's node: no predecessor can add more
+                    break
+        own = bit_of[node_acq[v]]
+        if own >= 0:  # the action's other nodes die with it
+            acc[own >> 6] &= ~(np.uint64(1) << np.uint64(own & 63))
+        if root_of[p - p0] >= 0:
+            kk = root_of[p - p0]
+            acc[kk >> 6] |= np.uint64(1) << np.uint64(kk & 63)
+        for c in range(words):
+            reach[p - p0, c] = acc[c]
+    # an acquisition is lost to action k when none of its alive nodes carries k's bit
+    lost = np.zeros(n_act, dtype=np.int64)
+    for i in range(n):
+        if alive_count[i] == 0:
+            continue
+        v = acq_ptr[i + 1] - 1
+        while v >= first_alive[i] and not alive[v]:
+            v -= 1
+        t_last = node_time[v]
+        acc[:] = 0
+        for u in range(first_alive[i], v + 1):
+            if alive[u] and pos[u] >= p0:
+                for c in range(words):
+                    acc[c] |= reach[pos[u] - p0, c]
+        for k in range(n_act):
+            a = act[k]
+            if a == i or t_last > node_finish[target[k]] + LOOKAHEAD_S:
+                continue
+            if (acc[k >> 6] >> np.uint64(k & 63)) & np.uint64(1) == 0:
+                lost[k] += 1
+                x[a, LOSES + 1] = max(x[a, LOSES + 1], static[i, 1])
+                x[a, LOSES + 2] += static[i, 2]
+    for k in range(n_act):
+        x[act[k], LOSES] = lost[k] / 10.0
 
 
 @numba.njit(cache=True)

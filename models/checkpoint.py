@@ -17,6 +17,7 @@ import torch
 from eosp.atomic import atomic_path
 from eosp.config import EnvConfig, ModelConfig, from_dict, to_dict
 from eosp.errors import InputError
+from eosp.envs.observation import LOSES, N_NODE_FEATURES
 from eosp.models.agent import EOSPAgent
 
 WEIGHTS, CONFIG = "agent.pt", "agent.json"
@@ -58,18 +59,33 @@ def load_agent(directory: str | Path) -> tuple[EOSPAgent, EnvConfig, dict[str, A
         first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
         raise InputError(d / WEIGHTS, f"cannot read the weights: {first}") from None  # one line: torch's are long
     try:
-        agent.load_state_dict(state)
+        agent.load_state_dict(with_lookahead_columns(state))
     except RuntimeError as exc:
         raise InputError(d / WEIGHTS, f"weights do not match the model configuration: {exc}") from None
     agent.eval()
     return agent, from_dict(EnvConfig, meta["env"]), meta
 
 
+def with_lookahead_columns(state: dict[str, torch.Tensor]) -> dict[str, torch.Tensor]:
+    """`state` with zero input weights for the lookahead features when it predates them.
+
+    They are the last node features (:data:`eosp.envs.observation.LOSES` on); a checkpoint saved
+    before they existed has three input columns fewer in the first node layer.  Zero weights there
+    make the agent compute exactly what it computed before, and let training start from it."""
+    key = "node_embed.0.weight"
+    w = state.get(key)
+    if w is not None and w.ndim == 2 and w.shape[1] == LOSES:
+        state = dict(state)
+        state[key] = torch.cat([torch.as_tensor(w), torch.zeros(w.shape[0], N_NODE_FEATURES - LOSES,
+                                                                  dtype=torch.as_tensor(w).dtype)], dim=1)
+    return state
+
+
 def agent_from_rllib_weights(weights: dict[str, Any], model_cfg: ModelConfig) -> EOSPAgent:
     """An agent from the learner's module state (keys 'agent.*', numpy arrays or tensors)."""
     agent = EOSPAgent(model_cfg)
     state = {k[len("agent."):]: torch.as_tensor(v) for k, v in weights.items() if k.startswith("agent.")}
-    agent.load_state_dict(state)
+    agent.load_state_dict(with_lookahead_columns(state))
     agent.eval()
     return agent
 

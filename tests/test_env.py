@@ -10,7 +10,7 @@ from hypothesis import strategies as st
 import eosp.envs  # noqa: F401  (registers EOSP-v0)
 from eosp.envs.eosp_env import EOSPEnv, InvalidAction
 from eosp.envs.sources import FixedSource
-from eosp.envs.observation import SELECTABLE
+from eosp.envs.observation import LOOKAHEAD_S, LOSES, N_NODE_FEATURES, SELECTABLE
 from eosp.config import EnvConfig
 from eosp.instances.schedule import check
 from tests.conftest import generated
@@ -171,13 +171,69 @@ def test_snapshot_restore_replays_identically():
     assert len(env.path()) == 3
 
 
+def lookahead_reference(env, inst):
+    """What each allowed action would remove, from the environment's own step on a copy of the state:
+    {action: (lost acquisitions, the highest log-utility feature among them, their utility share)}, counting
+    an acquisition only when its last alive node starts within LOOKAHEAD_S of the end of the action's node."""
+    from eosp.envs.core import step, target_node
+
+    ep, eg = env.state.ep, env.state.prepared.eg
+    static = env.state.prepared.cand.static
+    out = {}
+    for a in np.flatnonzero(ep.mask):
+        w = target_node(eg, ep.alive, ep.last[0], a)
+        limit = eg.node_finish[w] + LOOKAHEAD_S
+        before = ep.alive_count > 0
+        last_start = np.array([inst.node_time[np.flatnonzero(ep.alive[eg.acq_ptr[i]:eg.acq_ptr[i + 1]])[-1]
+                                              + eg.acq_ptr[i]] if before[i] else np.inf for i in range(inst.n_acq)])
+        copy = ep.copy()
+        step(eg, copy, a)
+        lost = before & (copy.alive_count == 0) & (last_start <= limit)
+        lost[a] = False
+        out[int(a)] = (int(lost.sum()), float(static[lost, 1].max()) if lost.any() else 0.0,
+                       float(static[lost, 2].sum()))
+    return out
+
+
+@settings(max_examples=30, deadline=None)
+@given(n=st.integers(2, 12), seed=st.integers(0, 10_000), walk=st.integers(0, 2**31 - 1))
+def test_lookahead_features_are_what_the_step_would_remove(n, seed, walk):
+    inst = synthetic_instance(n, seed)
+    env = make_env(inst, reward="utility")
+    obs, _ = env.reset(seed=0)
+    rng = np.random.default_rng(walk)
+    while obs["action_mask"][:n].any():
+        ref = lookahead_reference(env, inst)
+        x = obs["x"][:n]
+        for a in range(n):
+            count, top, share = ref.get(a, (0, 0.0, 0.0))
+            assert x[a, LOSES] == pytest.approx(count / 10, abs=1e-6)
+            assert x[a, LOSES + 1] == pytest.approx(top, abs=1e-6) and x[a, LOSES + 2] == pytest.approx(share, abs=1e-6)
+        obs, *_ = env.step(int(rng.choice(np.flatnonzero(obs["action_mask"][:n]))))
+
+
+def test_lookahead_features_on_a_generated_instance_and_an_action_that_removes_something():
+    inst = generated("clusters", 40, 3, step=1.0)
+    env = make_env(inst)
+    obs, _ = env.reset(seed=0)
+    rng = np.random.default_rng(0)
+    seen = 0
+    while obs["action_mask"].any():
+        ref = lookahead_reference(env, inst)
+        np.testing.assert_allclose(obs["x"][:, LOSES], [ref.get(a, (0,))[0] / 10 for a in range(inst.n_acq)],
+                                   atol=1e-6)
+        seen += sum(c > 0 for c, _, _ in ref.values())
+        obs, *_ = env.step(int(rng.choice(np.flatnonzero(obs["action_mask"]))))
+    assert seen > 0  # the features were tested on actions that do remove acquisitions
+
+
 def test_observation_shapes_dtypes_and_edges():
     inst = generated("uniform", 30, 1)
     for mode in ("earliest", "full"):
         env = EOSPEnv(EnvConfig(max_acquisitions=64, obs_edges=mode), source=FixedSource(inst))
         obs, _ = env.reset(seed=0)
         assert env.observation_space.contains(obs)
-        assert obs["x"].shape == (64, 25) and obs["edge_index"].dtype == np.int32
+        assert obs["x"].shape == (64, N_NODE_FEATURES) == (64, 28) and obs["edge_index"].dtype == np.int32
         m = int(obs["n_edges"][0])
         assert m > 0 and np.all(obs["edge_index"][:, m:] == 0)
         src, dst = obs["edge_index"][:, :m]

@@ -120,6 +120,36 @@ def test_checkpoint_round_trip_same_actions(tmp_path, agent):
     np.testing.assert_array_equal(a, b)
 
 
+def test_a_checkpoint_without_the_lookahead_features_loads_and_decides_as_before(tmp_path, agent):
+    """Checkpoints saved before the three lookahead features existed (the first node layer three inputs
+    narrower) load with zero weights there: the same decisions as the agent with those weights zeroed."""
+    import copy
+
+    from eosp.envs.observation import LOSES, N_NODE_FEATURES
+    from eosp.envs.sources import prepare_instance
+
+    old = copy.deepcopy(agent)
+    with torch.no_grad():
+        old.node_embed[0].weight[:, LOSES:] = torch.randn(old.node_embed[0].weight.shape[0], N_NODE_FEATURES - LOSES)
+    save_agent(old, tmp_path / "ck", EnvConfig())
+    state = torch.load(tmp_path / "ck" / "agent.pt", weights_only=True)
+    state["node_embed.0.weight"] = state["node_embed.0.weight"][:, :LOSES].clone()
+    torch.save(state, tmp_path / "ck" / "agent.pt")
+    back = load_agent(tmp_path / "ck")[0]
+    assert torch.all(back.node_embed[0].weight[:, LOSES:] == 0)
+    with torch.no_grad():
+        old.node_embed[0].weight[:, LOSES:] = 0.0
+    p = prepare_instance(generated("conflict", 40, 4, step=1.0))
+    np.testing.assert_array_equal(rollout(old, p, EnvConfig())[0], rollout(back, p, EnvConfig())[0])
+    # any other width is still refused with one line
+    state["node_embed.0.weight"] = state["node_embed.0.weight"][:, :LOSES - 1].clone()
+    torch.save(state, tmp_path / "ck" / "agent.pt")
+    from eosp.errors import InputError
+
+    with pytest.raises(InputError, match="weights do not match the model configuration"):
+        load_agent(tmp_path / "ck")
+
+
 def test_unknown_or_bad_checkpoint(tmp_path, agent):
     from eosp.errors import InputError
 
