@@ -56,7 +56,7 @@ def run(cfg: PretrainConfig) -> dict:
     from eosp.models.checkpoint import save_agent
     from eosp.training.imitation import DemoData, WeightAverage, cosine_lr, train_epoch
     from eosp.training.plots import imitation_curve
-    from eosp.training.validation import Validator
+    from eosp.training.validation import Validator, selection_score
 
     torch.set_num_threads(1)
     im = cfg.imitation
@@ -111,8 +111,8 @@ def run(cfg: PretrainConfig) -> dict:
         last = epoch == im.epochs or out_of_time
         if validator is not None and (epoch % im.validate_every == 0 or last):
             metrics.update(validator.run(policy).metrics)
-            if metrics["val/policy_mean"] > best:
-                best = metrics["val/policy_mean"]
+            if selection_score(metrics) > best:
+                best = selection_score(metrics)
                 save_agent(policy, ckpt / "best", cfg.env, {"epoch": epoch, "val": metrics, "source": "imitation"})
         if im.dagger_every and epoch % im.dagger_every == 0 and not last:
             metrics.update(data.add_policy_states(policy, im.dagger_instances, im.dagger_beam, rng))
@@ -122,7 +122,8 @@ def run(cfg: PretrainConfig) -> dict:
         print(f"[pretrain] epoch {epoch}: loss {metrics['train/policy_loss']:.4f} accuracy "
               f"{metrics['train/accuracy']:.4f} value {metrics['train/value_loss']:.4f}"
               + (f"  val /optimum {metrics['val/ratio_to_exact']:.4f} /ramp {metrics['val/ratio_to_ramp']:.4f} "
-                 f"/greedy {metrics['val/ratio_to_greedy']:.4f}" if "val/ratio_to_exact" in metrics else "")
+                 f"/greedy {metrics['val/ratio_to_greedy']:.4f} (per instance /optimum "
+                 f"{metrics['val/mean_ratio_to_exact']:.4f})" if "val/ratio_to_exact" in metrics else "")
               + (f"  dagger +{metrics['dagger/states_added']:.0f} states" if "dagger/states_added" in metrics else "")
               + f"  ({metrics['wall_s']:.0f} s)", flush=True)
         if out_of_time:

@@ -99,7 +99,7 @@ def main(argv: list[str] | None = None) -> int:
     from eosp.training.loop import Trainer
     from eosp.training.plots import learning_curve
     from eosp.training.ppo import estimate_value_scale
-    from eosp.training.validation import Validator
+    from eosp.training.validation import Validator, selection_score
 
     torch.set_num_threads(1)
     init_ray(cfg.ray.address, cfg.ray.num_cpus)
@@ -119,7 +119,7 @@ def main(argv: list[str] | None = None) -> int:
         if given:
             print(f"[train] warning: --train.resume continues the saved configuration; ignoring "
                   f"{', '.join('--' + k.replace('_', '-') for k in sorted(given))}", file=sys.stderr)
-        run_id, start_iter, best = prev["mlflow_run_id"], prev["iteration"], prev.get("best", float("-inf"))
+        run_id, start_iter, best = prev["mlflow_run_id"], prev["iteration"], prev.get("best_score", float("-inf"))
         history = prev.get("history", [])
         cfg = from_dict(RunConfig, {**prev["config"], "train": {**prev["config"]["train"],
                                                                  "iterations": t.iterations, "resume": True}})
@@ -146,7 +146,7 @@ def main(argv: list[str] | None = None) -> int:
         mlflow.log_dict(to_dict(cfg), "config.json")
 
     def save_state(iteration: int) -> None:
-        state = {"config": to_dict(cfg), "mlflow_run_id": run_id, "iteration": iteration, "best": best,
+        state = {"config": to_dict(cfg), "mlflow_run_id": run_id, "iteration": iteration, "best_score": best,
                  "history": history}
         from eosp.atomic import atomic_path
 
@@ -170,8 +170,8 @@ def main(argv: list[str] | None = None) -> int:
         out_of_time = t.time_budget > 0 and time.perf_counter() - t_start > t.time_budget
         last = it + 1 == t.iterations or out_of_time
         metrics, agent = trainer.train(validate=(it + 1) % t.validate_every == 0 or last)
-        if agent is not None and metrics["val/policy_mean"] > best:
-            best = metrics["val/policy_mean"]
+        if agent is not None and selection_score(metrics) > best:
+            best = selection_score(metrics)
             save_agent(agent, ckpt_dir / "best", cfg.env, {"iteration": it + 1, "val": metrics})
             save_state(max(start_iter, it + 1 - (it + 1) % t.checkpoint_every))  # `best` is never lost
         metrics["perf/wall_s"] = time.perf_counter() - t_start

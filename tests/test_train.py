@@ -104,3 +104,21 @@ def test_ppo_starts_from_an_imitation_checkpoint(tmp_path, data):
     assert run["iteration"] < 50
     first = run["history"][0]
     assert first["val/policy_mean"] == pytest.approx(expected, rel=1e-6)
+
+
+def test_the_best_checkpoint_is_picked_by_the_mean_per_instance_ratio():
+    """In utility mode values span eight orders of magnitude: the mean value only sees the instances with
+    top-class acquisitions.  The selection score is the mean of the per-instance ratios."""
+    import numpy as np
+
+    from eosp.training.validation import compare, selection_score
+
+    exact = np.array([3e8, 5e4])
+    a = compare(np.array([3e8, 4.6e4]), {"exact": exact, "greedy": np.array([3e8, 4e4])})  # loses 8% on the second
+    b = compare(np.array([3e8 - 1e4, 5e4]), {"exact": exact, "greedy": np.array([3e8, 4e4])})  # 3e-5 on the first
+    assert a["val/policy_mean"] > b["val/policy_mean"]
+    assert a["val/mean_ratio_to_exact"] == 0.5 * (1 + 0.92) and selection_score(b) > selection_score(a)
+    assert selection_score(a) == a["val/mean_ratio_to_exact"]
+    no_exact = compare(np.array([3e8, 4.6e4]), {"greedy": np.array([3e8, 4e4])})
+    assert selection_score(no_exact) == no_exact["val/mean_ratio_to_greedy"] == 0.5 * (1 + 4.6 / 4)
+    assert selection_score(compare(np.array([1.0, 2.0]), {})) == 1.5
