@@ -16,7 +16,7 @@ graph, chosen by ``obs_edges``:
 
 Node features (float32, :data:`NODE_FEATURES`), times relative to the end of
 the last scheduled acquisition in units of :data:`TIME_SCALE` seconds.  The last
-three look one step ahead (:func:`lookahead`): for each allowed action, what the
+six look one step ahead (:func:`lookahead`): for each allowed action, what the
 acquisitions it would remove from the graph are worth.  Edge
 features: the slack of the transition (start of the reached node minus the end
 of the source node) and a flag for edges out of the last scheduled node.
@@ -40,7 +40,7 @@ NODE_FEATURES = (
     "duration", "log_utility", "utility_share",
     *(f"class_{c}" for c in range(N_CLASSES)),
     "roll_min", "roll_max", "roll_mean", "pitch_min", "pitch_max", "pitch_mean",
-    "loses_count", "loses_top", "loses_share",
+    "loses_count", "loses_top", "loses_share", "excess_count", "excess_top", "excess_share",
 )
 N_NODE_FEATURES = len(NODE_FEATURES)
 N_EDGE_FEATURES = 2
@@ -56,9 +56,10 @@ LATEST_START = NODE_FEATURES.index("latest_start")
 EARLIEST_START = NODE_FEATURES.index("earliest_start")
 ALIVE_FRACTION = NODE_FEATURES.index("alive_fraction")
 STATIC = NODE_FEATURES.index("duration")  # first of the N_STATIC columns of static_features, in their order
-LOSES = NODE_FEATURES.index("loses_count")  # the three lookahead features, last (checkpoints without them: zeros)
+LOSES = NODE_FEATURES.index("loses_count")  # the six lookahead features, last (checkpoints without them: zeros)
+N_LOOKAHEAD = 6
 LOOKAHEAD_S = 300.0
-assert STATIC == 9 and LOSES == STATIC + N_STATIC and N_NODE_FEATURES == LOSES + 3
+assert STATIC == 9 and LOSES == STATIC + N_STATIC and N_NODE_FEATURES == LOSES + N_LOOKAHEAD
 
 
 class Candidates(NamedTuple):
@@ -179,9 +180,12 @@ def build_observation(g, ep, cand, k_out, k_last_cap, full, x, edge_index, edge_
 
 @numba.njit(cache=True)
 def lookahead(g, ep, static, x):
-    """Fill the columns :data:`LOSES` .. +2 of x: for each allowed action a, the other acquisitions that
-    taking a would remove from the graph (all their alive nodes before a's node, or unreachable from it):
-    their number / 10, the highest log-utility feature among them, the sum of their utility shares.
+    """Fill the :data:`N_LOOKAHEAD` columns from :data:`LOSES` of x: for each allowed action a, the other
+    acquisitions that taking a would remove from the graph (all their alive nodes before a's node, or
+    unreachable from it): their number / 10, the highest log-utility feature among them, the sum of
+    their utility shares; then the same three minus their least value over the allowed actions (what a
+    loses beyond the most careful choice: a comparison across actions that message passing would
+    otherwise have to learn).
 
     Why: the policy builds its schedule in time order and sees what an action kills only through a few
     hops of message passing; its costliest mistakes in utility mode were such actions (a class-1
@@ -200,9 +204,8 @@ def lookahead(g, ep, static, x):
     n = acq_ptr.shape[0] - 1
     last = ep.last[0]
     for i in range(n):
-        x[i, LOSES] = 0.0
-        x[i, LOSES + 1] = 0.0
-        x[i, LOSES + 2] = 0.0
+        for f in range(N_LOOKAHEAD):
+            x[i, LOSES + f] = 0.0
     # the allowed actions, their nodes, and the window
     n_act = 0
     for a in range(n):
@@ -284,6 +287,13 @@ def lookahead(g, ep, static, x):
                 x[a, LOSES + 2] += static[i, 2]
     for k in range(n_act):
         x[act[k], LOSES] = lost[k] / 10.0
+    # the same in excess of the allowed action that loses the least of each
+    for f in range(3):
+        least = np.inf
+        for k in range(n_act):
+            least = min(least, x[act[k], LOSES + f])
+        for k in range(n_act):
+            x[act[k], LOSES + 3 + f] = x[act[k], LOSES + f] - least
 
 
 @numba.njit(cache=True)

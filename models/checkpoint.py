@@ -70,7 +70,7 @@ def with_lookahead_columns(state: dict[str, torch.Tensor]) -> dict[str, torch.Te
     """`state` with zero input weights for the lookahead features when it predates them.
 
     They are the last node features (:data:`eosp.envs.observation.LOSES` on); a checkpoint saved
-    before they existed has three input columns fewer in the first node layer.  Zero weights there
+    before they existed has six input columns fewer in the first node layer.  Zero weights there
     make the agent compute exactly what it computed before, and let training start from it."""
     key = "node_embed.0.weight"
     w = state.get(key)

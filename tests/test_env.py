@@ -205,10 +205,14 @@ def test_lookahead_features_are_what_the_step_would_remove(n, seed, walk):
     while obs["action_mask"][:n].any():
         ref = lookahead_reference(env, inst)
         x = obs["x"][:n]
+        least = np.min([[c / 10, t, s] for c, t, s in ref.values()], axis=0)
         for a in range(n):
             count, top, share = ref.get(a, (0, 0.0, 0.0))
             assert x[a, LOSES] == pytest.approx(count / 10, abs=1e-6)
             assert x[a, LOSES + 1] == pytest.approx(top, abs=1e-6) and x[a, LOSES + 2] == pytest.approx(share, abs=1e-6)
+            # in excess of the allowed action that loses the least; nothing for a forbidden one
+            excess = np.array([count / 10, top, share]) - least if a in ref else np.zeros(3)
+            np.testing.assert_allclose(x[a, LOSES + 3:LOSES + 6], excess, atol=1e-6)
         obs, *_ = env.step(int(rng.choice(np.flatnonzero(obs["action_mask"][:n]))))
 
 
@@ -233,7 +237,7 @@ def test_observation_shapes_dtypes_and_edges():
         env = EOSPEnv(EnvConfig(max_acquisitions=64, obs_edges=mode), source=FixedSource(inst))
         obs, _ = env.reset(seed=0)
         assert env.observation_space.contains(obs)
-        assert obs["x"].shape == (64, N_NODE_FEATURES) == (64, 28) and obs["edge_index"].dtype == np.int32
+        assert obs["x"].shape == (64, N_NODE_FEATURES) == (64, 31) and obs["edge_index"].dtype == np.int32
         m = int(obs["n_edges"][0])
         assert m > 0 and np.all(obs["edge_index"][:, m:] == 0)
         src, dst = obs["edge_index"][:, :m]

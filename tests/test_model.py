@@ -121,7 +121,7 @@ def test_checkpoint_round_trip_same_actions(tmp_path, agent):
 
 
 def test_a_checkpoint_without_the_lookahead_features_loads_and_decides_as_before(tmp_path, agent):
-    """Checkpoints saved before the three lookahead features existed (the first node layer three inputs
+    """Checkpoints saved before the six lookahead features existed (the first node layer six inputs
     narrower) load with zero weights there: the same decisions as the agent with those weights zeroed."""
     import copy
 
