@@ -166,7 +166,8 @@ class EOSPEnv(gym.Env):
         self._publish_mask()
         bufs = self._buffers()
         m = build_observation(prepared.eg, self.state.ep, prepared.cand, self.cfg.max_out_degree,
-                              self.cfg.last_edges_cap, self.cfg.obs_edges == "full", *bufs, self.cfg.obs_horizon_s)
+                              self.cfg.last_edges_cap, self.cfg.obs_edges == "full", *bufs, self.cfg.obs_horizon_s,
+                              self.cfg.lookahead)
         return self._observation(bufs, m), {"instance": prepared.inst.name, "n_acquisitions": prepared.inst.n_acq}
 
     def step(self, action):
@@ -181,7 +182,8 @@ class EOSPEnv(gym.Env):
             raise InvalidAction(f"action {a} is not allowed: {why}; allowed: {np.flatnonzero(ep.mask).tolist()}")
         bufs = self._buffers()
         w, m = step_and_observe_fields(tuple(eg), tuple(ep), tuple(s.prepared.cand), a, self.cfg.max_out_degree,
-                                       self.cfg.last_edges_cap, self.cfg.obs_edges == "full", *bufs, self.cfg.obs_horizon_s)
+                                       self.cfg.last_edges_cap, self.cfg.obs_edges == "full", *bufs, self.cfg.obs_horizon_s,
+                                       self.cfg.lookahead)
         assert w >= 0
         u = float(s.prepared.inst.acqs.utility[a])
         s.value += u

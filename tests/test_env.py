@@ -199,10 +199,15 @@ def lookahead_reference(env, inst):
 @given(n=st.integers(2, 12), seed=st.integers(0, 10_000), walk=st.integers(0, 2**31 - 1))
 def test_lookahead_features_are_what_the_step_would_remove(n, seed, walk):
     inst = synthetic_instance(n, seed)
-    env = make_env(inst, reward="utility")
+    env = make_env(inst, reward="utility", lookahead=True)
+    off = make_env(inst, reward="utility")
     obs, _ = env.reset(seed=0)
+    obs_off, _ = off.reset(seed=0)
     rng = np.random.default_rng(walk)
     while obs["action_mask"][:n].any():
+        # off (the default): zeros there, everything else the same
+        assert np.all(obs_off["x"][:, LOSES:] == 0)
+        np.testing.assert_array_equal(obs_off["x"][:, :LOSES], obs["x"][:, :LOSES])
         ref = lookahead_reference(env, inst)
         x = obs["x"][:n]
         least = np.min([[c / 10, t, s] for c, t, s in ref.values()], axis=0)
@@ -213,12 +218,14 @@ def test_lookahead_features_are_what_the_step_would_remove(n, seed, walk):
             # in excess of the allowed action that loses the least; nothing for a forbidden one
             excess = np.array([count / 10, top, share]) - least if a in ref else np.zeros(3)
             np.testing.assert_allclose(x[a, LOSES + 3:LOSES + 6], excess, atol=1e-6)
-        obs, *_ = env.step(int(rng.choice(np.flatnonzero(obs["action_mask"][:n]))))
+        a = int(rng.choice(np.flatnonzero(obs["action_mask"][:n])))
+        obs, *_ = env.step(a)
+        obs_off, *_ = off.step(a)
 
 
 def test_lookahead_features_on_a_generated_instance_and_an_action_that_removes_something():
     inst = generated("clusters", 40, 3, step=1.0)
-    env = make_env(inst)
+    env = make_env(inst, lookahead=True)
     obs, _ = env.reset(seed=0)
     rng = np.random.default_rng(0)
     seen = 0
