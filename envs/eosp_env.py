@@ -181,9 +181,10 @@ class EOSPEnv(gym.Env):
             why = "out of range" if not 0 <= a < n else "masked (no arc from the last scheduled node to it)"
             raise InvalidAction(f"action {a} is not allowed: {why}; allowed: {np.flatnonzero(ep.mask).tolist()}")
         bufs = self._buffers()
-        w, m = step_and_observe_fields(tuple(eg), tuple(ep), tuple(s.prepared.cand), a, self.cfg.max_out_degree,
-                                       self.cfg.last_edges_cap, self.cfg.obs_edges == "full", *bufs, self.cfg.obs_horizon_s,
-                                       self.cfg.lookahead)
+        cfg = self.cfg
+        w, m = step_and_observe_fields(tuple(eg), tuple(ep), tuple(s.prepared.cand), a, cfg.max_out_degree,
+                                       cfg.last_edges_cap, cfg.obs_edges == "full", *bufs, cfg.obs_horizon_s,
+                                       cfg.lookahead)
         assert w >= 0
         u = float(s.prepared.inst.acqs.utility[a])
         s.value += u

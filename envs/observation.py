@@ -18,9 +18,8 @@ Node features (float32, :data:`NODE_FEATURES`), times relative to the end of
 the last scheduled acquisition in units of :data:`TIME_SCALE` seconds.  The last
 six look one step ahead (:func:`lookahead`, filled when ``look``, i.e. EnvConfig.lookahead;
 zeros otherwise): for each allowed action, what the acquisitions it would remove from the
-graph are worth.  Edge
-features: the slack of the transition (start of the reached node minus the end
-of the source node) and a flag for edges out of the last scheduled node.
+graph are worth.  Edge features: the slack of the transition (start of the reached node
+minus the end of the source node) and a flag for edges out of the last scheduled node.
 """
 
 from __future__ import annotations

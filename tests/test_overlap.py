@@ -49,7 +49,10 @@ def test_overlapped_ppo_counts_every_batch_and_never_drops_a_weight_sync(algo):
         assert algo._in_flight == 1  # the next batch is already being sampled while this returns
         if i == 0:
             after_first = runner_weights()
-    assert steps == [64, 128, 192]
+    # every iteration counts one whole batch: 64 steps, or a step or two more when RLlib's vectorized envs
+    # overshoot (plain PPO on this fixture counts 65 / 130 / 195 as well); a dropped or doubled batch fails
+    per_iteration = np.diff([0] + steps)
+    assert np.all((per_iteration >= 64) & (per_iteration <= 64 + 2)), steps
     assert np.isfinite(result["learners"]["default_policy"]["policy_loss"])
 
     # the runner then holds exactly the learner's latest weights (a dropped sync would leave older ones),
