@@ -85,7 +85,7 @@ def agent_from_rllib_weights(weights: dict[str, Any], model_cfg: ModelConfig) ->
     """An agent from the learner's module state (keys 'agent.*', numpy arrays or tensors)."""
     agent = EOSPAgent(model_cfg)
     state = {k[len("agent."):]: torch.as_tensor(v) for k, v in weights.items() if k.startswith("agent.")}
-    agent.load_state_dict(with_lookahead_columns(state))
+    agent.load_state_dict(state)
     agent.eval()
     return agent
 
