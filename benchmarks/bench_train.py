@@ -60,7 +60,8 @@ class Args:
     """Model preset (eosp.config.MODEL_PRESETS)."""
     reward: str = "unitary"
     num_env_runners: int = 1
-    num_envs_per_env_runner: int = 2
+    num_envs_per_env_runner: int = 0
+    """0: the default of the code benchmarked (TrainConfig; a --compare commit keeps its own)."""
     overlap_sampling: bool = True
     """Sample the next batch while learning (eosp.config.TrainConfig.overlap_sampling, on by default)."""
     num_gpus_per_learner: float = 0.0
@@ -200,8 +201,9 @@ def observation_share(data: Path, cfg, steps: int = 600) -> float:
         s = env.state
         bufs = env._buffers()
         t2 = time.perf_counter()
+        look = (cfg.lookahead,) if hasattr(cfg, "lookahead") else ()  # older commits (--compare) have none
         build_observation(s.prepared.eg, s.ep, s.prepared.cand, cfg.max_out_degree, cfg.last_edges_cap,
-                          cfg.obs_edges == "full", *bufs, cfg.obs_horizon_s, cfg.lookahead)
+                          cfg.obs_edges == "full", *bufs, cfg.obs_horizon_s, *look)
         t3 = time.perf_counter()
         if i >= 50:  # compiled by then
             t_step, t_obs = t_step + t1 - t0, t_obs + t3 - t2
@@ -223,7 +225,9 @@ def bench(a: Args) -> dict:
     data = data_set(a)
     cfg = RunConfig(model=from_dict(ModelConfig, MODEL_PRESETS[a.preset]))
     cfg.train.train_data, cfg.train.val_data = str(data), ""
-    cfg.train.num_env_runners, cfg.train.num_envs_per_env_runner = a.num_env_runners, a.num_envs_per_env_runner
+    cfg.train.num_env_runners = a.num_env_runners
+    if a.num_envs_per_env_runner:
+        cfg.train.num_envs_per_env_runner = a.num_envs_per_env_runner
     cfg.env.reward = a.reward
     cfg.train.overlap_sampling = a.overlap_sampling  # an older commit ignores it (plain PPO)
     cfg.train.num_gpus_per_learner = a.num_gpus_per_learner

@@ -56,6 +56,7 @@ def ppo_config(cfg: RunConfig):
         from eosp.training.overlap import OverlappedPPO
 
         algo_class = OverlappedPPO
+    model_config = {**to_dict(cfg.model), "rollout_values": t.rollout_values}  # the latter: the module's own key
     pc = (
         PPOConfig(algo_class=algo_class)
         .environment(env=EOSPEnv, env_config=env_config, disable_env_checking=True)
@@ -65,7 +66,7 @@ def ppo_config(cfg: RunConfig):
                      gym_env_vectorize_mode="sync",
                      custom_resources_per_env_runner={t.env_runner_resource: 1} if t.env_runner_resource else {})
         .learners(num_learners=0, num_gpus_per_learner=t.num_gpus_per_learner, **learner)
-        .rl_module(rl_module_spec=RLModuleSpec(module_class=EOSPTorchRLModule, model_config=to_dict(cfg.model)))
+        .rl_module(rl_module_spec=RLModuleSpec(module_class=EOSPTorchRLModule, model_config=model_config))
         .training(train_batch_size_per_learner=t.train_batch_size, minibatch_size=t.minibatch_size,
                   num_epochs=t.num_epochs, lr=t.lr, gamma=t.gamma, lambda_=t.gae_lambda, clip_param=t.clip_param,
                   entropy_coeff=t.entropy_coeff, vf_loss_coeff=t.vf_loss_coeff / scale**2, vf_clip_param=1e12,
