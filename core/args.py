@@ -82,7 +82,8 @@ def add_config_args(parser: argparse.ArgumentParser, cls: type, prefix: str = ""
         if len(options) == 1 and len(typing.get_args(hint)) == 2:  # `X | None`: the flag gives an X
             hint = options[0]
         flag = "--" + name.replace("_", "-")
-        help_text = (docs.get(f.name, "") + f" (default: {value!r})").strip()
+        # argparse %-formats help strings: a docstring's '%' must reach the user as written
+        help_text = (docs.get(f.name, "") + f" (default: {value!r})").strip().replace("%", "%%")
         origin = typing.get_origin(hint)
         if hint is bool:  # `--flag` alone means true
             parser.add_argument(flag, dest=name, type=_parse_bool, nargs="?", const=True, default=argparse.SUPPRESS,

@@ -428,7 +428,7 @@ class TrainConfig:
     runner's sampling 1.4 -> 0.8 s per 512 steps at 100 acquisitions, docs/benchmarks.md)."""
     rollout_values: bool = True
     """GAE's values come from the runners' own forward pass (the sampling weights, as in PPO's reference
-    implementation) instead of a second pass over the whole batch in the learner (~9% of its time); only each
+    implementation) instead of a second pass over the whole batch in the learner (a tenth of its time); only each
     episode chunk's bootstrap observation is evaluated in the learner.  false: RLlib's learner-side pass."""
     overlap_sampling: bool = True
     """Sample the next batch while the learner updates on this one (training/overlap.py): the runners and

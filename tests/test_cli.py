@@ -1,5 +1,6 @@
 """The eosp command as users run it (subprocesses)."""
 
+import dataclasses
 import subprocess
 import sys
 
@@ -69,3 +70,40 @@ def test_corrupt_arcs_row_group_is_one_line_exit_2(tmp_path):
     r = eosp("info", inst, check=False)
     assert r.returncode == 2 and "Traceback" not in r.stderr
     assert len(r.stderr.strip().splitlines()) == 1 and "arcs.parquet" in r.stderr and "row group 1" in r.stderr
+
+
+@dataclasses.dataclass
+class Percent:
+    share: float = 0.5
+    """Share of the time (50% by default; '%(prog)s' printed as is)."""
+
+
+def test_every_config_renders_its_help_with_docstrings_as_written():
+    """Field docstrings are the --help; argparse %-formats help strings, so a '%' in one must not break it."""
+    import argparse
+    import inspect
+
+    import eosp.config as config
+    from eosp.args import add_config_args
+
+    classes = [c for _, c in inspect.getmembers(config, inspect.isclass)
+               if dataclasses.is_dataclass(c) and c.__module__ == config.__name__]
+    assert len(classes) >= 10
+    for cls in [*classes, Percent]:
+        p = argparse.ArgumentParser(prog="x")
+        add_config_args(p, cls)
+        text = p.format_help()
+        assert all("--" + f.name.replace("_", "-") in text for f in dataclasses.fields(cls)), cls
+    assert "50% by default; '%(prog)s' printed as is" in " ".join(text.split())
+
+
+def test_every_job_prints_its_help():
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[1]
+    for job in ("build_shards", "build_demos", "pretrain", "train", "tune", "evaluate"):
+        r = subprocess.run([sys.executable, str(root / "jobs" / f"{job}.py"), "--help"], capture_output=True,
+                           text=True, timeout=120)
+        assert r.returncode == 0 and "usage:" in r.stdout and not r.stderr.strip(), (job, r.stderr[-2000:])
+        if job == "train":
+            assert "--train.rollout-values" in r.stdout and "GAE's values come from" in r.stdout
