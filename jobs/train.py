@@ -202,7 +202,8 @@ def main(argv: list[str] | None = None) -> int:
     mlflow.end_run()
     trainer.stop()
     summary = history[-1] if history else {}
-    print(f"[train] done: {t.run_name}, {t.iterations - start_iter} iterations this session in {wall:.0f} s; "
+    done = history[-1]["iteration"] - start_iter if history else 0  # fewer than asked when the time budget ended it
+    print(f"[train] done: {t.run_name}, {done} iterations this session in {wall:.0f} s; "
           f"checkpoints in {ckpt_dir}")
     if "val/ratio_to_greedy" in summary:
         print("[train] validation (greedy decoding) vs baselines:")

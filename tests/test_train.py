@@ -102,6 +102,7 @@ def test_ppo_starts_from_an_imitation_checkpoint(tmp_path, data):
     run = json.loads((tmp_path / "runs" / "t" / "run.json").read_text())
     assert run["config"]["model"]["hidden_dim"] == 12 and run["config"]["model"]["value_scale"] == 3.0
     assert run["iteration"] < 50
+    assert f"done: t, {run['iteration']} iterations this session" in r.stdout
     first = run["history"][0]
     assert first["val/policy_mean"] == pytest.approx(expected, rel=1e-6)
 
