@@ -379,6 +379,11 @@ class EnvConfig:
     """Fill the six lookahead node features (what each allowed action would remove from the graph,
     envs/observation.py); false: they are zeros and the step skips that work (~0.08 ms a step at 100
     acquisitions, ~2 ms at 1000).  Recorded in checkpoints with the other env settings."""
+    plan: str = choice("", "", "greedy")
+    """'greedy': fill the three plan node features with Greedy's completion of the current partial schedule
+    (the operational greedy insertion from the last scheduled node, in Greedy's order for the reward: by
+    decreasing utility, by window start for 'unitary'; envs/observation.py); empty: zeros, no work.
+    Recorded in checkpoints with the other env settings."""
     shards: tuple[str, ...] = ()
     """Shard files (or data set directories) the environment copies share out among themselves."""
     seed: int = 0

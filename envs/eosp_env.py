@@ -52,7 +52,8 @@ import gymnasium as gym
 import numpy as np
 
 from eosp.envs import core
-from eosp.envs.observation import N_EDGE_FEATURES, N_NODE_FEATURES, build_observation, step_and_observe_fields
+from eosp.envs.observation import (N_EDGE_FEATURES, N_NODE_FEATURES, PLAN_ORDERS, build_observation,
+                                   step_and_observe_fields)
 from eosp.envs.sources import FixedSource, PreparedInstance, ShardSource, expand_shards, owned_shards, prepare_instance
 from eosp.config import CLASS_UTILITIES, N_CLASSES, EnvConfig, from_dict
 from eosp.instances.instance import Instance
@@ -118,11 +119,13 @@ class EOSPEnv(gym.Env):
         if cfg.obs_edges not in ("earliest", "full"):
             raise ValueError(f"unknown obs_edges {cfg.obs_edges!r} (earliest, full)")
         self.cfg = cfg
+        # the plan features' kernel code (envs/observation.PLAN_ORDERS): Greedy's order for this reward
+        self._plan = 0 if not cfg.plan else PLAN_ORDERS.index("start" if cfg.reward == "unitary" else "utility")
         self.worker_index, self.vector_index = worker_index, vector_index
         if source is None:
             if cfg.shards:
                 source = ShardSource(owned_shards(expand_shards(cfg.shards), worker_index, num_workers),
-                                     max_cached=cfg.max_cached_instances, prune=cfg.prune)
+                                     max_cached=cfg.max_cached_instances, prune=cfg.prune, unpruned=bool(cfg.plan))
             else:
                 source = FixedSource(_embedded_default(cfg.seed), prune=cfg.prune)
         self.source = source
@@ -161,13 +164,16 @@ class EOSPEnv(gym.Env):
                 raise ValueError(f"instance has {prepared.inst.n_acq} acquisitions > max_acquisitions={self.n_max}")
         else:
             prepared = self.source.sample(self.np_random)
+        if self._plan and prepared.cand.plan_indptr.shape[0] != prepared.eg.node_time.shape[0] + 1:
+            prepared.inst.unpruned("the plan features (--env.plan greedy)")  # not loaded: a one-line InputError
+            raise ValueError(f"{prepared.inst.name}: its unpruned graph does not have the environment graph's nodes")
         self.state = Snapshot(prepared=prepared, ep=core.Episode.start(prepared.eg), value=0.0)
         core.start(prepared.eg, self.state.ep)
         self._publish_mask()
         bufs = self._buffers()
         m = build_observation(prepared.eg, self.state.ep, prepared.cand, self.cfg.max_out_degree,
                               self.cfg.last_edges_cap, self.cfg.obs_edges == "full", *bufs, self.cfg.obs_horizon_s,
-                              self.cfg.lookahead)
+                              self.cfg.lookahead, self._plan)
         return self._observation(bufs, m), {"instance": prepared.inst.name, "n_acquisitions": prepared.inst.n_acq}
 
     def step(self, action):
@@ -184,7 +190,7 @@ class EOSPEnv(gym.Env):
         cfg = self.cfg
         w, m = step_and_observe_fields(tuple(eg), tuple(ep), tuple(s.prepared.cand), a, cfg.max_out_degree,
                                        cfg.last_edges_cap, cfg.obs_edges == "full", *bufs, cfg.obs_horizon_s,
-                                       cfg.lookahead)
+                                       cfg.lookahead, self._plan)
         assert w >= 0
         u = float(s.prepared.inst.acqs.utility[a])
         s.value += u

@@ -15,10 +15,12 @@ graph, chosen by ``obs_edges``:
   to ``max_edges``.
 
 Node features (float32, :data:`NODE_FEATURES`), times relative to the end of
-the last scheduled acquisition in units of :data:`TIME_SCALE` seconds.  The last
-six look one step ahead (:func:`lookahead`, filled when ``look``, i.e. EnvConfig.lookahead;
+the last scheduled acquisition in units of :data:`TIME_SCALE` seconds.  Six
+look one step ahead (:func:`lookahead`, filled when ``look``, i.e. EnvConfig.lookahead;
 zeros otherwise): for each allowed action, what the acquisitions it would remove from the
-graph are worth.  Edge features: the slack of the transition (start of the reached node
+graph are worth.  The last three are Greedy's completion of the current partial schedule
+(:func:`plan_features`, filled when EnvConfig.plan is set; zeros otherwise).  Edge features:
+the slack of the transition (start of the reached node
 minus the end of the source node) and a flag for edges out of the last scheduled node.
 """
 
@@ -32,6 +34,7 @@ import numpy as np
 from eosp.config import CLASS_UTILITIES, N_CLASSES
 from eosp.envs.core import EnvGraph, Episode, step
 from eosp.graphs.discrete import arc_to_acq
+from eosp.graphs.insertion import greedy_insert, insertion_order
 
 TIME_SCALE = 300.0
 NODE_FEATURES = (
@@ -41,6 +44,7 @@ NODE_FEATURES = (
     *(f"class_{c}" for c in range(N_CLASSES)),
     "roll_min", "roll_max", "roll_mean", "pitch_min", "pitch_max", "pitch_mean",
     "loses_count", "loses_top", "loses_share", "excess_count", "excess_top", "excess_share",
+    "plan_member", "plan_next", "plan_start",
 )
 N_NODE_FEATURES = len(NODE_FEATURES)
 N_EDGE_FEATURES = 2
@@ -56,10 +60,13 @@ LATEST_START = NODE_FEATURES.index("latest_start")
 EARLIEST_START = NODE_FEATURES.index("earliest_start")
 ALIVE_FRACTION = NODE_FEATURES.index("alive_fraction")
 STATIC = NODE_FEATURES.index("duration")  # first of the N_STATIC columns of static_features, in their order
-LOSES = NODE_FEATURES.index("loses_count")  # the six lookahead features, last (checkpoints without them: zeros)
+LOSES = NODE_FEATURES.index("loses_count")  # the six lookahead features (checkpoints without them: zeros)
 N_LOOKAHEAD = 6
 LOOKAHEAD_S = 300.0
-assert STATIC == 9 and LOSES == STATIC + N_STATIC and N_NODE_FEATURES == LOSES + N_LOOKAHEAD
+PLAN = NODE_FEATURES.index("plan_member")  # the three plan features, last (checkpoints without them: zeros)
+N_PLAN = 3
+PLAN_ORDERS = ("", "utility", "start")  # EnvConfig.plan's kernel code: 0 off, 1 by utility, 2 by window start
+assert STATIC == 9 and LOSES == STATIC + N_STATIC and PLAN == LOSES + N_LOOKAHEAD and N_NODE_FEATURES == PLAN + N_PLAN
 
 
 class Candidates(NamedTuple):
@@ -69,12 +76,25 @@ class Candidates(NamedTuple):
     vtw_end: np.ndarray  # float64 [n]
     duration: np.ndarray  # float64 [n]
     static: np.ndarray  # float32 [n, N_STATIC]: static_features
+    order_utility: np.ndarray  # int32 [n]: Greedy's insertion order in utility mode (decreasing utility)
+    order_start: np.ndarray  # int32 [n]: and in unitary mode (by window start)
+    plan_indptr: np.ndarray  # CSR of the UNPRUNED graph (same nodes), for the plan features; [0] if not loaded
+    plan_dst: np.ndarray
 
 
-def candidates(acqs, priority: np.ndarray) -> Candidates:
-    """:class:`Candidates` of an instance's acquisitions (eosp.instances.instance.Acquisitions)."""
+def candidates(acqs, priority: np.ndarray, node_time: np.ndarray, acq_ptr: np.ndarray, unpruned=None) -> Candidates:
+    """:class:`Candidates` of an instance's acquisitions (eosp.instances.instance.Acquisitions) in the
+    environment's graph (its node start times and acquisition pointer); `unpruned`: the instance's unpruned
+    discrete graph (eosp.graphs.discrete.DiscreteGraph, the same nodes) when loaded, which the plan features
+    need (Greedy inserts acquisitions between others: the pruned graph has no arc across an insertable one)."""
+    if unpruned is not None and unpruned.indptr.shape[0] == node_time.shape[0] + 1:
+        indptr, dst = unpruned.indptr, unpruned.dst
+    else:
+        indptr, dst = np.zeros(1, dtype=np.int64), np.zeros(0, dtype=np.int32)
     return Candidates(acqs.vtw_start, acqs.vtw_end, acqs.duration,
-                      static_features(acqs.duration, acqs.utility, priority, acqs.attitude))
+                      static_features(acqs.duration, acqs.utility, priority, acqs.attitude),
+                      insertion_order(node_time, acq_ptr, acqs.utility, "utility"),
+                      insertion_order(node_time, acq_ptr, acqs.utility, "start"), indptr, dst)
 
 
 def static_features(duration: np.ndarray, utility: np.ndarray, priority: np.ndarray,
@@ -97,13 +117,15 @@ def _clip(x):
 
 
 @numba.njit(cache=True)
-def build_observation(g, ep, cand, k_out, k_last_cap, full, x, edge_index, edge_attr, horizon=0.0, look=False):
+def build_observation(g, ep, cand, k_out, k_last_cap, full, x, edge_index, edge_attr, horizon=0.0, look=False,
+                      plan=0):
     """Fill x [N_max, F], edge_index [2, E_max], edge_attr [E_max, 2]; returns the number of edges.
 
     `g`: eosp.envs.core.EnvGraph, `ep`: eosp.envs.core.Episode (with first_alive advanced),
     `cand`: :class:`Candidates`.  `horizon` > 0 (seconds): acquisitions that cannot be chosen now and
     whose earliest start is more than `horizon` after the end of the last scheduled one are left out
-    of the graph (marked removed, no edge): the network's cost follows the near future only.
+    of the graph (marked removed, no edge): the network's cost follows the near future only.  `look`:
+    fill the lookahead features; `plan` (:data:`PLAN_ORDERS` code): fill the plan features.
     """
     node_acq, node_time, node_finish, indptr, dst, acq_ptr = g.node_acq, g.node_time, g.node_finish, g.indptr, \
         g.dst, g.acq_ptr
@@ -142,6 +164,7 @@ def build_observation(g, ep, cand, k_out, k_last_cap, full, x, edge_index, edge_
         for i in range(n):
             for f in range(N_LOOKAHEAD):
                 x[i, LOSES + f] = 0.0
+    plan_features(g, ep, cand, plan, x)
     beyond = np.zeros(n, dtype=np.bool_)
     if horizon > 0.0:
         for i in range(n):
@@ -302,26 +325,67 @@ def lookahead(g, ep, static, x):
 
 
 @numba.njit(cache=True)
-def step_and_observe(g, ep, cand, action, k_out, k_last_cap, full, x, edge_index, edge_attr, horizon=0.0, look=False):
+def plan_features(g, ep, cand, plan, x):
+    """Fill the :data:`N_PLAN` columns from :data:`PLAN` of x with Greedy's completion of the current partial
+    schedule: the operational greedy insertion (eosp.graphs.insertion) run from the last scheduled node over
+    the acquisitions still in the graph, in Greedy's order (`plan` 1: decreasing utility, 2: window start;
+    0: zeros, no work).  Columns: the acquisition is in that plan; it is the plan's first; the start the plan
+    gives it, relative to the end of the last scheduled acquisition (units of :data:`TIME_SCALE`; 0 when not
+    in the plan).  The plan is a path of the UNPRUNED graph (`cand.plan_indptr`, `cand.plan_dst`): Greedy
+    leaves gaps where something else would fit, which the pruned graph has no arc across, so its first
+    acquisition need not be an allowed action (an allowed one then fits before it).
+
+    Why: in utility mode the policy's costliest mistakes were high-class acquisitions given up, by steps
+    whose effect shows many decisions later (two class-0 acquisitions that stop fitting together), while
+    Greedy, which inserts by decreasing utility, never gives one up.  The plan says which acquisitions still
+    fit together from here, and how the operational rule would complete the schedule: the policy learns
+    where to depart from it.  A function of the state (recomputed each step, so snapshots and search
+    need nothing more); cost: one greedy insertion over the remaining acquisitions per step.
+    """
+    for i in range(cand.order_utility.shape[0]):
+        for f in range(N_PLAN):
+            x[i, PLAN + f] = 0.0
+    if plan == 0:
+        return
+    order = cand.order_utility if plan == 1 else cand.order_start
+    alive_count = ep.alive_count
+    skip = np.zeros(alive_count.shape[0], dtype=np.uint8)
+    for i in range(alive_count.shape[0]):
+        if alive_count[i] == 0:
+            skip[i] = 1
+    last = ep.last[0]
+    acqs, nodes, _ = greedy_insert(cand.plan_indptr, cand.plan_dst, g.acq_ptr, g.node_time, order, last, skip)
+    t_now = g.node_finish[last]
+    for k in range(acqs.shape[0]):
+        a = acqs[k]
+        x[a, PLAN] = 1.0
+        x[a, PLAN + 2] = _clip((g.node_time[nodes[k]] - t_now) / TIME_SCALE)
+    if acqs.shape[0] > 0:
+        x[acqs[0], PLAN + 1] = 1.0
+
+
+@numba.njit(cache=True)
+def step_and_observe(g, ep, cand, action, k_out, k_last_cap, full, x, edge_index, edge_attr, horizon=0.0, look=False,
+                     plan=0):
     """eosp.envs.core.step, then :func:`build_observation` of the new state: one kernel call per environment
     step (each call unpacks the tuples again).  Returns (new node, number of edges); (-1, 0) and the state
     unchanged if `action` is not allowed."""
     w = step(g, ep, action)
     if w < 0:
         return w, 0
-    return w, build_observation(g, ep, cand, k_out, k_last_cap, full, x, edge_index, edge_attr, horizon, look)
+    return w, build_observation(g, ep, cand, k_out, k_last_cap, full, x, edge_index, edge_attr, horizon, look, plan)
 
 
 @numba.njit(cache=True)
 def step_and_observe_fields(g_fields, ep_fields, cand_fields, action, k_out, k_last_cap, full, x, edge_index,
-                            edge_attr, horizon=0.0, look=False):
+                            edge_attr, horizon=0.0, look=False, plan=0):
     """:func:`step_and_observe` called with ``tuple(g), tuple(ep), tuple(cand)``: the environment's hot path.
 
     Numba's dispatcher types a plain tuple of arrays about twice as fast as a NamedTuple (measured 1.2 vs
     2.1 us for 12 arrays: a third of a small instance's step); the NamedTuples are rebuilt here, for free.
     """
     return step_and_observe(EnvGraph(*g_fields), Episode(*ep_fields), Candidates(*cand_fields), action, k_out,
-                            k_last_cap, full, x, edge_index, edge_attr, horizon, look)
+                            k_last_cap, full, x, edge_index, edge_attr, horizon, look, plan)
 
 
 @numba.njit(cache=True)

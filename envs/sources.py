@@ -31,8 +31,8 @@ class PreparedInstance:
 def prepare_instance(inst: Instance, prune: bool = True) -> PreparedInstance:
     pg = inst.graph_for(prune)
     prio = inst.priorities()
-    return PreparedInstance(inst, prepare(pg, inst.acqs.duration),
-                            candidates(inst.acqs, prio),
+    eg = prepare(pg, inst.acqs.duration)
+    return PreparedInstance(inst, eg, candidates(inst.acqs, prio, eg.node_time, eg.acq_ptr, inst.unpruned_graph),
                             prio, float(np.mean(inst.acqs.utility)))
 
 
@@ -77,7 +77,7 @@ def owned_shards(paths: list[Path], worker_index: int, num_workers: int) -> list
 class ShardSource:
     """Instances of a set of shards, drawn uniformly, loaded lazily, kept in an LRU cache."""
 
-    def __init__(self, paths: list[Path], max_cached: int = 256, prune: bool = True):
+    def __init__(self, paths: list[Path], max_cached: int = 256, prune: bool = True, unpruned: bool = False):
         from eosp.shards.io import ShardReader
 
         if not paths:
@@ -89,6 +89,7 @@ class ShardSource:
         self.cache: OrderedDict[tuple[int, int], PreparedInstance] = OrderedDict()
         self.max_cached = max_cached
         self.prune = prune
+        self.unpruned = unpruned or not prune  # load the unpruned arcs (the plan features need them)
 
     def __len__(self) -> int:
         return len(self.index)
@@ -98,7 +99,7 @@ class ShardSource:
         if key in self.cache:
             self.cache.move_to_end(key)
             return self.cache[key]
-        prepared = prepare_instance(self.readers[key[0]].read(key[1], unpruned=not self.prune), self.prune)
+        prepared = prepare_instance(self.readers[key[0]].read(key[1], unpruned=self.unpruned), self.prune)
         self.cache[key] = prepared
         if len(self.cache) > self.max_cached:
             self.cache.popitem(last=False)

@@ -17,7 +17,7 @@ import torch
 from eosp.atomic import atomic_path
 from eosp.config import EnvConfig, ModelConfig, from_dict, to_dict
 from eosp.errors import InputError
-from eosp.envs.observation import LOSES, N_NODE_FEATURES
+from eosp.envs.observation import LOSES, N_NODE_FEATURES, PLAN
 from eosp.models.agent import EOSPAgent
 
 WEIGHTS, CONFIG = "agent.pt", "agent.json"
@@ -67,17 +67,18 @@ def load_agent(directory: str | Path) -> tuple[EOSPAgent, EnvConfig, dict[str, A
 
 
 def with_lookahead_columns(state: dict[str, torch.Tensor]) -> dict[str, torch.Tensor]:
-    """`state` with zero input weights for the lookahead features when it predates them.
+    """`state` with zero input weights for the node features added after it was saved.
 
-    They are the last node features (:data:`eosp.envs.observation.LOSES` on); a checkpoint saved
-    before they existed has six input columns fewer in the first node layer.  Zero weights there
-    make the agent compute exactly what it computed before, and let training start from it."""
+    The lookahead features (:data:`eosp.envs.observation.LOSES` on), then the plan features
+    (:data:`eosp.envs.observation.PLAN` on), were appended as the last node features: a checkpoint
+    saved before them has 6 or 9 input columns fewer in the first node layer.  Zero weights there make
+    the agent compute exactly what it computed before, and let training start from it."""
     key = "node_embed.0.weight"
     w = state.get(key)
-    if w is not None and w.ndim == 2 and w.shape[1] == LOSES:
+    if w is not None and w.ndim == 2 and w.shape[1] in (LOSES, PLAN):
+        w = torch.as_tensor(w)
         state = dict(state)
-        state[key] = torch.cat([torch.as_tensor(w), torch.zeros(w.shape[0], N_NODE_FEATURES - LOSES,
-                                                                  dtype=torch.as_tensor(w).dtype)], dim=1)
+        state[key] = torch.cat([w, torch.zeros(w.shape[0], N_NODE_FEATURES - w.shape[1], dtype=w.dtype)], dim=1)
     return state
 
 

@@ -244,7 +244,7 @@ def test_observation_shapes_dtypes_and_edges():
         env = EOSPEnv(EnvConfig(max_acquisitions=64, obs_edges=mode), source=FixedSource(inst))
         obs, _ = env.reset(seed=0)
         assert env.observation_space.contains(obs)
-        assert obs["x"].shape == (64, N_NODE_FEATURES) == (64, 31) and obs["edge_index"].dtype == np.int32
+        assert obs["x"].shape == (64, N_NODE_FEATURES) == (64, 34) and obs["edge_index"].dtype == np.int32
         m = int(obs["n_edges"][0])
         assert m > 0 and np.all(obs["edge_index"][:, m:] == 0)
         src, dst = obs["edge_index"][:, :m]
@@ -312,3 +312,58 @@ def test_observation_horizon_keeps_the_selectable_and_drops_the_far_future():
         o_full, *_ = full.step(a)
         o_near, *_ = near.step(a)
     assert dropped_any
+
+
+@pytest.mark.parametrize("reward,mode", [("normalized", "utility"), ("unitary", "unitary")])
+def test_plan_features_are_greedys_feasible_completion_of_the_partial_schedule(reward, mode):
+    """With --env.plan greedy: at the start the plan is the Greedy solver's schedule; at every state of a
+    random walk the plan's acquisitions, in the order of their plan starts, complete the partial schedule
+    into one the independent checker accepts, with those starts; off, the columns are zeros."""
+    from eosp.envs.observation import PLAN, TIME_SCALE
+    from eosp.graphs.discrete import arc_to_acq
+    from eosp.instances.schedule import Schedule
+    from eosp.solvers.base import run_solver
+
+    for family, n, seed in (("clusters", 40, 3), ("conflict", 30, 5)):
+        inst = generated(family, n, seed, step=1.0)
+        env, off = make_env(inst, reward=reward, plan="greedy"), make_env(inst, reward=reward)
+        obs, _ = env.reset(seed=0)
+        obs_off, _ = off.reset(seed=0)
+        greedy = run_solver("greedy", inst, mode=mode)
+        assert sorted(np.flatnonzero(obs["x"][:, PLAN])) == sorted(inst.node_acq[greedy.nodes])
+        g = inst.unpruned()
+        rng = np.random.default_rng(seed)
+        while obs["action_mask"].any():
+            assert np.all(obs_off["x"][:, PLAN:] == 0)
+            np.testing.assert_array_equal(obs_off["x"][:, :PLAN], obs["x"][:, :PLAN])
+            x = obs["x"]
+            members = np.flatnonzero(x[:, PLAN])
+            members = members[np.argsort(x[members, PLAN + 2], kind="stable")]
+            assert x[:, PLAN + 1].sum() == (1 if len(members) else 0)
+            if len(members):
+                assert x[members[0], PLAN + 1] == 1
+            path = list(env.path())
+            t_now = inst.node_time[path[-1]] + inst.acqs.duration[inst.node_acq[path[-1]]] if path else 0.0
+            prev = path[-1] if path else 0
+            for a in members:  # each starts as early as the arc from its predecessor allows
+                prev = arc_to_acq(g.indptr, g.dst, g.acq_ptr, prev, a)
+                assert prev >= 0
+                assert x[a, PLAN + 2] == pytest.approx(min(10.0, (inst.node_time[prev] - t_now) / TIME_SCALE), abs=1e-5)
+                path.append(prev)
+            nodes = np.array(path, dtype=np.int64)
+            sched = Schedule(acq=inst.node_acq[nodes].astype(np.int32), node=inst.node_ids[nodes].astype(np.int32),
+                             start=inst.node_time[nodes].astype(np.float64))
+            assert check(inst, sched).feasible
+            a = int(rng.choice(np.flatnonzero(obs["action_mask"])))
+            obs, *_ = env.step(a)
+            obs_off, *_ = off.step(a)
+
+
+def test_plan_features_without_the_unpruned_arcs_are_refused_in_one_line():
+    from eosp.errors import InputError
+
+    inst = generated("uniform", 20, 1)
+    inst.pruned()
+    inst.unpruned_graph = None
+    with pytest.raises(InputError, match="the plan features .*needs the unpruned arcs"):
+        make_env(inst, plan="greedy").reset(seed=0)

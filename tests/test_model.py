@@ -120,29 +120,33 @@ def test_checkpoint_round_trip_same_actions(tmp_path, agent):
     np.testing.assert_array_equal(a, b)
 
 
-def test_a_checkpoint_without_the_lookahead_features_loads_and_decides_as_before(tmp_path, agent):
-    """Checkpoints saved before the six lookahead features existed (the first node layer six inputs
-    narrower) load with zero weights there: the same decisions as the agent with those weights zeroed."""
+@pytest.mark.parametrize("width", ["LOSES", "PLAN"])
+def test_a_checkpoint_without_the_newer_features_loads_and_decides_as_before(tmp_path, agent, width):
+    """Checkpoints saved before the lookahead features (LOSES inputs) or the plan features (PLAN inputs)
+    existed, their first node layer narrower, load with zero weights for the missing columns: the same
+    decisions as the agent with those weights zeroed."""
     import copy
 
-    from eosp.envs.observation import LOSES, N_NODE_FEATURES
+    from eosp.envs import observation
+    from eosp.envs.observation import N_NODE_FEATURES
     from eosp.envs.sources import prepare_instance
 
+    w = getattr(observation, width)
     old = copy.deepcopy(agent)
     with torch.no_grad():
-        old.node_embed[0].weight[:, LOSES:] = torch.randn(old.node_embed[0].weight.shape[0], N_NODE_FEATURES - LOSES)
+        old.node_embed[0].weight[:, w:] = torch.randn(old.node_embed[0].weight.shape[0], N_NODE_FEATURES - w)
     save_agent(old, tmp_path / "ck", EnvConfig())
     state = torch.load(tmp_path / "ck" / "agent.pt", weights_only=True)
-    state["node_embed.0.weight"] = state["node_embed.0.weight"][:, :LOSES].clone()
+    state["node_embed.0.weight"] = state["node_embed.0.weight"][:, :w].clone()
     torch.save(state, tmp_path / "ck" / "agent.pt")
     back = load_agent(tmp_path / "ck")[0]
-    assert torch.all(back.node_embed[0].weight[:, LOSES:] == 0)
+    assert torch.all(back.node_embed[0].weight[:, w:] == 0)
     with torch.no_grad():
-        old.node_embed[0].weight[:, LOSES:] = 0.0
+        old.node_embed[0].weight[:, w:] = 0.0
     p = prepare_instance(generated("conflict", 40, 4, step=1.0))
     np.testing.assert_array_equal(rollout(old, p, EnvConfig())[0], rollout(back, p, EnvConfig())[0])
     # any other width is still refused with one line
-    state["node_embed.0.weight"] = state["node_embed.0.weight"][:, :LOSES - 1].clone()
+    state["node_embed.0.weight"] = state["node_embed.0.weight"][:, :w - 1].clone()
     torch.save(state, tmp_path / "ck" / "agent.pt")
     from eosp.errors import InputError
 

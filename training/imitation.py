@@ -200,7 +200,8 @@ class DemoData:
         demos = []
         for shard in expand_shards(list(paths)):
             reader = ShardReader(shard)
-            prepared = [prepare_instance(reader.read(k, unpruned=not env_cfg.prune), env_cfg.prune) for k in range(len(reader))]
+            unpruned = not env_cfg.prune or bool(env_cfg.plan)  # the plan features need the unpruned arcs
+            prepared = [prepare_instance(reader.read(k, unpruned=unpruned), env_cfg.prune) for k in range(len(reader))]
             for d in read_demos(shard, self.mode, prepared):
                 self.instances.append((shard, d.index, prepared[d.index]))
                 self.optimal_values.append(d.value)

@@ -15,7 +15,7 @@ def estimate_value_scale(cfg: RunConfig, episodes: int = 8) -> float:
     from eosp.envs.sources import ShardSource, expand_shards
 
     env = EOSPEnv(cfg.env, source=ShardSource(expand_shards([cfg.train.train_data]), max_cached=episodes,
-                                             prune=cfg.env.prune))
+                                             prune=cfg.env.prune, unpruned=bool(cfg.env.plan)))
     returns = []
     for ep in range(episodes):
         env.reset(seed=cfg.train.seed + ep)

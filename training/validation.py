@@ -115,7 +115,7 @@ class Validator:
 
         self.env_cfg = env_cfg
         self.mode = objective_mode(env_cfg)
-        insts = read_instances(expand_shards([str(val_path)]), unpruned=not env_cfg.prune)
+        insts = read_instances(expand_shards([str(val_path)]), unpruned=not env_cfg.prune or bool(env_cfg.plan))
         if max_instances:
             insts = insts[:max_instances]
         self.prepared = [prepare_instance(i, env_cfg.prune) for i in insts]
