@@ -18,8 +18,9 @@ Node features (float32, :data:`NODE_FEATURES`), times relative to the end of
 the last scheduled acquisition in units of :data:`TIME_SCALE` seconds.  Six
 look one step ahead (:func:`lookahead`, filled when ``look``, i.e. EnvConfig.lookahead;
 zeros otherwise): for each allowed action, what the acquisitions it would remove from the
-graph are worth.  The last three are Greedy's completion of the current partial schedule
-(:func:`plan_features`, filled when EnvConfig.plan is set; zeros otherwise).  Edge features:
+graph are worth.  The last six are Greedy's completion of the current partial schedule and
+what Greedy would complete after each allowed action (:func:`plan_features`, filled when
+EnvConfig.plan is set; zeros otherwise).  Edge features:
 the slack of the transition (start of the reached node
 minus the end of the source node) and a flag for edges out of the last scheduled node.
 """
@@ -32,7 +33,7 @@ import numba
 import numpy as np
 
 from eosp.config import CLASS_UTILITIES, N_CLASSES
-from eosp.envs.core import EnvGraph, Episode, step
+from eosp.envs.core import EnvGraph, Episode, step, sweep
 from eosp.graphs.discrete import arc_to_acq
 from eosp.graphs.insertion import greedy_insert, insertion_order
 
@@ -44,7 +45,7 @@ NODE_FEATURES = (
     *(f"class_{c}" for c in range(N_CLASSES)),
     "roll_min", "roll_max", "roll_mean", "pitch_min", "pitch_max", "pitch_mean",
     "loses_count", "loses_top", "loses_share", "excess_count", "excess_top", "excess_share",
-    "plan_member", "plan_next", "plan_start",
+    "plan_member", "plan_next", "plan_start", "after_loss", "after_best", "after_ratio",
 )
 N_NODE_FEATURES = len(NODE_FEATURES)
 N_EDGE_FEATURES = 2
@@ -63,8 +64,8 @@ STATIC = NODE_FEATURES.index("duration")  # first of the N_STATIC columns of sta
 LOSES = NODE_FEATURES.index("loses_count")  # the six lookahead features (checkpoints without them: zeros)
 N_LOOKAHEAD = 6
 LOOKAHEAD_S = 300.0
-PLAN = NODE_FEATURES.index("plan_member")  # the three plan features, last (checkpoints without them: zeros)
-N_PLAN = 3
+PLAN = NODE_FEATURES.index("plan_member")  # the six plan features, last (checkpoints without them: zeros)
+N_PLAN = 6
 PLAN_ORDERS = ("", "utility", "start")  # EnvConfig.plan's kernel code: 0 off, 1 by utility, 2 by window start
 assert STATIC == 9 and LOSES == STATIC + N_STATIC and PLAN == LOSES + N_LOOKAHEAD and N_NODE_FEATURES == PLAN + N_PLAN
 
@@ -80,6 +81,7 @@ class Candidates(NamedTuple):
     order_start: np.ndarray  # int32 [n]: and in unitary mode (by window start)
     plan_indptr: np.ndarray  # CSR of the UNPRUNED graph (same nodes), for the plan features; [0] if not loaded
     plan_dst: np.ndarray
+    utility: np.ndarray  # float64 [n]
 
 
 def candidates(acqs, priority: np.ndarray, node_time: np.ndarray, acq_ptr: np.ndarray, unpruned=None) -> Candidates:
@@ -94,7 +96,7 @@ def candidates(acqs, priority: np.ndarray, node_time: np.ndarray, acq_ptr: np.nd
     return Candidates(acqs.vtw_start, acqs.vtw_end, acqs.duration,
                       static_features(acqs.duration, acqs.utility, priority, acqs.attitude),
                       insertion_order(node_time, acq_ptr, acqs.utility, "utility"),
-                      insertion_order(node_time, acq_ptr, acqs.utility, "start"), indptr, dst)
+                      insertion_order(node_time, acq_ptr, acqs.utility, "start"), indptr, dst, acqs.utility)
 
 
 def static_features(duration: np.ndarray, utility: np.ndarray, priority: np.ndarray,
@@ -327,30 +329,42 @@ def lookahead(g, ep, static, x):
 @numba.njit(cache=True)
 def plan_features(g, ep, cand, plan, x):
     """Fill the :data:`N_PLAN` columns from :data:`PLAN` of x with Greedy's completion of the current partial
-    schedule: the operational greedy insertion (eosp.graphs.insertion) run from the last scheduled node over
-    the acquisitions still in the graph, in Greedy's order (`plan` 1: decreasing utility, 2: window start;
-    0: zeros, no work).  Columns: the acquisition is in that plan; it is the plan's first; the start the plan
-    gives it, relative to the end of the last scheduled acquisition (units of :data:`TIME_SCALE`; 0 when not
-    in the plan).  The plan is a path of the UNPRUNED graph (`cand.plan_indptr`, `cand.plan_dst`): Greedy
-    leaves gaps where something else would fit, which the pruned graph has no arc across, so its first
-    acquisition need not be an allowed action (an allowed one then fits before it).
+    schedule, and of the state after each allowed action: the operational greedy insertion
+    (eosp.graphs.insertion) run over the acquisitions still in the graph, in Greedy's order (`plan` 1:
+    decreasing utility, 2: window start, every acquisition worth 1; 0: zeros, no work).
+
+    Columns, from the last scheduled node: the acquisition is in the plan; it is the plan's first; the start
+    the plan gives it, relative to the end of the last scheduled acquisition (units of :data:`TIME_SCALE`; 0
+    when not in the plan).  Then for each allowed action a, with V(a) = a's worth + the worth of Greedy's
+    completion after a (from the node a would start at): what a loses against the best allowed action,
+    max V - V(a), as log10(1 + loss) / 8 in utility (1: a top-class acquisition, 0.5: a class-2 one) or
+    loss / 10 in unitary mode; 1 for the actions of largest V; V(a) / max V.  Zeros for the other actions.
+    The completion after a is the plan the next state will show: Greedy over the acquisitions the
+    environment's step to a keeps in the (pruned) graph, so V(a) is reachable in this MDP.
+
+    The plan is a path of the UNPRUNED graph (`cand.plan_indptr`, `cand.plan_dst`): Greedy leaves gaps
+    where something else would fit, which the pruned graph has no arc across, so its first acquisition need
+    not be an allowed action (an allowed one then fits before it).
 
     Why: in utility mode the policy's costliest mistakes were high-class acquisitions given up, by steps
     whose effect shows many decisions later (two class-0 acquisitions that stop fitting together), while
     Greedy, which inserts by decreasing utility, never gives one up.  The plan says which acquisitions still
-    fit together from here, and how the operational rule would complete the schedule: the policy learns
-    where to depart from it.  A function of the state (recomputed each step, so snapshots and search
-    need nothing more); cost: one greedy insertion over the remaining acquisitions per step.
+    fit together from here; V(a) is the rollout of Greedy after each action (taking the action of largest
+    V at every step is the classic rollout policy, never worse than its base heuristic when that is
+    sequentially consistent): the policy learns where to depart from both.  A function of the state
+    (recomputed each step, so snapshots and search need nothing more); cost: one greedy insertion over the
+    remaining acquisitions per allowed action and step.
     """
-    for i in range(cand.order_utility.shape[0]):
+    n = cand.order_utility.shape[0]
+    for i in range(n):
         for f in range(N_PLAN):
             x[i, PLAN + f] = 0.0
     if plan == 0:
         return
     order = cand.order_utility if plan == 1 else cand.order_start
-    alive_count = ep.alive_count
-    skip = np.zeros(alive_count.shape[0], dtype=np.uint8)
-    for i in range(alive_count.shape[0]):
+    alive_count, mask = ep.alive_count, ep.mask
+    skip = np.zeros(n, dtype=np.uint8)
+    for i in range(n):
         if alive_count[i] == 0:
             skip[i] = 1
     last = ep.last[0]
@@ -362,6 +376,36 @@ def plan_features(g, ep, cand, plan, x):
         x[a, PLAN + 2] = _clip((g.node_time[nodes[k]] - t_now) / TIME_SCALE)
     if acqs.shape[0] > 0:
         x[acqs[0], PLAN + 1] = 1.0
+    # Greedy's rollout after each allowed action, from the state the environment's step would reach
+    value = np.full(n, -1.0)
+    best = -1.0
+    alive2 = np.empty_like(ep.alive)
+    count2 = np.empty_like(alive_count)
+    for a in range(n):
+        if mask[a] == 0:
+            continue
+        w = arc_to_acq(g.indptr, g.dst, g.acq_ptr, last, a)  # the node the step would start a at
+        alive2[:] = ep.alive
+        count2[:] = alive_count
+        for v in range(g.acq_ptr[a], g.acq_ptr[a + 1]):  # eosp.envs.core.apply_action on copies
+            alive2[v] = 0
+        count2[a] = 0
+        sweep(g, alive2, count2, g.pos[w], ep.last_pos[0])
+        for i in range(n):
+            skip[i] = 1 if count2[i] == 0 else 0
+        after, _, _ = greedy_insert(cand.plan_indptr, cand.plan_dst, g.acq_ptr, g.node_time, order, w, skip)
+        v = cand.utility[a] if plan == 1 else 1.0
+        for k in range(after.shape[0]):
+            v += cand.utility[after[k]] if plan == 1 else 1.0
+        value[a] = v
+        best = max(best, v)
+    for a in range(n):
+        if value[a] < 0.0:
+            continue
+        loss = max(best - value[a], 0.0)
+        x[a, PLAN + 3] = np.log10(1.0 + loss) / 8.0 if plan == 1 else loss / 10.0
+        x[a, PLAN + 4] = 1.0 if loss <= 1e-9 * best else 0.0
+        x[a, PLAN + 5] = value[a] / best if best > 0.0 else 1.0
 
 
 @numba.njit(cache=True)

@@ -126,8 +126,9 @@ def main() -> None:
           f"{meta.get('epoch', meta.get('iteration'))}).",
           "", "## How it was trained", ""]
     if parent:
-        md += ["Started from the model shipped before it (`--imitation.init-checkpoint models/pretrained/"
-               f"{a.mode}`), which was trained by:", "", "```bash", *parent, "```", "", "then:", ""]
+        md += ["Descends from the model shipped before it (`--imitation.init-checkpoint models/pretrained/"
+               f"{a.mode}`, directly or through the runs named below), which was trained by:", "", "```bash",
+               *parent, "```", "", "then:", ""]
     md.append("```bash")
     if not parent:  # a parent recipe already built the first mix
         md += ["python experiments/expert_guided.py data      # data sets (seeds below) and expert demos:",
@@ -164,28 +165,42 @@ def _settings(inst: dict) -> str:
 
 
 def _parent_recipe(cfg: dict, dest: Path) -> list[str]:
-    """The bash lines of the shipped model's recipe when this run started from it (else nothing)."""
+    """The bash lines of the shipped model's recipe when this run descends from it (else nothing): started
+    from it, or from a checkpoint of a run (runs/NAME/checkpoints/C) that descends from it, whose command
+    is then added."""
     init = cfg.get("imitation", {}).get("init_checkpoint", "") or cfg.get("train", {}).get("init_checkpoint", "")
-    md = dest / "MODEL.md"
-    if not init or not md.exists() or Path(init).resolve() != dest.resolve():
+    if not init:
         return []
-    text = md.read_text()
-    if "```bash" not in text:
+    md, start = dest / "MODEL.md", Path(init)
+    if start.resolve() == dest.resolve():
+        if not md.exists() or "```bash" not in md.read_text():
+            return []
+        block = md.read_text().split("## How it was trained", 1)[-1]
+        return [line for chunk in block.split("```bash")[1:] for line in chunk.split("```", 1)[0].strip().splitlines()]
+    history = start.parent.parent / "history.json"
+    if start.parent.name != "checkpoints" or not history.exists():
         return []
-    block = text.split("## How it was trained", 1)[-1]
-    return [line for chunk in block.split("```bash")[1:] for line in chunk.split("```", 1)[0].strip().splitlines()]
+    up = json.loads(history.read_text())["config"]
+    lines = _parent_recipe(up, dest)
+    if not lines:
+        return []
+    return lines + [f"# then (its checkpoint {start.name} starts the next command):",
+                    "python jobs/pretrain.py " + " ".join(f"--{k.replace('_', '-')} {v}" for k, v in _flags(up))]
 
 
 def _flags(cfg: dict) -> list[tuple[str, str]]:
     out = []
     im = cfg.get("imitation", {})
     for k in ("train_data", "val_data", "init_checkpoint", "epochs", "time_budget", "batch_size", "lr", "lr_schedule",
-              "ema", "dagger_every", "dagger_instances", "dagger_beam", "regret_coeff", "set_tolerance", "seed"):
-        if k in im and not (k == "init_checkpoint" and not im[k]):
+              "ema", "dagger_every", "dagger_instances", "dagger_beam", "regret_coeff", "set_tolerance", "seed",
+              "run_name"):
+        if k in im and not (k in ("init_checkpoint", "run_name") and not im[k]):
             v = im[k]
             out.append((f"imitation.{k}", " ".join(map(str, v)) if isinstance(v, list) else v))
     env = cfg.get("env", {})
     out += [("env.reward", env.get("reward")), ("env.max-acquisitions", env.get("max_acquisitions"))]
+    out += [(f"env.{k}", str(env[k]).lower() if isinstance(env[k], bool) else env[k])
+            for k in ("lookahead", "plan") if env.get(k)]
     return out
 
 

@@ -70,12 +70,12 @@ def with_lookahead_columns(state: dict[str, torch.Tensor]) -> dict[str, torch.Te
     """`state` with zero input weights for the node features added after it was saved.
 
     The lookahead features (:data:`eosp.envs.observation.LOSES` on), then the plan features
-    (:data:`eosp.envs.observation.PLAN` on), were appended as the last node features: a checkpoint
-    saved before them has 6 or 9 input columns fewer in the first node layer.  Zero weights there make
+    (:data:`eosp.envs.observation.PLAN` on, the rollout ones from PLAN + 3), were appended as the last node
+    features: a checkpoint saved before them has 12, 6 or 3 input columns fewer in the first node layer.  Zero weights there make
     the agent compute exactly what it computed before, and let training start from it."""
     key = "node_embed.0.weight"
     w = state.get(key)
-    if w is not None and w.ndim == 2 and w.shape[1] in (LOSES, PLAN):
+    if w is not None and w.ndim == 2 and w.shape[1] in (LOSES, PLAN, PLAN + 3):
         w = torch.as_tensor(w)
         state = dict(state)
         state[key] = torch.cat([w, torch.zeros(w.shape[0], N_NODE_FEATURES - w.shape[1], dtype=w.dtype)], dim=1)

@@ -244,7 +244,7 @@ def test_observation_shapes_dtypes_and_edges():
         env = EOSPEnv(EnvConfig(max_acquisitions=64, obs_edges=mode), source=FixedSource(inst))
         obs, _ = env.reset(seed=0)
         assert env.observation_space.contains(obs)
-        assert obs["x"].shape == (64, N_NODE_FEATURES) == (64, 34) and obs["edge_index"].dtype == np.int32
+        assert obs["x"].shape == (64, N_NODE_FEATURES) == (64, 37) and obs["edge_index"].dtype == np.int32
         m = int(obs["n_edges"][0])
         assert m > 0 and np.all(obs["edge_index"][:, m:] == 0)
         src, dst = obs["edge_index"][:, :m]
@@ -367,3 +367,35 @@ def test_plan_features_without_the_unpruned_arcs_are_refused_in_one_line():
     inst.unpruned_graph = None
     with pytest.raises(InputError, match="the plan features .*needs the unpruned arcs"):
         make_env(inst, plan="greedy").reset(seed=0)
+
+
+@pytest.mark.parametrize("reward", ["normalized", "unitary"])
+def test_rollout_features_value_each_action_by_greedys_completion_after_it(reward):
+    """V(a), Greedy's rollout after an allowed action a, is a's worth plus the worth of the plan shown in the
+    state the step to a leads to; the loss and ratio columns compare it with the best allowed action."""
+    from eosp.envs.observation import PLAN
+
+    for family, n, seed in (("clusters", 40, 3), ("conflict", 30, 5), ("uniform", 40, 7)):
+        inst = generated(family, n, seed, step=1.0)
+        w = np.ones(n) if reward == "unitary" else inst.acqs.utility
+        env = make_env(inst, reward=reward, plan="greedy")
+        obs, _ = env.reset(seed=0)
+        rng = np.random.default_rng(seed)
+        while obs["action_mask"].any():
+            allowed = np.flatnonzero(obs["action_mask"])
+            snap = env.snapshot()
+            v = {}
+            for a in allowed:
+                after, *_ = env.step(int(a))
+                v[a] = w[a] + w[after["x"][:n, PLAN] > 0].sum()
+                env.restore(snap)
+            best = max(v.values())
+            x = obs["x"]
+            for a in allowed:
+                loss = best - v[a]
+                expect = np.log10(1 + loss) / 8 if reward != "unitary" else loss / 10
+                assert x[a, PLAN + 3] == pytest.approx(expect, abs=1e-5)
+                assert x[a, PLAN + 4] == (1.0 if loss <= 1e-9 * best else 0.0)
+                assert x[a, PLAN + 5] == pytest.approx(v[a] / best, rel=1e-5)
+            assert np.all(x[np.setdiff1d(np.arange(n), allowed), PLAN + 3:] == 0)
+            obs, *_ = env.step(int(rng.choice(allowed)))
