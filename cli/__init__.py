@@ -16,6 +16,7 @@ from pathlib import Path
 from eosp.args import add_config_args, config_from_args
 from eosp.config import InstanceConfig, family_config
 from eosp.errors import InputError
+from eosp.models.pretrained import PREFIX, pretrained_dir
 
 
 def _load_instance(path: str):
@@ -129,8 +130,11 @@ def cmd_solve(ns: argparse.Namespace) -> int:
     options = solve_options(ns)
     make_config(ns.solver, **options)  # bad options are refused before any file is read
     check_schedule_out(ns.out)
-    if options.get("checkpoint") and not Path(options["checkpoint"]).exists():
-        raise InputError(options["checkpoint"], "checkpoint not found")
+    ck = options.get("checkpoint") or ""
+    if ck.startswith(PREFIX):
+        pretrained_dir(ck[len(PREFIX):])  # a shipped model by name: refused in one line if there is none
+    elif ck and not Path(ck).exists():
+        raise InputError(ck, "checkpoint not found")
     inst = _load_instance(ns.instance_dir)
     t0 = time.perf_counter()
     sol = run_solver(ns.solver, inst, **options)

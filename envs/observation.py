@@ -20,9 +20,9 @@ look one step ahead (:func:`lookahead`, filled when ``look``, i.e. EnvConfig.loo
 zeros otherwise): for each allowed action, what the acquisitions it would remove from the
 graph are worth.  The last six are Greedy's completion of the current partial schedule and
 what Greedy would complete after each allowed action (:func:`plan_features`, filled when
-EnvConfig.plan is set; zeros otherwise).  Edge features:
-the slack of the transition (start of the reached node
-minus the end of the source node) and a flag for edges out of the last scheduled node.
+EnvConfig.plan is set; zeros otherwise).  Edge features: the slack of the transition (start
+of the reached node minus the end of the source node) and a flag for edges out of the last
+scheduled node.
 """
 
 from __future__ import annotations

@@ -75,6 +75,8 @@ def main() -> None:
     p.add_argument("--exact-limit", type=float, default=60.0, help="seconds of exact search per instance")
     p.add_argument("--baselines", default="", help="an earlier ship-MODE.csv of the same tests: reuse its baselines")
     p.add_argument("--evaluate-only", action="store_true", help="write the record and print; do not ship")
+    p.add_argument("--name", default="", help="ship as models/pretrained/NAME (a variant, eosp.models.pretrained."
+                                              "VARIANTS) instead of the mode's default model")
     p.add_argument("--checkpoint", default="best", choices=["best", "last"],
                    help="which checkpoint of the run: 'best' on its validation set, or 'last' (with a cosine decay and "
                         "a weight average the last is the settled one; a 20-instance validation cannot tell 0.5%%)")
@@ -89,7 +91,7 @@ def main() -> None:
     torch.set_num_threads(1)
     run = Path(a.run)
     agent, env_cfg, meta = load_agent(run / "checkpoints" / a.checkpoint)
-    dest = PRE / a.mode
+    dest = PRE / (a.name or a.mode)
     known = pd.read_csv(a.baselines).set_index(["test", "instance"]) if a.baselines else None
     rows = evaluate((agent, env_cfg, meta), a.mode, a.tests, a.exact_limit, known)
     df = pd.DataFrame(rows)
@@ -108,7 +110,7 @@ def main() -> None:
         return
     history = run / "history.json"
     cfg = json.loads(history.read_text())["config"] if history.exists() else {}
-    parent = _parent_recipe(cfg, dest)  # read before the new weights replace the old ones
+    parent = _parent_recipe(cfg, PRE / a.mode)  # read before the new weights replace the old ones
     save_agent(agent, dest, env_cfg, {k: v for k, v in meta.items() if k in ("epoch", "iteration", "source")})
     data_sets = cfg.get("imitation", {}).get("train_data", [])
     manifests = {}
@@ -119,7 +121,8 @@ def main() -> None:
                 m = json.loads((part / "manifest.json").read_text())["dataset"]
                 manifests[part.name] = {k: m[k] for k in ("family", "n_acquisitions", "n_instances", "seed")}
                 manifests[part.name]["instance"] = m.get("instance", {})
-    md = [f"# Pretrained model: {a.mode} mode", "",
+    md = [f"# Pretrained model: {a.mode} mode" + (f", variant `{a.name}` (`--checkpoint pretrained:{a.name}`)"
+                                                  if a.name else ""), "",
           f"Weights `agent.pt` (tensors only, `torch.load(weights_only=True)`) and `agent.json` "
           f"(model {json.dumps(cfg.get('model', {}))}, env reward `{env_cfg.reward}`).  Source run: "
           f"`{run.name}`, checkpoint `{a.checkpoint}` ({meta.get('source', 'ppo')}, epoch/iteration "
@@ -143,7 +146,8 @@ def main() -> None:
         md.append(f"| {name} | {m['family']} | {m['n_acquisitions']} | {m['n_instances']} | {m['seed']} | "
                   f"{_settings(m['instance'])} |")
     md += ["", "## Figures on unseen test sets (greedy decoding)", "",
-           f"`python experiments/ship_model.py --mode {a.mode} --run {a.run} --checkpoint {a.checkpoint} "
+           f"`python experiments/ship_model.py --mode {a.mode}" + (f" --name {a.name}" if a.name else "")
+           + f" --run {a.run} --checkpoint {a.checkpoint} "
            f"--exact-limit {a.exact_limit:g}" + (f" --baselines {a.baselines}" if a.baselines else "")
            + f" --tests {' '.join(a.tests)}`" + (f" (Greedy, RAMP and exact from `{a.baselines}`, the record of an "
                                                   "earlier run of this script on the same instances)" if a.baselines else ""),

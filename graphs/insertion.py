@@ -52,18 +52,35 @@ def greedy_insert(indptr, dst, acq_ptr, node_time, order, start, skip):
     seq_acq = np.empty(n, dtype=np.int32)
     seq_node = np.empty(n, dtype=np.int32)
     trace_pos = np.full(n, -1, dtype=np.int32)
+    # the widest window (last minus first node start): a sequence member starting more than that before a's
+    # first node has no node left at or after it, so a cannot go in front of it (no arc goes back in time)
+    widest = 0.0
+    for i in range(acq_ptr.shape[0] - 1):
+        if acq_ptr[i + 1] > acq_ptr[i]:
+            widest = max(widest, node_time[acq_ptr[i + 1] - 1] - node_time[acq_ptr[i]])
     m = 0
     for step in range(n):
         a = order[step]
         if skip[a]:
             continue
+        first_time = node_time[acq_ptr[a]]
         last_time = node_time[acq_ptr[a + 1] - 1]
         best_p = -1
         best_cost = np.inf
         best_start = np.inf
-        for p in range(m + 1):
+        # first position worth trying: binary search on the sequence's starts (increasing along it)
+        lo, hi = 0, m
+        while lo < hi:
+            mid = (lo + hi) >> 1
+            if node_time[seq_node[mid]] < first_time - widest:
+                lo = mid + 1
+            else:
+                hi = mid
+        for p in range(lo, m + 1):
             if p > 0 and node_time[seq_node[p - 1]] >= last_time:
                 break  # predecessors only get later along the sequence
+            if p < m and node_time[acq_ptr[seq_acq[p] + 1] - 1] < first_time:
+                continue  # the member at p has no node left after a's first: it cannot follow a
             cost, first = _insertion_cost(indptr, dst, acq_ptr, node_time, seq_acq, seq_node, m, p, a, start)
             if first < 0:
                 continue

@@ -80,14 +80,15 @@ def rollout(agent: EOSPAgent, prepared: PreparedInstance, env_cfg: EnvConfig, sa
 
 
 def resolve_agent(solver: str, checkpoint: str, agent: tuple | None, mode: str = "utility") -> tuple:
-    """The (agent, env config, metadata) given, loaded from `checkpoint`, or the shipped model of `mode`."""
+    """The (agent, env config, metadata) given, loaded from `checkpoint` (a directory, or ``pretrained:NAME`` for a
+    shipped model by name, eosp.models.pretrained), or the shipped model of `mode`."""
     if agent is not None:
         return agent
     torch.set_num_threads(1)
-    if not checkpoint:
-        from eosp.models.pretrained import load_pretrained
+    from eosp.models.pretrained import PREFIX, load_pretrained
 
-        return load_pretrained(mode)
+    if not checkpoint or checkpoint.startswith(PREFIX):  # pretrained:NAME, a shipped model by name
+        return load_pretrained(checkpoint[len(PREFIX):] if checkpoint else mode)
     from eosp.models.checkpoint import load_agent
 
     return load_agent(checkpoint)

@@ -204,6 +204,31 @@ def test_shipped_models_solve_without_a_checkpoint(tmp_path, mode):
         assert check(inst, read_schedule(out)).feasible
 
 
+def test_the_plan_variant_is_one_flag_away_and_an_unknown_name_is_one_line(tmp_path, capsys):
+    """`--checkpoint pretrained:utility-plan` solves with the shipped variant (it reads Greedy's plan: its
+    schedule is at least Greedy's here); a name that is not shipped is refused in one line, nothing written."""
+    from eosp.cli import main
+    from eosp.instances.interchange import write_instance
+    from eosp.instances.schedule import check, read_schedule
+    from eosp.models.pretrained import load_pretrained
+    from eosp.solvers.base import run_solver
+
+    _, env_cfg, _ = load_pretrained("utility-plan")
+    assert env_cfg.plan == "greedy" and env_cfg.reward == "normalized"
+    inst = generated("conflict", 30, 5)
+    write_instance(inst, tmp_path / "inst")
+    out = tmp_path / "plan.parquet"
+    assert main(["solve", str(tmp_path / "inst"), "--solver", "policy", "--mode", "utility", "--checkpoint",
+                 "pretrained:utility-plan", "--out", str(out)]) == 0
+    v = check(inst, read_schedule(out))
+    assert v.feasible and v.value >= run_solver("greedy", inst, mode="utility").value * (1 - 1e-9)
+    capsys.readouterr()
+    assert main(["solve", str(tmp_path / "inst"), "--solver", "policy", "--mode", "utility", "--checkpoint",
+                 "pretrained:nope", "--out", str(tmp_path / "x.parquet")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0 and "no pretrained model 'nope'" in err and not (tmp_path / "x.parquet").exists()
+
+
 def test_missing_or_corrupt_shipped_model_is_one_line(tmp_path, monkeypatch, capsys):
     import eosp.models.pretrained as pretrained
     from eosp.cli import main
