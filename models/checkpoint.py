@@ -71,8 +71,9 @@ def with_lookahead_columns(state: dict[str, torch.Tensor]) -> dict[str, torch.Te
 
     The lookahead features (:data:`eosp.envs.observation.LOSES` on), then the plan features
     (:data:`eosp.envs.observation.PLAN` on, the rollout ones from PLAN + 3), were appended as the last node
-    features: a checkpoint saved before them has 12, 6 or 3 input columns fewer in the first node layer.  Zero weights there make
-    the agent compute exactly what it computed before, and let training start from it."""
+    features: a checkpoint saved before them has 12, 6 or 3 input columns fewer in the first node layer.
+    Zero weights there make the agent compute exactly what it computed before, and let training start
+    from it."""
     key = "node_embed.0.weight"
     w = state.get(key)
     if w is not None and w.ndim == 2 and w.shape[1] in (LOSES, PLAN, PLAN + 3):

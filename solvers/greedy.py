@@ -40,7 +40,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from eosp.graphs.insertion import greedy_insert
+from eosp.graphs.insertion import ORDERS, greedy_insert
 from eosp.graphs.insertion import insertion_order as graph_order
 from eosp.instances.instance import Instance
 from eosp.config import choice
@@ -58,7 +58,7 @@ def insertion_order(inst: Instance, mode: str, order: str | None = None) -> np.n
 class GreedyConfig(SolverConfig):
     """The operational greedy insertion; one pass, so no time limit."""
 
-    order: str = choice("", "", "utility", "start", "deadline", "window", "index")
+    order: str = choice("", "", *ORDERS)
     """Order in which acquisitions are inserted; empty: by decreasing utility in utility mode, by window
     start in unitary mode (see the module docstring)."""
 

@@ -371,7 +371,8 @@ def reference_greedy(g, order):
             if cand is None:
                 continue
             old = dict(zip(seq, nodes))
-            cost = sum(g.node_time[v] - g.node_time[old[a]] for a, v in zip(seq[:p] + [acq] + seq[p:], cand) if a != acq)
+            placed = seq[:p] + [acq] + seq[p:]
+            cost = sum(g.node_time[v] - g.node_time[old[a]] for a, v in zip(placed, cand) if a != acq)
             key = (cost, g.node_time[cand[p]])
             if best is None or key < best[0]:
                 best = (key, p, cand)
