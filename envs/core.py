@@ -11,8 +11,13 @@ die, (3) nodes no longer reachable from w die.  (3) is one sweep over nodes in
 time order (a topological order: arcs go forward in time) starting at w: a node
 stays alive iff one of its predecessors is w or alive.  Predecessors are
 scanned latest first, so the first one checked usually decides; the arcs of a
-node that died are never scanned again: an episode costs O(arcs) of arc work plus
-one read of an alive flag per later node and step.
+node that died are never scanned again.  The sweep stops where no node can die
+any more: a node that dies has lost a predecessor (one that died, or the
+previous last node), and its arcs are at most that node's longest arc
+(:attr:`EnvGraph.span`) long, so past the latest death plus its span nothing
+changes (exact, not a heuristic).  A step thus costs the arcs of the nodes it
+kills plus a read of an alive flag per node up to that horizon, not per node to
+the end of the orbit.
 """
 
 from __future__ import annotations
@@ -40,6 +45,7 @@ class EnvGraph(NamedTuple):
     pos: np.ndarray  # position of each node in `order`
     init_alive: np.ndarray  # uint8 [N]: nodes reachable from the source
     init_count: np.ndarray  # int32 [n]
+    span: np.ndarray  # float64 [N]: time from each node to the latest node it has an arc to (0: none)
 
 
 class Episode(NamedTuple):
@@ -65,6 +71,15 @@ class Episode(NamedTuple):
 
     def copy(self) -> Episode:
         return Episode._make([a.copy() for a in self])
+
+
+@numba.njit(cache=True)
+def _span(indptr, dst, node_time):
+    out = np.zeros(indptr.shape[0] - 1)
+    for u in range(out.shape[0]):
+        for a in range(indptr[u], indptr[u + 1]):
+            out[u] = max(out[u], node_time[dst[a]] - node_time[u])
+    return out
 
 
 @numba.njit(cache=True)
@@ -99,27 +114,33 @@ def prepare(graph: DiscreteGraph, durations: np.ndarray) -> EnvGraph:
     alive[0] = 0
     count = np.diff(graph.acq_ptr).astype(np.int32)
     eg = EnvGraph(graph.node_acq, graph.node_time, finish, graph.indptr, graph.dst, graph.acq_ptr, rindptr, rsrc,
-                  order, pos, alive, count)
-    sweep(eg, alive, count, 0, 0)  # fills init_alive and init_count (the same arrays)
+                  order, pos, alive, count, _span(graph.indptr, graph.dst, graph.node_time))
+    sweep(eg, alive, count, 0, 0)  # fills init_alive and init_count (the same arrays): the whole orbit
     return eg
 
 
 @numba.njit(cache=True)
-def sweep(g, alive, alive_count, root_pos, prev_pos):
+def sweep(g, alive, alive_count, root_pos, prev_pos, horizon=np.inf):
     """Kill every alive node not reachable from the node at time-order position `root_pos`.
 
     Alive nodes between `prev_pos` (the previous root) and `root_pos` are before
-    the root in time, hence unreachable.
+    the root in time, hence unreachable.  The scan stops at the first node later than `horizon`, which
+    every death moves to the dead node's time plus its span: the caller passes the latest time a node
+    can lose its last way in by the change it made (:func:`apply_action`), or inf (the default) to scan
+    the whole orbit when alive nodes need not be reachable yet (:func:`prepare`).
     """
-    order, node_acq, rindptr, rsrc = g.order, g.node_acq, g.rindptr, g.rsrc
+    order, node_acq, rindptr, rsrc, node_time, span = g.order, g.node_acq, g.rindptr, g.rsrc, g.node_time, g.span
     root = order[root_pos]
     for p in range(prev_pos, root_pos):
         v = order[p]
         if alive[v]:
             alive[v] = 0
             alive_count[node_acq[v]] -= 1
+            horizon = max(horizon, node_time[v] + span[v])
     for p in range(root_pos + 1, order.shape[0]):
         v = order[p]
+        if node_time[v] > horizon:
+            break
         if not alive[v]:
             continue
         ok = False
@@ -131,6 +152,7 @@ def sweep(g, alive, alive_count, root_pos, prev_pos):
         if not ok:
             alive[v] = 0
             alive_count[node_acq[v]] -= 1
+            horizon = max(horizon, node_time[v] + span[v])
 
 
 @numba.njit(cache=True)
@@ -140,6 +162,26 @@ def target_node(g, alive, last, action):
     if w < 0 or not alive[w]:
         return -1
     return w
+
+
+@numba.njit(cache=True)
+def horizon(g, alive, last, action):
+    """The latest time a node can lose its last way in when `action` follows `last`, before the cascade:
+    the ends of the longest arcs out of `last` (no longer a root) and out of the alive nodes of `action`
+    (which die).  Call before :func:`kill`."""
+    h = g.node_time[last] + g.span[last]
+    for v in range(g.acq_ptr[action], g.acq_ptr[action + 1]):
+        if alive[v]:
+            h = max(h, g.node_time[v] + g.span[v])
+    return h
+
+
+@numba.njit(cache=True)
+def kill(g, alive, alive_count, action):
+    """Remove every node of `action` (scheduled, or given up) from the graph."""
+    for v in range(g.acq_ptr[action], g.acq_ptr[action + 1]):
+        alive[v] = 0
+    alive_count[action] = 0
 
 
 @numba.njit(cache=True)
@@ -155,10 +197,9 @@ def apply_action(g, ep, action):
     w = target_node(g, ep.alive, ep.last[0], action)
     if w < 0:
         return -1
-    for v in range(g.acq_ptr[action], g.acq_ptr[action + 1]):  # (2) the other nodes of the acquisition
-        ep.alive[v] = 0
-    ep.alive_count[action] = 0
-    sweep(g, ep.alive, ep.alive_count, g.pos[w], ep.last_pos[0])  # (3) unreachable nodes
+    h = horizon(g, ep.alive, ep.last[0], action)
+    kill(g, ep.alive, ep.alive_count, action)  # (2) the other nodes of the acquisition
+    sweep(g, ep.alive, ep.alive_count, g.pos[w], ep.last_pos[0], h)  # (3) unreachable nodes
     ep.path[ep.n_scheduled[0]] = w
     ep.n_scheduled[0] += 1
     ep.last[0] = w

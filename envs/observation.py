@@ -33,7 +33,7 @@ import numba
 import numpy as np
 
 from eosp.config import CLASS_UTILITIES, N_CLASSES
-from eosp.envs.core import EnvGraph, Episode, step, sweep
+from eosp.envs.core import EnvGraph, Episode, horizon, kill, step, sweep
 from eosp.graphs.discrete import arc_to_acq
 from eosp.graphs.insertion import greedy_insert, insertion_order
 
@@ -387,10 +387,9 @@ def plan_features(g, ep, cand, plan, x):
         w = arc_to_acq(g.indptr, g.dst, g.acq_ptr, last, a)  # the node the step would start a at
         alive2[:] = ep.alive
         count2[:] = alive_count
-        for v in range(g.acq_ptr[a], g.acq_ptr[a + 1]):  # eosp.envs.core.apply_action on copies
-            alive2[v] = 0
-        count2[a] = 0
-        sweep(g, alive2, count2, g.pos[w], ep.last_pos[0])
+        h = horizon(g, alive2, last, a)  # eosp.envs.core.apply_action on copies
+        kill(g, alive2, count2, a)
+        sweep(g, alive2, count2, g.pos[w], ep.last_pos[0], h)
         for i in range(n):
             skip[i] = 1 if count2[i] == 0 else 0
         after, _, _ = greedy_insert(cand.plan_indptr, cand.plan_dst, g.acq_ptr, g.node_time, order, w, skip)

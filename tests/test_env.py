@@ -171,6 +171,34 @@ def test_snapshot_restore_replays_identically():
     assert len(env.path()) == 3
 
 
+@pytest.mark.parametrize("family,n,seed", [("conflict", 60, 3), ("clusters", 50, 4), ("uniform", 80, 5)])
+def test_the_bounded_sweep_kills_what_the_whole_orbit_sweep_kills(family, n, seed):
+    """A step's sweep stops past the latest death plus that node's longest arc; from every state of random
+    walks and for every allowed action, it leaves exactly the alive nodes of a sweep to the end of the orbit
+    (and does stop early somewhere, or the bound would go untested)."""
+    from eosp.envs import core
+
+    env = make_env(generated(family, n, seed))
+    rng = np.random.default_rng(seed)
+    stopped_early = 0
+    for _ in range(3):
+        env.reset(seed=0)
+        while env.action_mask().any():
+            g, ep = env.state.prepared.eg, env.state.ep
+            for a in np.flatnonzero(env.action_mask()):
+                bounded = ep.copy()
+                w = core.apply_action(g, bounded, int(a))
+                alive, count = ep.alive.copy(), ep.alive_count.copy()
+                core.kill(g, alive, count, int(a))
+                core.sweep(g, alive, count, g.pos[w], ep.last_pos[0])
+                np.testing.assert_array_equal(bounded.alive, alive)
+                np.testing.assert_array_equal(bounded.alive_count, count)
+                h = core.horizon(g, ep.alive, ep.last[0], int(a))
+                stopped_early += bool(h < g.node_time.max())
+            env.step(int(rng.choice(np.flatnonzero(env.action_mask()))))
+    assert stopped_early > 0
+
+
 def lookahead_reference(env, inst):
     """What each allowed action would remove, from the environment's own step on a copy of the state:
     {action: (lost acquisitions, the highest log-utility feature among them, their utility share)}, counting
