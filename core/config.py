@@ -379,12 +379,13 @@ class EnvConfig:
     """Fill the six lookahead node features (what each allowed action would remove from the graph,
     envs/observation.py); false: they are zeros and the step skips that work (~0.08 ms a step at 100
     acquisitions, ~2 ms at 1000).  Recorded in checkpoints with the other env settings."""
-    plan: str = choice("", "", "greedy")
+    plan: str = choice("", "", "greedy", "greedy2")
     """'greedy': fill the six plan node features: Greedy's completion of the current partial schedule (the
     operational greedy insertion from the last scheduled node, in Greedy's order for the reward: decreasing
     utility, window start for 'unitary') and, for each allowed action, the worth of Greedy's completion after
-    it (envs/observation.py).  Needs the instances' unpruned arcs.  Empty: zeros, no work.  Recorded in
-    checkpoints with the other env settings."""
+    it (envs/observation.py).  'greedy2': the better of two insertion orders each time (utility: also by class
+    then window start; unitary: also by latest start), at up to twice the insertion work.  Needs the
+    instances' unpruned arcs.  Empty: zeros, no work.  Recorded in checkpoints with the other env settings."""
     shards: tuple[str, ...] = ()
     """Shard files (or data set directories) the environment copies share out among themselves."""
     seed: int = 0

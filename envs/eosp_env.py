@@ -120,7 +120,9 @@ class EOSPEnv(gym.Env):
             raise ValueError(f"unknown obs_edges {cfg.obs_edges!r} (earliest, full)")
         self.cfg = cfg
         # the plan features' kernel code (envs/observation.PLAN_ORDERS): Greedy's order for this reward
-        self._plan = 0 if not cfg.plan else PLAN_ORDERS.index("start" if cfg.reward == "unitary" else "utility")
+        order = "start+deadline" if cfg.reward == "unitary" else "utility+class"
+        order = order if cfg.plan == "greedy2" else order.split("+")[0]
+        self._plan = 0 if not cfg.plan else PLAN_ORDERS.index(order)
         self.worker_index, self.vector_index = worker_index, vector_index
         if source is None:
             if cfg.shards:

@@ -66,7 +66,9 @@ N_LOOKAHEAD = 6
 LOOKAHEAD_S = 300.0
 PLAN = NODE_FEATURES.index("plan_member")  # the six plan features, last (checkpoints without them: zeros)
 N_PLAN = 6
-PLAN_ORDERS = ("", "utility", "start")  # EnvConfig.plan's kernel code: 0 off, 1 by utility, 2 by window start
+# EnvConfig.plan's kernel code: 0 off; 1 Greedy by utility, 2 by window start (unitary); 3 and 4: the better of
+# that order and a second one (utility: by class, then window start; unitary: by latest start)
+PLAN_ORDERS = ("", "utility", "start", "utility+class", "start+deadline")
 assert STATIC == 9 and LOSES == STATIC + N_STATIC and PLAN == LOSES + N_LOOKAHEAD and N_NODE_FEATURES == PLAN + N_PLAN
 
 
@@ -79,6 +81,8 @@ class Candidates(NamedTuple):
     static: np.ndarray  # float32 [n, N_STATIC]: static_features
     order_utility: np.ndarray  # int32 [n]: Greedy's insertion order in utility mode (decreasing utility)
     order_start: np.ndarray  # int32 [n]: and in unitary mode (by window start)
+    order_class: np.ndarray  # int32 [n]: the second order in utility mode (by class, then window start)
+    order_deadline: np.ndarray  # int32 [n]: and in unitary mode (by latest start)
     plan_indptr: np.ndarray  # CSR of the UNPRUNED graph (same nodes), for the plan features; [0] if not loaded
     plan_dst: np.ndarray
     utility: np.ndarray  # float64 [n]
@@ -96,7 +100,9 @@ def candidates(acqs, priority: np.ndarray, node_time: np.ndarray, acq_ptr: np.nd
     return Candidates(acqs.vtw_start, acqs.vtw_end, acqs.duration,
                       static_features(acqs.duration, acqs.utility, priority, acqs.attitude),
                       insertion_order(node_time, acq_ptr, acqs.utility, "utility"),
-                      insertion_order(node_time, acq_ptr, acqs.utility, "start"), indptr, dst, acqs.utility)
+                      insertion_order(node_time, acq_ptr, acqs.utility, "start"),
+                      np.lexsort((np.arange(len(priority)), node_time[acq_ptr[:-1]], priority)).astype(np.int32),
+                      insertion_order(node_time, acq_ptr, acqs.utility, "deadline"), indptr, dst, acqs.utility)
 
 
 def static_features(duration: np.ndarray, utility: np.ndarray, priority: np.ndarray,
@@ -327,6 +333,30 @@ def lookahead(g, ep, static, x):
 
 
 @numba.njit(cache=True)
+def _completion(g, cand, plan, start, skip):
+    """Greedy's completion from node `start` over the acquisitions not skipped, in the order(s) of kernel code
+    `plan` (:data:`PLAN_ORDERS`): (acquisitions, nodes, worth), of the better order when there are two (ties to
+    the first).  Worth: the sum of utilities, or the count for codes 2 and 4 (unitary)."""
+    unitary = plan == 2 or plan == 4
+    first = cand.order_utility if plan == 1 or plan == 3 else cand.order_start
+    acqs, nodes, _ = greedy_insert(cand.plan_indptr, cand.plan_dst, g.acq_ptr, g.node_time, first, start, skip)
+    worth = float(acqs.shape[0]) if unitary else 0.0
+    if not unitary:
+        for k in range(acqs.shape[0]):
+            worth += cand.utility[acqs[k]]
+    if plan >= 3:
+        second = cand.order_class if plan == 3 else cand.order_deadline
+        acqs2, nodes2, _ = greedy_insert(cand.plan_indptr, cand.plan_dst, g.acq_ptr, g.node_time, second, start, skip)
+        worth2 = float(acqs2.shape[0]) if unitary else 0.0
+        if not unitary:
+            for k in range(acqs2.shape[0]):
+                worth2 += cand.utility[acqs2[k]]
+        if worth2 > worth * (1.0 + 1e-12):
+            return acqs2, nodes2, worth2
+    return acqs, nodes, worth
+
+
+@numba.njit(cache=True)
 def plan_features(g, ep, cand, plan, x):
     """Fill the :data:`N_PLAN` columns from :data:`PLAN` of x with Greedy's completion of the current partial
     schedule, and of the state after each allowed action: the operational greedy insertion
@@ -361,14 +391,14 @@ def plan_features(g, ep, cand, plan, x):
             x[i, PLAN + f] = 0.0
     if plan == 0:
         return
-    order = cand.order_utility if plan == 1 else cand.order_start
+    unitary = plan == 2 or plan == 4
     alive_count, mask = ep.alive_count, ep.mask
     skip = np.zeros(n, dtype=np.uint8)
     for i in range(n):
         if alive_count[i] == 0:
             skip[i] = 1
     last = ep.last[0]
-    acqs, nodes, _ = greedy_insert(cand.plan_indptr, cand.plan_dst, g.acq_ptr, g.node_time, order, last, skip)
+    acqs, nodes, _ = _completion(g, cand, plan, last, skip)
     t_now = g.node_finish[last]
     for k in range(acqs.shape[0]):
         a = acqs[k]
@@ -392,17 +422,15 @@ def plan_features(g, ep, cand, plan, x):
         sweep(g, alive2, count2, g.pos[w], ep.last_pos[0], h)
         for i in range(n):
             skip[i] = 1 if count2[i] == 0 else 0
-        after, _, _ = greedy_insert(cand.plan_indptr, cand.plan_dst, g.acq_ptr, g.node_time, order, w, skip)
-        v = cand.utility[a] if plan == 1 else 1.0
-        for k in range(after.shape[0]):
-            v += cand.utility[after[k]] if plan == 1 else 1.0
+        _, _, after = _completion(g, cand, plan, w, skip)
+        v = (1.0 if unitary else cand.utility[a]) + after
         value[a] = v
         best = max(best, v)
     for a in range(n):
         if value[a] < 0.0:
             continue
         loss = max(best - value[a], 0.0)
-        x[a, PLAN + 3] = np.log10(1.0 + loss) / 8.0 if plan == 1 else loss / 10.0
+        x[a, PLAN + 3] = loss / 10.0 if unitary else np.log10(1.0 + loss) / 8.0
         x[a, PLAN + 4] = 1.0 if loss <= 1e-9 * best else 0.0
         x[a, PLAN + 5] = value[a] / best if best > 0.0 else 1.0
 

@@ -2,6 +2,8 @@
 
     python experiments/expert_guided.py data                 # the mixed data sets and their demos
     python experiments/expert_guided.py data --more --modes unitary   # a second, larger mix (train2/)
+    python experiments/expert_guided.py data --dense --modes utility  # a third mix, dense targets (train3/)
+    python experiments/expert_guided.py data --scale        # unseen test sets at 300 and 1000 acquisitions
     python experiments/expert_guided.py run --minutes 10     # the comparison (unitary and utility)
     python experiments/expert_guided.py report               # table of every finished run
 
@@ -66,6 +68,19 @@ TRAIN2 = {
     "u200-s2-bcb": ("uniform", 200, 24, 470_000, [STEP, "2", *BCB]),
     "x150-s3-pw-r35": ("conflict", 150, 32, 480_000, [STEP, "3", ROLL, "35"]),
 }
+# A third mix (``data --dense``, linked into ``train3/``): the dense families only (clusters, conflict), where the
+# policies were furthest from the optimum (clusters at 100: 0.975-0.983), with what the first two mixes never vary:
+# the number of clusters (2-8), their radius (120-450 km), high-priority targets clustered or not.
+K = "--instance.targets.n-clusters"
+RADIUS = "--instance.targets.cluster-radius-km"
+TRAIN3 = {
+    "c100-s1-bcb-k2": ("clusters", 100, 64, 500_000, [*BCB, K, "2"]),
+    "c120-s2-pw-k6-r150": ("clusters", 120, 48, 510_000, [STEP, "2", K, "6", RADIUS, "150"]),
+    "c80-s3-pw-a700-k3": ("clusters", 80, 64, 520_000, [STEP, "3", A, "700", K, "3"]),
+    "c100-s2-bcb-r450-r35": ("clusters", 100, 48, 530_000, [STEP, "2", *BCB, RADIUS, "450", ROLL, "35"]),
+    "x120-s1-pw-k3": ("conflict", 120, 48, 540_000, [K, "3"]),
+    "c140-s1-pw-k8-r120": ("clusters", 140, 32, 550_000, [K, "8", RADIUS, "120"]),
+}
 VAL = {
     "val-u100": ("uniform", 100, 8, 200_000, ["--instance.graph.step-s", "2"]),
     "val-c100": ("clusters", 100, 4, 210_000, ["--instance.satellite.slew-model", "bang_coast_bang"]),
@@ -75,6 +90,12 @@ TEST = {
     "test-u100": ("uniform", 100, 16, 300_000, []),
     "test-c100": ("clusters", 100, 16, 310_000, ["--instance.graph.step-s", "2"]),
     "test-x100": ("conflict", 100, 16, 320_000, ["--instance.satellite.slew-model", "bang_coast_bang"]),
+}
+# Unseen sets at scale (``data --scale``; x RAMP, which proves nothing but met the optimum wherever it was known)
+SCALE = {
+    "test-u300": ("uniform", 300, 8, 330_000, []),
+    "test-x300": ("conflict", 300, 8, 340_000, []),
+    "test-u1000": ("uniform", 1000, 4, 350_000, []),
 }
 MODES = {"unitary": "unitary", "utility": "normalized"}
 
@@ -104,9 +125,13 @@ def build(base: Path, sets: dict, link_into: str | None) -> list[Path]:
 
 def cmd_data(a) -> None:
     base = ROOT / a.data
-    if a.more:
-        build(base, TRAIN2, "train2")
-        sh([PY, "jobs/build_demos.py", "--data", str(base / "train2"), "--modes", *a.modes, "--action-sets", "true",
+    if a.scale:
+        build(base, SCALE, None)
+        return
+    if a.more or a.dense:
+        name, sets = ("train2", TRAIN2) if a.more else ("train3", TRAIN3)
+        build(base, sets, name)
+        sh([PY, "jobs/build_demos.py", "--data", str(base / name), "--modes", *a.modes, "--action-sets", "true",
             "--beam", "1", "--time-limit", "30", "--sets-max-acquisitions", "150"])
         return
     build(base, TRAIN, "train")
@@ -252,6 +277,8 @@ def main() -> None:
     p.add_argument("--kinds", nargs="+", default=["ppo", "imitation", "imitation+ppo"])
     p.add_argument("--tests", nargs="+", default=list(TEST))
     p.add_argument("--more", action="store_true", help="data: build the second training mix (train2/) instead")
+    p.add_argument("--dense", action="store_true", help="data: build the third mix, dense targets (train3/) instead")
+    p.add_argument("--scale", action="store_true", help="data: build the test sets at 300 and 1000 acquisitions")
     a = p.parse_args()
     {"data": cmd_data, "run": cmd_run, "report": cmd_report}[a.stage](a)
 

@@ -57,13 +57,14 @@ def main() -> None:
     ap.add_argument("--tests", nargs="+", required=True, help="test set directories (shards with unpruned arcs)")
     ap.add_argument("--baselines", required=True, help="record of Greedy and exact values (experiments/records)")
     ap.add_argument("--policies", nargs="+", default=["follow", "rollout"], choices=("follow", "rollout"))
+    ap.add_argument("--plan", default="greedy", choices=("greedy", "greedy2"), help="the features' --env.plan")
     args = ap.parse_args()
     base = {r["instance"]: r for r in csv.DictReader(open(args.baselines))}
     print("| test | policy | instances | / Greedy | / exact | below Greedy | s / instance |")
     print("|---|---|---|---|---|---|---|")
     for test in args.tests:
         insts = read_instances(expand_shards([test]))
-        env = EOSPEnv(EnvConfig(reward="unitary" if args.mode == "unitary" else "normalized", plan="greedy",
+        env = EOSPEnv(EnvConfig(reward="unitary" if args.mode == "unitary" else "normalized", plan=args.plan,
                                 max_acquisitions=0), source=FixedSource(insts[0]))
         for policy in args.policies:
             rg, rx, t0 = [], [], time.perf_counter()

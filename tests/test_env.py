@@ -342,23 +342,42 @@ def test_observation_horizon_keeps_the_selectable_and_drops_the_far_future():
     assert dropped_any
 
 
+def greedy_plan_at_start(inst, mode, plan):
+    """The acquisitions of the Greedy solver's schedule; with 'greedy2', of the better of it and Greedy in the
+    second order (utility: by class then window start; unitary: by latest start), ties to the first."""
+    from eosp.graphs.insertion import greedy_insert
+    from eosp.solvers.base import run_solver
+
+    first = inst.node_acq[run_solver("greedy", inst, mode=mode).nodes]
+    if plan == "greedy":
+        return first
+    if mode == "unitary":
+        second = inst.node_acq[run_solver("greedy", inst, mode=mode, order="deadline").nodes]
+        return second if len(second) > len(first) else first
+    g = inst.unpruned()
+    order = np.lexsort((np.arange(inst.n_acq), g.node_time[g.acq_ptr[:-1]], inst.acqs.priority)).astype(np.int32)
+    second, *_ = greedy_insert(g.indptr, g.dst, g.acq_ptr, g.node_time, order, 0, np.zeros(inst.n_acq, np.uint8))
+    u = inst.acqs.utility
+    return second if u[second].sum() > u[first].sum() * (1 + 1e-12) else first
+
+
+@pytest.mark.parametrize("plan", ["greedy", "greedy2"])
 @pytest.mark.parametrize("reward,mode", [("normalized", "utility"), ("unitary", "unitary")])
-def test_plan_features_are_greedys_feasible_completion_of_the_partial_schedule(reward, mode):
-    """With --env.plan greedy: at the start the plan is the Greedy solver's schedule; at every state of a
-    random walk the plan's acquisitions, in the order of their plan starts, complete the partial schedule
-    into one the independent checker accepts, with those starts; off, the columns are zeros."""
+def test_plan_features_are_greedys_feasible_completion_of_the_partial_schedule(reward, mode, plan):
+    """With --env.plan greedy: at the start the plan is the Greedy solver's schedule (greedy2: the better of two
+    orders); at every state of a random walk the plan's acquisitions, in the order of their plan starts,
+    complete the partial schedule into one the independent checker accepts, with those starts; off, the
+    columns are zeros."""
     from eosp.envs.observation import PLAN, TIME_SCALE
     from eosp.graphs.discrete import arc_to_acq
     from eosp.instances.schedule import Schedule
-    from eosp.solvers.base import run_solver
 
     for family, n, seed in (("clusters", 40, 3), ("conflict", 30, 5)):
         inst = generated(family, n, seed, step=1.0)
-        env, off = make_env(inst, reward=reward, plan="greedy"), make_env(inst, reward=reward)
+        env, off = make_env(inst, reward=reward, plan=plan), make_env(inst, reward=reward)
         obs, _ = env.reset(seed=0)
         obs_off, _ = off.reset(seed=0)
-        greedy = run_solver("greedy", inst, mode=mode)
-        assert sorted(np.flatnonzero(obs["x"][:, PLAN])) == sorted(inst.node_acq[greedy.nodes])
+        assert sorted(np.flatnonzero(obs["x"][:, PLAN])) == sorted(greedy_plan_at_start(inst, mode, plan))
         g = inst.unpruned()
         rng = np.random.default_rng(seed)
         while obs["action_mask"].any():
@@ -397,8 +416,9 @@ def test_plan_features_without_the_unpruned_arcs_are_refused_in_one_line():
         make_env(inst, plan="greedy").reset(seed=0)
 
 
+@pytest.mark.parametrize("plan", ["greedy", "greedy2"])
 @pytest.mark.parametrize("reward", ["normalized", "unitary"])
-def test_rollout_features_value_each_action_by_greedys_completion_after_it(reward):
+def test_rollout_features_value_each_action_by_greedys_completion_after_it(reward, plan):
     """V(a), Greedy's rollout after an allowed action a, is a's worth plus the worth of the plan shown in the
     state the step to a leads to; the loss and ratio columns compare it with the best allowed action."""
     from eosp.envs.observation import PLAN
@@ -406,7 +426,7 @@ def test_rollout_features_value_each_action_by_greedys_completion_after_it(rewar
     for family, n, seed in (("clusters", 40, 3), ("conflict", 30, 5), ("uniform", 40, 7)):
         inst = generated(family, n, seed, step=1.0)
         w = np.ones(n) if reward == "unitary" else inst.acqs.utility
-        env = make_env(inst, reward=reward, plan="greedy")
+        env = make_env(inst, reward=reward, plan=plan)
         obs, _ = env.reset(seed=0)
         rng = np.random.default_rng(seed)
         while obs["action_mask"].any():
