@@ -94,8 +94,8 @@ TEST = {
 # Unseen sets at scale (``data --scale``; x RAMP, which proves nothing but met the optimum wherever it was known)
 SCALE = {
     "test-u300": ("uniform", 300, 8, 330_000, []),
-    "test-x300": ("conflict", 300, 8, 340_000, []),
-    "test-u1000": ("uniform", 1000, 4, 350_000, []),
+    "test-x300": ("conflict", 300, 8, 340_000, [STEP, "2"]),
+    "test-u1000": ("uniform", 1000, 4, 350_000, [STEP, "2"]),
 }
 MODES = {"unitary": "unitary", "utility": "normalized"}
 

@@ -110,7 +110,7 @@ def main() -> None:
         return
     history = run / "history.json"
     cfg = json.loads(history.read_text())["config"] if history.exists() else {}
-    parent = _parent_recipe(cfg, PRE / a.mode)  # read before the new weights replace the old ones
+    parent, ancestor = _parent_recipe(cfg, PRE)  # read before the new weights replace the old ones
     save_agent(agent, dest, env_cfg, {k: v for k, v in meta.items() if k in ("epoch", "iteration", "source")})
     data_sets = cfg.get("imitation", {}).get("train_data", [])
     manifests = {}
@@ -129,8 +129,8 @@ def main() -> None:
           f"{meta.get('epoch', meta.get('iteration'))}).",
           "", "## How it was trained", ""]
     if parent:
-        md += ["Descends from the model shipped before it (`--imitation.init-checkpoint models/pretrained/"
-               f"{a.mode}`, directly or through the runs named below), which was trained by:", "", "```bash",
+        md += ["Descends from a model shipped before it (`--imitation.init-checkpoint models/pretrained/"
+               f"{ancestor}`, directly or through the runs named below), which was trained by:", "", "```bash",
                *parent, "```", "", "then:", ""]
     md.append("```bash")
     if not parent:  # a parent recipe already built the first mix
@@ -139,6 +139,8 @@ def main() -> None:
                "#   jobs/build_demos.py --modes utility --action-sets true --beam 1 --sets-max-acquisitions 150"]
     if any("train2" in str(d) for d in data_sets):
         md.append(f"python experiments/expert_guided.py data --more --modes {a.mode}   # the second mix, train2/")
+    if any("train3" in str(d) for d in data_sets):
+        md.append(f"python experiments/expert_guided.py data --dense --modes {a.mode}   # the third mix, train3/")
     md += ["python jobs/pretrain.py " + " ".join(f"--{k.replace('_', '-')} {v}" for k, v in _flags(cfg)), "```", "",
            "Training data (generated with jobs/build_shards.py; instance k of a set uses seed + k):", "",
            "| set | family | acquisitions | instances | seed | generator settings |", "|---|---|---|---|---|---|"]
@@ -168,28 +170,30 @@ def _settings(inst: dict) -> str:
             f"acquisitions {tg.get('duration_min_s', '')}-{tg.get('duration_max_s', '')} s")
 
 
-def _parent_recipe(cfg: dict, dest: Path) -> list[str]:
-    """The bash lines of the shipped model's recipe when this run descends from it (else nothing): started
-    from it, or from a checkpoint of a run (runs/NAME/checkpoints/C) that descends from it, whose command
-    is then added."""
+def _parent_recipe(cfg: dict, shipped: Path) -> tuple[list[str], str]:
+    """(the bash lines of a shipped model's recipe, its name) when this run descends from a model under `shipped`
+    (else nothing): started from it, or from a checkpoint of a run (runs/NAME/checkpoints/C) that descends from
+    it, whose command is then added."""
     init = cfg.get("imitation", {}).get("init_checkpoint", "") or cfg.get("train", {}).get("init_checkpoint", "")
     if not init:
-        return []
-    md, start = dest / "MODEL.md", Path(init)
-    if start.resolve() == dest.resolve():
+        return [], ""
+    start = Path(init)
+    if start.resolve().parent == shipped.resolve():
+        md = start / "MODEL.md"
         if not md.exists() or "```bash" not in md.read_text():
-            return []
+            return [], ""
         block = md.read_text().split("## How it was trained", 1)[-1]
-        return [line for chunk in block.split("```bash")[1:] for line in chunk.split("```", 1)[0].strip().splitlines()]
+        return [line for chunk in block.split("```bash")[1:]
+                for line in chunk.split("```", 1)[0].strip().splitlines()], start.resolve().name
     history = start.parent.parent / "history.json"
     if start.parent.name != "checkpoints" or not history.exists():
-        return []
+        return [], ""
     up = json.loads(history.read_text())["config"]
-    lines = _parent_recipe(up, dest)
+    lines, ancestor = _parent_recipe(up, shipped)
     if not lines:
-        return []
+        return [], ""
     return lines + [f"# then (its checkpoint {start.name} starts the next command):",
-                    "python jobs/pretrain.py " + " ".join(f"--{k.replace('_', '-')} {v}" for k, v in _flags(up))]
+                    "python jobs/pretrain.py " + " ".join(f"--{k.replace('_', '-')} {v}" for k, v in _flags(up))], ancestor
 
 
 def _flags(cfg: dict) -> list[tuple[str, str]]:
