@@ -78,7 +78,17 @@ def main() -> None:
     out = Path(a.out)
     out.mkdir(parents=True, exist_ok=True)
     rows = []
-    agents = {m: resolve_agent("policy", a.checkpoint, None, m) for m in a.modes}
+    from eosp.models.pretrained import PREFIX, default_name
+
+    loaded = {}
+
+    def agent_for(mode: str, n: int, limited: bool):
+        """--checkpoint, or the shipped model a solver without one would use (by size and time limit)."""
+        key = a.checkpoint or PREFIX + default_name(mode, n, limited)
+        if key not in loaded:
+            loaded[key] = resolve_agent("policy", key, None, mode)
+        return loaded[key]
+
     for size in a.sizes:
         for family in a.families:
             for k in range(a.instances):
@@ -94,7 +104,7 @@ def main() -> None:
 
                     if "policy" in a.methods:
                         t0 = time.perf_counter()
-                        sol = run_solver("policy", inst, mode=mode, agent=agents[mode])
+                        sol = run_solver("policy", inst, mode=mode, agent=agent_for(mode, inst.n_acq, False))
                         dt = time.perf_counter() - t0
                         for t in a.times:
                             add("policy", t, sol.value if dt <= t else np.nan, dt)
@@ -118,7 +128,7 @@ def main() -> None:
                         for t in a.times:
                             refine = {"windows": a.windows, "window_graph": a.window_graph}
                             kw = ({} if method == "exact" else refine if method == "lns" else
-                                  {"agent": agents[mode], "polish": a.polish, **refine})
+                                  {"agent": agent_for(mode, inst.n_acq, True), "polish": a.polish, **refine})
                             if method == "sample":
                                 kw["samples"] = 16
                             if method == "beam":

@@ -3,7 +3,7 @@
     python experiments/fresh_eval.py --mode utility --n 100 --families uniform conflict clusters --count 30 \
         --seed 970000 --reference exact --checkpoints pretrained:utility pretrained:utility-plan
 
-Instance k of each family uses seed + k (the generator's defaults otherwise), so a draw is reproducible and
+Instance k of each family uses seed + k (the generator's defaults, or --step and --slew), so a draw is reproducible and
 disjoint from the training seeds (100000-559999) and test seeds (300000-359999) when the seed is chosen so.
 Prints, per family and policy: the mean of per-instance ratios to the reference, the worst ratio, how many
 instances end below Greedy, and the decision time; with ``--out``, one CSV row per instance and solver.
@@ -21,7 +21,7 @@ import numpy as np
 from eosp.config import family_config
 from eosp.instances.generator import generate
 from eosp.solvers import exact, greedy, policy, ramp
-from eosp.solvers.policy import resolve_agent
+from eosp.solvers.policy import PolicyConfig, resolve_agent
 
 
 def main() -> None:
@@ -34,13 +34,20 @@ def main() -> None:
     p.add_argument("--reference", choices=["ramp", "exact"], default="ramp")
     p.add_argument("--time-limit", type=float, default=60.0, help="of the exact solver (its best if hit)")
     p.add_argument("--checkpoints", nargs="+", required=True, help="checkpoint directories or pretrained:NAME")
+    p.add_argument("--step", type=float, default=0.0, help="time step of the discrete graph (s); 0: the default")
+    p.add_argument("--slew", default="", help="slew model (piecewise, bang_coast_bang); empty: the default")
+    p.add_argument("--guard", type=float, nargs="+", default=[PolicyConfig().guard],
+                   help="rollout guard(s) of the decisions (eosp.solvers.base.LearnedConfig.guard); 0: off")
     p.add_argument("--out", default="", help="CSV of every (instance, solver) result")
     a = p.parse_args()
     agents = {ck: resolve_agent("policy", ck, None, a.mode) for ck in a.checkpoints}
+    names = [ck if len(a.guard) == 1 else f"{ck} guard {g:g}" for ck in a.checkpoints for g in a.guard]
+    overrides = {**({"graph": {"step_s": a.step}} if a.step else {}),
+                 **({"satellite": {"slew_model": a.slew}} if a.slew else {})}
     rows = []
     for family in a.families:
         for k in range(a.count):
-            inst = generate(family_config(family, a.n, a.seed + k))
+            inst = generate(family_config(family, a.n, a.seed + k, **overrides))
             g = greedy.solve(inst, greedy.GreedyConfig(mode=a.mode)).value
             if a.reference == "exact":
                 ref = exact.solve(inst, exact.ExactConfig(mode=a.mode, time_limit=a.time_limit)).value
@@ -48,23 +55,25 @@ def main() -> None:
                 ref = ramp.solve(inst, ramp.RampConfig(mode=a.mode)).value
             row = {"family": family, "seed": a.seed + k, "greedy": g, a.reference: ref}
             for ck, agent in agents.items():
-                t0 = time.perf_counter()
-                row[ck] = policy.solve(inst, policy.PolicyConfig(mode=a.mode), agent=agent).value
-                row[ck + " s"] = time.perf_counter() - t0
+                for guard in a.guard:
+                    name = ck if len(a.guard) == 1 else f"{ck} guard {guard:g}"
+                    t0 = time.perf_counter()
+                    row[name] = policy.solve(inst, policy.PolicyConfig(mode=a.mode, guard=guard), agent=agent).value
+                    row[name + " s"] = time.perf_counter() - t0
             rows.append(row)
             print(f"[fresh_eval] {family} {a.seed + k}: greedy {g / ref:.4f} "
-                  + " ".join(f"{ck} {row[ck] / ref:.4f}" for ck in agents), flush=True)
+                  + " ".join(f"{name} {row[name] / ref:.4f}" for name in names), flush=True)
     print(f"\n{a.mode}, {a.n} acquisitions, x {a.reference} (mean of per-instance ratios; worst; below Greedy; "
           f"s per instance)")
     for family in [*a.families, "all"]:
         sel = [r for r in rows if family in ("all", r["family"])]
         ref = np.array([r[a.reference] for r in sel])
         parts = [f"greedy {np.mean([r['greedy'] for r in sel] / ref):.4f}"]
-        for ck in agents:
-            v = np.array([r[ck] for r in sel])
-            below = sum(r[ck] < r["greedy"] * (1 - 1e-9) for r in sel)
-            parts.append(f"{ck} {np.mean(v / ref):.4f} (worst {np.min(v / ref):.4f}; below Greedy {below}/{len(sel)}; "
-                         f"{np.mean([r[ck + ' s'] for r in sel]):.2f} s)")
+        for name in names:
+            v = np.array([r[name] for r in sel])
+            below = sum(r[name] < r["greedy"] * (1 - 1e-9) for r in sel)
+            parts.append(f"{name} {np.mean(v / ref):.4f} (worst {np.min(v / ref):.4f}; below Greedy {below}/{len(sel)}; "
+                         f"{np.mean([r[name + ' s'] for r in sel]):.2f} s)")
         print(f"  {family:9s} " + " | ".join(parts))
     if a.out:
         with open(a.out, "w", newline="") as f:

@@ -59,12 +59,13 @@ class SolverWorker:
         options = {"mode": cfg.mode}
         if takes_time_limit(solver):  # the one-shot solvers (random, greedy, policy) refuse a limit
             options["time_limit"] = cfg.time_limit
-        agent = self._agent(cfg.checkpoint, cfg.mode) if solver in LEARNED else None
         if solver in ("sample", "beam"):
             options["time_limit"] = cfg.search_time or None
             options.update({"samples": cfg.samples} if solver == "sample" else {"beam_width": cfg.beam_width})
         if solver == "mcts":
             options["budget"] = budget
+        limited = solver != "policy" and options.get("time_limit") is not None
+        agent = self._agent(cfg.checkpoint, cfg.mode, inst.n_acq, limited) if solver in LEARNED else None
         if solver in ("sample", "beam", "mcts"):
             options.update(polish=cfg.polish, refine=cfg.refine, windows=cfg.windows, window_graph=cfg.window_graph)
         t0 = time.perf_counter()
@@ -85,13 +86,16 @@ class SolverWorker:
                 "bound": float(sol.info.get("bound", np.nan)), "status": str(sol.info.get("status", "")),
                 "family": str(inst.meta.get("family", ""))}
 
-    def _agent(self, checkpoint: str, mode: str):
-        """The agent of `checkpoint`, or the shipped model of `mode` (loaded once per worker)."""
-        key = checkpoint or f"pretrained:{mode}"
+    def _agent(self, checkpoint: str, mode: str, n_acquisitions: int, time_limited: bool):
+        """The agent of `checkpoint`, or the shipped model that serves `mode` for this instance and search
+        (eosp.models.pretrained.default_name), loaded once per worker."""
+        from eosp.models.pretrained import default_name
+
+        key = checkpoint or f"pretrained:{default_name(mode, n_acquisitions, time_limited)}"
         if key not in self.agents:
             from eosp.solvers.policy import resolve_agent
 
-            self.agents[key] = resolve_agent("policy", checkpoint, None, mode)
+            self.agents[key] = resolve_agent("policy", key, None, mode)
         return self.agents[key]
 
 
@@ -167,7 +171,11 @@ def run(cfg: EvalConfig, ray_cfg: RayConfig) -> "object":
     if set(LEARNED) & set(cfg.solvers) and not cfg.checkpoint:
         from eosp.models.pretrained import pretrained_dir
 
-        print(f"[evaluate] policy/mcts: the shipped model {pretrained_dir(cfg.mode)}", flush=True)
+        from eosp.models.pretrained import FAST, FAST_ABOVE
+
+        fast = (f" (searches with a time limit on more than {FAST_ABOVE} acquisitions: "
+                f"{pretrained_dir(FAST[cfg.mode])})") if cfg.mode in FAST else ""
+        print(f"[evaluate] policy/mcts: the shipped model {pretrained_dir(cfg.mode)}{fast}", flush=True)
     if Path(cfg.out).exists() and not Path(cfg.out).is_dir():
         raise SystemExit(f"error: --out {cfg.out} is a file, not a directory")
     jobs = []

@@ -1,13 +1,18 @@
 """Pretrained agents shipped with the package: one call away, no download.
 
-``models/pretrained/<mode>/`` holds ``agent.pt`` (weights, read with
+``models/pretrained/<name>/`` holds ``agent.pt`` (weights, read with
 ``weights_only=True``), ``agent.json`` (model and environment configuration) and
 ``MODEL.md`` (the command, data seeds and validation figures that produced it).
-``eosp solve --solver policy|mcts --mode M`` without ``--checkpoint`` uses the one
-of mode M, and so do ``jobs/evaluate.py`` and the MLflow model.  Other shipped models
-(:data:`VARIANTS`, e.g. ``utility-plan``, which reads Greedy's plan: better schedules,
-~20x the decision cost at 1000 acquisitions) are one flag away:
-``--checkpoint pretrained:utility-plan``.
+``eosp solve --solver policy|mcts --mode M`` without ``--checkpoint`` uses the model
+of mode M, and so do ``jobs/evaluate.py`` and the MLflow model.  The utility model reads
+Greedy's plan and Greedy's rollout after each allowed action (``--env.plan``), whose cost
+per step grows with the allowed actions times the acquisitions left (2 ms at 300
+acquisitions, 36-420 ms at 1000): the time-limited searches on instances of more than
+:data:`FAST_ABOVE` acquisitions therefore default to the mode's fast model
+(:data:`FAST`, ``utility-fast``: no plan features, the shipped utility model before it),
+whose greedy episode fits their time share.  Any shipped model is one flag away:
+``--checkpoint pretrained:NAME`` (``utility-plan``: the name the plan model had when it
+was a variant, kept so that commands written then still work).
 """
 
 from __future__ import annotations
@@ -18,14 +23,27 @@ from eosp.errors import InputError
 
 ROOT = Path(__file__).resolve().parent / "pretrained"
 MODES = ("unitary", "utility")
-VARIANTS = ("utility-plan",)
+VARIANTS = ("utility-fast",)
+ALIASES = {"utility-plan": "utility"}
+FAST = {"utility": "utility-fast"}
+FAST_ABOVE = 500
 PREFIX = "pretrained:"
+
+
+def default_name(mode: str, n_acquisitions: int = 0, time_limited: bool = False) -> str:
+    """The shipped model that serves `mode` when no checkpoint is given: the mode's own, or its fast model for a
+    time-limited search on more than :data:`FAST_ABOVE` acquisitions (see the module docstring)."""
+    if time_limited and n_acquisitions > FAST_ABOVE and mode in FAST:
+        return FAST[mode]
+    return mode
 
 
 def pretrained_dir(mode: str) -> Path:
     """The shipped checkpoint directory of an objective mode ('unitary' or 'utility') or of a variant."""
+    mode = ALIASES.get(mode, mode)
     if mode not in MODES + VARIANTS:
-        raise InputError("--mode", f"no pretrained model {mode!r}; shipped: {', '.join(MODES + VARIANTS)}")
+        names = ", ".join(MODES + VARIANTS + tuple(ALIASES))
+        raise InputError("--mode", f"no pretrained model {mode!r}; shipped: {names}")
     d = ROOT / mode
     if not (d / "agent.pt").is_file() or not (d / "agent.json").is_file():
         raise InputError(d, "the shipped pretrained model is missing (agent.pt and agent.json expected): reinstall "

@@ -88,9 +88,15 @@ class LearnedConfig(SolverConfig):
     loaded is passed to ``solve(inst, cfg, agent=...)`` instead, as an (agent, env config, metadata) tuple."""
 
     checkpoint: str = ""
-    """Trained agent: a checkpoint directory, or pretrained:NAME for another shipped model (utility-plan: reads
-    Greedy's plan, better schedules, ~20x the decision cost at 1000 acquisitions); empty: the shipped pretrained
-    model of --mode."""
+    """Trained agent: a checkpoint directory, or pretrained:NAME for another shipped model (utility-fast: no plan
+    features, cheaper decisions at 1000+ acquisitions, lower values); empty: the shipped pretrained model of
+    --mode (for the searches with a time limit on more than 500 acquisitions, utility-fast)."""
+    guard: float = ranged(0.875, 0)
+    """Rollout guard of the decisions, for models that read Greedy's plan (--env.plan): an allowed action whose
+    Greedy rollout ends below the best allowed action's by at least 10^(8 x guard) - 1 utility (0.875: a class-1
+    acquisition, 1e7) is never chosen (unitary: 10 x guard acquisitions); the best never is, so an action always
+    remains; 0: off.  Why: the policy's rare costliest errors give up a top-class acquisition that Greedy's
+    rollout shows another action keeps."""
 
 
 @dataclass

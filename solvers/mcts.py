@@ -36,7 +36,8 @@ def solve(inst: Instance, cfg: MctsConfig | None = None, *, agent: tuple | None 
     cfg.validate()
     mode, time_limit, seed, budget = cfg.mode, cfg.time_limit, cfg.seed, cfg.budget
     c_puct, batch, gumbel = cfg.c_puct, cfg.batch, cfg.gumbel
-    model, env_cfg, _ = resolve_agent("mcts", cfg.checkpoint, agent, mode)
+    model, env_cfg, _ = resolve_agent("mcts", cfg.checkpoint, agent, mode, n_acquisitions=inst.n_acq,
+                                      time_limited=time_limit is not None)
     prepared = prepare_instance(inst, env_cfg.prune)
     env = make_env_for(prepared, env_cfg)
     vw = value_weights(model, prepared)  # lexicographic heads: per-class values weighed by class utilities
@@ -44,7 +45,8 @@ def solve(inst: Instance, cfg: MctsConfig | None = None, *, agent: tuple | None 
     t0 = time.perf_counter()
     if budget is None:  # with a time limit, bounded by it only
         budget = 1_000_000 if time_limit is not None else 100
-    nodes, ret, stats = mcts_solve(env, lambda obss: evaluate_batch(model, obss, vw), num_simulations=int(budget or 0),
+    nodes, ret, stats = mcts_solve(env, lambda obss: evaluate_batch(model, obss, vw, cfg.guard),
+                                   num_simulations=int(budget or 0),
                                    c_puct=c_puct, batch=batch, seed=seed, time_limit=search_time(cfg),
                                    gumbel=gumbel)
     if polisher is not None:  # the played episode and the best one met, both polished: the better

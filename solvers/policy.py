@@ -14,7 +14,8 @@ from eosp.envs.eosp_env import EOSPEnv
 from eosp.envs.sources import FixedSource, PreparedInstance, prepare_instance
 from eosp.config import CLASS_UTILITIES, EnvConfig
 from eosp.instances.instance import Instance
-from eosp.models.agent import EOSPAgent, batch_from_padded
+from eosp.envs.observation import PLAN
+from eosp.models.agent import MASKED, EOSPAgent, batch_from_padded
 from eosp.solvers.base import LearnedConfig, SearchConfig, Solution, objective_weights
 
 
@@ -22,27 +23,39 @@ def to_batch(obs: dict[str, np.ndarray]) -> dict[str, torch.Tensor]:
     return {k: torch.as_tensor(v)[None] for k, v in obs.items()}
 
 
+def guarded(logits: np.ndarray, x: np.ndarray, guard: float) -> np.ndarray:
+    """`logits` [..., N] with the actions whose rollout loss (the after_loss plan feature, x[..., PLAN + 3]) is at
+    least `guard` forbidden (set to MASKED), in place; `guard` 0: unchanged.  The action of largest rollout value
+    has loss 0, so an allowed action always remains; without plan features every loss is 0."""
+    if guard > 0.0:
+        logits[x[..., :logits.shape[-1], PLAN + 3] >= guard] = MASKED
+    return logits
+
+
 @torch.no_grad()
-def evaluate(agent: EOSPAgent, obs: dict[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
-    """Per-acquisition logits (forbidden: very negative) and the value head of one observation."""
+def evaluate(agent: EOSPAgent, obs: dict[str, np.ndarray], guard: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+    """Per-acquisition logits (forbidden: very negative; with `guard`, see :func:`guarded`) and the value head of
+    one observation."""
     gb, valid = batch_from_padded(to_batch(obs))
     logits, values = agent(gb)
-    return agent.padded_logits(logits, valid)[0].numpy(), values[0].numpy()
+    return guarded(agent.padded_logits(logits, valid)[0].numpy(), obs["x"], guard), values[0].numpy()
 
 
 @torch.no_grad()
 def evaluate_batch(agent: EOSPAgent, obss: list[dict[str, np.ndarray]],
-                   value_weights: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+                   value_weights: np.ndarray | None = None, guard: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
     """Logits [B, N] and scalar values [B] of several observations of one instance, in one call.
 
     The value is the first head's, or with `value_weights` the heads' weighted sum (a lexicographic
     model's per-class values turned into the normalized reward's units, see :func:`value_weights`).
+    `guard`: see :func:`guarded`.
     """
     batch = {k: torch.as_tensor(np.stack([o[k] for o in obss])) for k in obss[0]}
     gb, valid = batch_from_padded(batch)
     logits, values = agent(gb)
     v = values.numpy()
-    return agent.padded_logits(logits, valid).numpy(), (v[:, 0] if value_weights is None else v @ value_weights)
+    logits = guarded(agent.padded_logits(logits, valid).numpy(), batch["x"].numpy(), guard)
+    return logits, (v[:, 0] if value_weights is None else v @ value_weights)
 
 
 def value_weights(agent: EOSPAgent, prepared: PreparedInstance) -> np.ndarray | None:
@@ -60,14 +73,15 @@ def make_env_for(prepared: PreparedInstance, env_cfg: EnvConfig) -> EOSPEnv:
 
 
 def rollout(agent: EOSPAgent, prepared: PreparedInstance, env_cfg: EnvConfig, sample: bool = False,
-            seed: int = 0) -> tuple[np.ndarray, float]:
-    """Play one episode with the agent; returns the scheduled nodes and the schedule's utility."""
+            seed: int = 0, guard: float = 0.0) -> tuple[np.ndarray, float]:
+    """Play one episode with the agent (`guard`: see :func:`guarded`); returns the scheduled nodes and the
+    schedule's utility."""
     env = make_env_for(prepared, env_cfg)
     obs, _ = env.reset(seed=seed)
     rng = np.random.default_rng(seed)
     done = not obs["action_mask"].any()
     while not done:
-        logits, _ = evaluate(agent, obs)
+        logits, _ = evaluate(agent, obs, guard)
         if sample:
             allowed = np.flatnonzero(obs["action_mask"])
             z = logits[allowed] - logits[allowed].max()
@@ -79,16 +93,19 @@ def rollout(agent: EOSPAgent, prepared: PreparedInstance, env_cfg: EnvConfig, sa
     return env.path(), env.state.value
 
 
-def resolve_agent(solver: str, checkpoint: str, agent: tuple | None, mode: str = "utility") -> tuple:
+def resolve_agent(solver: str, checkpoint: str, agent: tuple | None, mode: str = "utility", *,
+                  n_acquisitions: int = 0, time_limited: bool = False) -> tuple:
     """The (agent, env config, metadata) given, loaded from `checkpoint` (a directory, or ``pretrained:NAME`` for a
-    shipped model by name, eosp.models.pretrained), or the shipped model of `mode`."""
+    shipped model by name, eosp.models.pretrained), or the shipped model that serves `mode` (for a time-limited
+    search on a large instance, the mode's fast model: eosp.models.pretrained.default_name)."""
     if agent is not None:
         return agent
     torch.set_num_threads(1)
-    from eosp.models.pretrained import PREFIX, load_pretrained
+    from eosp.models.pretrained import PREFIX, default_name, load_pretrained
 
     if not checkpoint or checkpoint.startswith(PREFIX):  # pretrained:NAME, a shipped model by name
-        return load_pretrained(checkpoint[len(PREFIX):] if checkpoint else mode)
+        return load_pretrained(checkpoint[len(PREFIX):] if checkpoint
+                               else default_name(mode, n_acquisitions, time_limited))
     from eosp.models.checkpoint import load_agent
 
     return load_agent(checkpoint)
@@ -146,12 +163,14 @@ def run_search(name: str, inst: Instance, cfg: SearchConfig, agent: tuple | None
 
     from eosp.search.rollouts import replay
 
-    model, env_cfg, _ = resolve_agent(name, cfg.checkpoint, agent, cfg.mode)
+    model, env_cfg, _ = resolve_agent(name, cfg.checkpoint, agent, cfg.mode, n_acquisitions=inst.n_acq,
+                                      time_limited=cfg.time_limit is not None)
     prepared = prepare_instance(inst, env_cfg.prune)
     env = make_env_for(prepared, env_cfg)
     polisher = polisher_for(prepared, cfg)  # set-up (kernels compiled), before the clock starts
     t0 = time.perf_counter()
-    best = search(env, lambda obss: evaluate_batch(model, obss), None if polisher is None else polisher.actions,
+    best = search(env, lambda obss: evaluate_batch(model, obss, guard=cfg.guard),
+                  None if polisher is None else polisher.actions,
                   search_time(cfg))
     # polished actions may use arcs the environment's (pruned) graph lacks: their nodes come from the polisher
     nodes = replay(env, best.actions, cfg.seed)[0] if polisher is None else polisher.nodes_of(best.actions)
@@ -170,5 +189,5 @@ def solve(inst: Instance, cfg: PolicyConfig | None = None, *, agent: tuple | Non
     cfg.validate()
     agent, env_cfg, _ = resolve_agent("policy", cfg.checkpoint, agent, cfg.mode)
     prepared = prepare_instance(inst, env_cfg.prune)
-    nodes, _ = rollout(agent, prepared, env_cfg, sample=cfg.sample, seed=cfg.seed)
+    nodes, _ = rollout(agent, prepared, env_cfg, sample=cfg.sample, seed=cfg.seed, guard=cfg.guard)
     return Solution.from_path(inst, nodes, cfg.mode, {"solver": "policy", "sample": cfg.sample})

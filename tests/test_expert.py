@@ -204,29 +204,52 @@ def test_shipped_models_solve_without_a_checkpoint(tmp_path, mode):
         assert check(inst, read_schedule(out)).feasible
 
 
-def test_the_plan_variant_is_one_flag_away_and_an_unknown_name_is_one_line(tmp_path, capsys):
-    """`--checkpoint pretrained:utility-plan` solves with the shipped variant (it reads Greedy's plan: its
-    schedule is at least Greedy's here); a name that is not shipped is refused in one line, nothing written."""
+def test_the_fast_variant_and_the_old_name_are_one_flag_away_and_an_unknown_name_is_one_line(tmp_path, capsys):
+    """The utility model reads Greedy's plan; `--checkpoint pretrained:utility-fast` (no plan features) and the
+    plan model's former name `pretrained:utility-plan` solve too (the plan model's schedule is at least Greedy's
+    here); a name that is not shipped is refused in one line, nothing written."""
     from eosp.cli import main
     from eosp.instances.interchange import write_instance
     from eosp.instances.schedule import check, read_schedule
-    from eosp.models.pretrained import load_pretrained
+    from eosp.models.pretrained import load_pretrained, pretrained_dir
     from eosp.solvers.base import run_solver
 
-    _, env_cfg, _ = load_pretrained("utility-plan")
-    assert env_cfg.plan == "greedy" and env_cfg.reward == "normalized"
+    _, env_cfg, _ = load_pretrained("utility")
+    assert env_cfg.plan in ("greedy", "greedy2") and env_cfg.reward == "normalized"
+    assert load_pretrained("utility-fast")[1].plan == ""
+    assert pretrained_dir("utility-plan") == pretrained_dir("utility")
     inst = generated("conflict", 30, 5)
     write_instance(inst, tmp_path / "inst")
-    out = tmp_path / "plan.parquet"
-    assert main(["solve", str(tmp_path / "inst"), "--solver", "policy", "--mode", "utility", "--checkpoint",
-                 "pretrained:utility-plan", "--out", str(out)]) == 0
-    v = check(inst, read_schedule(out))
-    assert v.feasible and v.value >= run_solver("greedy", inst, mode="utility").value * (1 - 1e-9)
+    greedy = run_solver("greedy", inst, mode="utility").value
+    for name in ("utility-plan", "utility-fast"):
+        out = tmp_path / f"{name}.parquet"
+        assert main(["solve", str(tmp_path / "inst"), "--solver", "policy", "--mode", "utility", "--checkpoint",
+                     f"pretrained:{name}", "--out", str(out)]) == 0
+        v = check(inst, read_schedule(out))
+        assert v.feasible and (name == "utility-fast" or v.value >= greedy * (1 - 1e-9))
     capsys.readouterr()
     assert main(["solve", str(tmp_path / "inst"), "--solver", "policy", "--mode", "utility", "--checkpoint",
                  "pretrained:nope", "--out", str(tmp_path / "x.parquet")]) == 2
     err = capsys.readouterr().err.strip()
     assert err.count("\n") == 0 and "no pretrained model 'nope'" in err and not (tmp_path / "x.parquet").exists()
+
+
+def test_time_limited_searches_on_large_instances_default_to_the_fast_model():
+    """The plan features cost grows with allowed actions x acquisitions left: without --checkpoint, a search with a
+    time limit on more than FAST_ABOVE acquisitions gets the fast utility model; the one-shot policy, smaller
+    instances and the unitary mode keep the mode's model."""
+    from eosp.models.pretrained import FAST_ABOVE, default_name
+    from eosp.solvers.policy import resolve_agent
+
+    assert default_name("utility", FAST_ABOVE + 1, time_limited=True) == "utility-fast"
+    assert default_name("utility", FAST_ABOVE + 1, time_limited=False) == "utility"
+    assert default_name("utility", FAST_ABOVE, time_limited=True) == "utility"
+    assert default_name("unitary", 10 * FAST_ABOVE, time_limited=True) == "unitary"
+    big = resolve_agent("sample", "", None, "utility", n_acquisitions=FAST_ABOVE + 1, time_limited=True)
+    small = resolve_agent("sample", "", None, "utility", n_acquisitions=FAST_ABOVE, time_limited=True)
+    assert big[1].plan == "" and small[1].plan != ""
+    forced = resolve_agent("sample", "pretrained:utility", None, "utility", n_acquisitions=10_000, time_limited=True)
+    assert forced[1].plan != ""  # an explicit checkpoint is never replaced
 
 
 def test_missing_or_corrupt_shipped_model_is_one_line(tmp_path, monkeypatch, capsys):
@@ -317,3 +340,43 @@ def test_pretrain_saves_the_weight_average_and_decays_the_learning_rate(demo_sha
     plain = load_agent(run_dir / "plain" / "checkpoints" / "last")[0].state_dict()
     averaged = load_agent(run_dir / "avg" / "checkpoints" / "last")[0].state_dict()
     assert any(not torch.equal(plain[k], averaged[k]) for k in plain)
+
+
+def test_the_rollout_guard_never_takes_an_action_greedys_rollout_shows_losing_a_class_1_acquisition():
+    """With the guard (the default of every learned solver), each decision of the shipped utility model is an
+    allowed action whose rollout loss (after_loss) is below the guard; the guard only ever removes actions (0:
+    the plain argmax), and the best-rollout action is never removed."""
+    from eosp.envs.observation import PLAN
+    from eosp.models.pretrained import load_pretrained
+    from eosp.solvers.base import LearnedConfig
+    from eosp.solvers.policy import evaluate, guarded, make_env_for
+    from eosp.envs.sources import prepare_instance
+
+    guard = LearnedConfig().guard
+    assert guard > 0
+    agent, env_cfg, _ = load_pretrained("utility")
+    checked = removed = 0
+    for family, n, seed in (("conflict", 40, 5), ("clusters", 40, 3)):
+        env = make_env_for(prepare_instance(generated(family, n, seed, step=1.0), env_cfg.prune), env_cfg)
+        obs, _ = env.reset(seed=0)
+        while obs["action_mask"].any():
+            plain, _ = evaluate(agent, obs)
+            logits, _ = evaluate(agent, obs, guard)
+            allowed = np.flatnonzero(obs["action_mask"])
+            loss = obs["x"][allowed, PLAN + 3]
+            kept = allowed[logits[allowed] > -1e8]
+            np.testing.assert_array_equal(kept, allowed[loss < guard])
+            assert obs["x"][allowed, PLAN + 4].max() == 1 and set(allowed[obs["x"][allowed, PLAN + 4] == 1]) <= set(kept)
+            np.testing.assert_array_equal(logits[kept], plain[kept])
+            removed += len(allowed) - len(kept)
+            a = int(np.argmax(logits))
+            assert obs["x"][a, PLAN + 3] < guard
+            checked += 1
+            obs, *_ = env.step(a)
+    assert checked > 20
+    # the kernel of the guard on a hand-made row: only the actions at or above it go, and 0 leaves all
+    x = np.zeros((1, 4, PLAN + 6), dtype=np.float32)
+    x[0, :, PLAN + 3] = [0.0, 0.9, 0.5, 0.875]
+    out = guarded(np.zeros((1, 4)), x, 0.875)
+    assert list(out[0] < -1e8) == [False, True, False, True]
+    assert not (guarded(np.zeros((1, 4)), x, 0.0) < -1e8).any()

@@ -29,12 +29,13 @@ class EOSPPolicyModel(mlflow.pyfunc.PythonModel):
     def predict(self, context, model_input: pd.DataFrame, params=None) -> pd.DataFrame:
         from eosp.envs.sources import prepare_instance
         from eosp.instances.interchange import read_instance
-        from eosp.solvers.policy import rollout
+        from eosp.solvers.policy import PolicyConfig, rollout
 
         rows = []
         for d in model_input["instance_dir"]:
             inst = read_instance(d)
-            nodes, value = rollout(self.agent, prepare_instance(inst, self.env_cfg.prune), self.env_cfg)
+            nodes, value = rollout(self.agent, prepare_instance(inst, self.env_cfg.prune), self.env_cfg,
+                                   guard=PolicyConfig().guard)
             rows.append({"instance_dir": d, "n_acquisitions": len(nodes), "value": value,
                          "nodes": inst.node_ids[nodes].tolist()})
         return pd.DataFrame(rows)
