@@ -3,7 +3,7 @@
     python experiments/fresh_eval.py --mode utility --n 100 --families uniform conflict clusters --count 30 \
         --seed 970000 --reference exact --checkpoints pretrained:utility pretrained:utility-plan
 
-Instance k of each family uses seed + k (the generator's defaults, or --step and --slew), so a draw is reproducible and
+Instance k of each family uses seed + k (the generator's defaults, or --step, --slew and --set), so a draw is reproducible and
 disjoint from the training seeds (100000-559999) and test seeds (300000-359999) when the seed is chosen so.
 Prints, per family and policy: the mean of per-instance ratios to the reference, the worst ratio, how many
 instances end below Greedy, and the decision time; with ``--out``, one CSV row per instance and solver.
@@ -36,14 +36,24 @@ def main() -> None:
     p.add_argument("--checkpoints", nargs="+", required=True, help="checkpoint directories or pretrained:NAME")
     p.add_argument("--step", type=float, default=0.0, help="time step of the discrete graph (s); 0: the default")
     p.add_argument("--slew", default="", help="slew model (piecewise, bang_coast_bang); empty: the default")
+    p.add_argument("--set", nargs="*", default=[], metavar="SECTION.FIELD=VALUE",
+                   help="other generator settings, e.g. orbit.altitude_km=550 satellite.roll_max_deg=40")
     p.add_argument("--guard", type=float, nargs="+", default=[PolicyConfig().guard],
                    help="rollout guard(s) of the decisions (eosp.solvers.base.LearnedConfig.guard); 0: off")
     p.add_argument("--out", default="", help="CSV of every (instance, solver) result")
     a = p.parse_args()
     agents = {ck: resolve_agent("policy", ck, None, a.mode) for ck in a.checkpoints}
     names = [ck if len(a.guard) == 1 else f"{ck} guard {g:g}" for ck in a.checkpoints for g in a.guard]
-    overrides = {**({"graph": {"step_s": a.step}} if a.step else {}),
-                 **({"satellite": {"slew_model": a.slew}} if a.slew else {})}
+    overrides: dict = {}
+    for item in [*([f"graph.step_s={a.step}"] if a.step else []), *([f"satellite.slew_model={a.slew}"] if a.slew else []),
+                 *a.set]:
+        key, _, value = item.partition("=")
+        section, _, name = key.partition(".")
+        if not value or not name:
+            p.error(f"--set {item!r}: SECTION.FIELD=VALUE expected")
+        number = value.lstrip("-")
+        parsed = int(value) if number.isdigit() else float(value) if number.replace(".", "", 1).isdigit() else value
+        overrides.setdefault(section, {})[name] = parsed
     rows = []
     for family in a.families:
         for k in range(a.count):
