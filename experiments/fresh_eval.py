@@ -39,7 +39,7 @@ def main() -> None:
     p.add_argument("--set", nargs="*", default=[], metavar="SECTION.FIELD=VALUE",
                    help="other generator settings, e.g. orbit.altitude_km=550 satellite.roll_max_deg=40")
     p.add_argument("--guard", type=float, nargs="+", default=[PolicyConfig().guard],
-                   help="rollout guard(s) of the decisions (eosp.solvers.base.LearnedConfig.guard); 0: off")
+                   help="rollout guard(s) of the decisions (eosp.solvers.base.LearnedConfig.guard); 1: off")
     p.add_argument("--out", default="", help="CSV of every (instance, solver) result")
     a = p.parse_args()
     agents = {ck: resolve_agent("policy", ck, None, a.mode) for ck in a.checkpoints}

@@ -91,12 +91,11 @@ class LearnedConfig(SolverConfig):
     """Trained agent: a checkpoint directory, or pretrained:NAME for another shipped model (utility-fast: no plan
     features, cheaper decisions at 1000+ acquisitions, lower values); empty: the shipped pretrained model of
     --mode (for the searches with a time limit on more than 500 acquisitions, utility-fast)."""
-    guard: float = ranged(0.875, 0)
+    guard: float = ranged(0.3, 0, 1)
     """Rollout guard of the decisions, for models that read Greedy's plan (--env.plan): an allowed action whose
-    Greedy rollout ends below the best allowed action's by at least 10^(8 x guard) - 1 utility (0.875: a class-1
-    acquisition, 1e7) is never chosen (unitary: 10 x guard acquisitions); the best never is, so an action always
-    remains; 0: off.  Why: the policy's rare costliest errors give up a top-class acquisition that Greedy's
-    rollout shows another action keeps."""
+    Greedy rollout value is below (1 - guard) times the best allowed action's is never chosen (the best never
+    is, so an action always remains); 1: off.  Relative, so it means the same on any utility scale.  Why: the
+    policy's rare costliest errors give up a top acquisition that Greedy's rollout shows another action keeps."""
 
 
 @dataclass

@@ -24,16 +24,18 @@ def to_batch(obs: dict[str, np.ndarray]) -> dict[str, torch.Tensor]:
 
 
 def guarded(logits: np.ndarray, x: np.ndarray, guard: float) -> np.ndarray:
-    """`logits` [..., N] with the actions whose rollout loss (the after_loss plan feature, x[..., PLAN + 3]) is at
-    least `guard` forbidden (set to MASKED), in place; `guard` 0: unchanged.  The action of largest rollout value
-    has loss 0, so an allowed action always remains; without plan features every loss is 0."""
-    if guard > 0.0:
-        logits[x[..., :logits.shape[-1], PLAN + 3] >= guard] = MASKED
+    """`logits` [..., N] with the actions whose Greedy rollout value is below ``(1 - guard)`` times the best
+    allowed action's (the after_ratio plan feature, x[..., PLAN + 5] = V(a) / max V) forbidden (set to MASKED), in
+    place; `guard` 1: unchanged.  The action of largest rollout value has ratio 1, so an allowed action always
+    remains; without plan features every ratio is 0 and nothing is forbidden."""
+    if guard < 1.0:
+        ratio = x[..., :logits.shape[-1], PLAN + 5]
+        logits[(ratio > 0.0) & (ratio < 1.0 - guard)] = MASKED
     return logits
 
 
 @torch.no_grad()
-def evaluate(agent: EOSPAgent, obs: dict[str, np.ndarray], guard: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+def evaluate(agent: EOSPAgent, obs: dict[str, np.ndarray], guard: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
     """Per-acquisition logits (forbidden: very negative; with `guard`, see :func:`guarded`) and the value head of
     one observation."""
     gb, valid = batch_from_padded(to_batch(obs))
@@ -43,7 +45,7 @@ def evaluate(agent: EOSPAgent, obs: dict[str, np.ndarray], guard: float = 0.0) -
 
 @torch.no_grad()
 def evaluate_batch(agent: EOSPAgent, obss: list[dict[str, np.ndarray]],
-                   value_weights: np.ndarray | None = None, guard: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+                   value_weights: np.ndarray | None = None, guard: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
     """Logits [B, N] and scalar values [B] of several observations of one instance, in one call.
 
     The value is the first head's, or with `value_weights` the heads' weighted sum (a lexicographic
@@ -73,7 +75,7 @@ def make_env_for(prepared: PreparedInstance, env_cfg: EnvConfig) -> EOSPEnv:
 
 
 def rollout(agent: EOSPAgent, prepared: PreparedInstance, env_cfg: EnvConfig, sample: bool = False,
-            seed: int = 0, guard: float = 0.0) -> tuple[np.ndarray, float]:
+            seed: int = 0, guard: float = 1.0) -> tuple[np.ndarray, float]:
     """Play one episode with the agent (`guard`: see :func:`guarded`); returns the scheduled nodes and the
     schedule's utility."""
     env = make_env_for(prepared, env_cfg)

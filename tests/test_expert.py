@@ -342,20 +342,19 @@ def test_pretrain_saves_the_weight_average_and_decays_the_learning_rate(demo_sha
     assert any(not torch.equal(plain[k], averaged[k]) for k in plain)
 
 
-def test_the_rollout_guard_never_takes_an_action_greedys_rollout_shows_losing_a_class_1_acquisition():
+def test_the_rollout_guard_never_takes_an_action_greedys_rollout_values_far_below_the_best():
     """With the guard (the default of every learned solver), each decision of the shipped utility model is an
-    allowed action whose rollout loss (after_loss) is below the guard; the guard only ever removes actions (0:
-    the plain argmax), and the best-rollout action is never removed."""
+    allowed action whose rollout value is at least (1 - guard) x the best allowed action's (after_ratio); the
+    guard only ever removes actions (1: the plain argmax), and the best-rollout action is never removed."""
     from eosp.envs.observation import PLAN
     from eosp.models.pretrained import load_pretrained
     from eosp.solvers.base import LearnedConfig
     from eosp.solvers.policy import evaluate, guarded, make_env_for
-    from eosp.envs.sources import prepare_instance
 
     guard = LearnedConfig().guard
-    assert guard > 0
+    assert 0 < guard < 1
     agent, env_cfg, _ = load_pretrained("utility")
-    checked = removed = 0
+    checked = 0
     for family, n, seed in (("conflict", 40, 5), ("clusters", 40, 3)):
         env = make_env_for(prepare_instance(generated(family, n, seed, step=1.0), env_cfg.prune), env_cfg)
         obs, _ = env.reset(seed=0)
@@ -363,20 +362,21 @@ def test_the_rollout_guard_never_takes_an_action_greedys_rollout_shows_losing_a_
             plain, _ = evaluate(agent, obs)
             logits, _ = evaluate(agent, obs, guard)
             allowed = np.flatnonzero(obs["action_mask"])
-            loss = obs["x"][allowed, PLAN + 3]
+            ratio = obs["x"][allowed, PLAN + 5]
             kept = allowed[logits[allowed] > -1e8]
-            np.testing.assert_array_equal(kept, allowed[loss < guard])
-            assert obs["x"][allowed, PLAN + 4].max() == 1 and set(allowed[obs["x"][allowed, PLAN + 4] == 1]) <= set(kept)
+            np.testing.assert_array_equal(kept, allowed[ratio >= 1 - guard])
+            assert set(allowed[obs["x"][allowed, PLAN + 4] == 1]) <= set(kept) and len(kept)
             np.testing.assert_array_equal(logits[kept], plain[kept])
-            removed += len(allowed) - len(kept)
             a = int(np.argmax(logits))
-            assert obs["x"][a, PLAN + 3] < guard
+            assert obs["x"][a, PLAN + 5] >= 1 - guard
             checked += 1
             obs, *_ = env.step(a)
     assert checked > 20
-    # the kernel of the guard on a hand-made row: only the actions at or above it go, and 0 leaves all
+    # the kernel on a hand-made row: only the allowed actions below (1 - guard) x the best go; 1 leaves all; a
+    # model without plan features (ratios 0) is untouched
     x = np.zeros((1, 4, PLAN + 6), dtype=np.float32)
-    x[0, :, PLAN + 3] = [0.0, 0.9, 0.5, 0.875]
-    out = guarded(np.zeros((1, 4)), x, 0.875)
+    x[0, :, PLAN + 5] = [1.0, 0.5, 0.95, 0.89]
+    out = guarded(np.zeros((1, 4)), x, 0.1)
     assert list(out[0] < -1e8) == [False, True, False, True]
-    assert not (guarded(np.zeros((1, 4)), x, 0.0) < -1e8).any()
+    assert not (guarded(np.zeros((1, 4)), x, 1.0) < -1e8).any()
+    assert not (guarded(np.zeros((1, 4)), np.zeros_like(x), 0.1) < -1e8).any()
