@@ -1,10 +1,10 @@
 """Learned policies on freshly generated instances, against Greedy and a reference (RAMP or the exact solver).
 
     python experiments/fresh_eval.py --mode utility --n 100 --families uniform conflict clusters --count 30 \
-        --seed 970000 --reference exact --checkpoints pretrained:utility pretrained:utility-plan
+        --seed 970000 --reference exact --checkpoints pretrained:utility pretrained:utility-fast
 
-Instance k of each family uses seed + k (the generator's defaults, or --step, --slew and --set), so a draw is reproducible and
-disjoint from the training seeds (100000-559999) and test seeds (300000-359999) when the seed is chosen so.
+Instance k of each family uses seed + k (the generator's defaults, or --step, --slew and --set), so a draw is
+reproducible and disjoint from the training seeds (100000-559999) when the seed is chosen so.
 Prints, per family and policy: the mean of per-instance ratios to the reference, the worst ratio, how many
 instances end below Greedy, and the decision time; with ``--out``, one CSV row per instance and solver.
 Greedy decoding (the shipped models' figures are of the argmax policy).
@@ -45,8 +45,8 @@ def main() -> None:
     agents = {ck: resolve_agent("policy", ck, None, a.mode) for ck in a.checkpoints}
     names = [ck if len(a.guard) == 1 else f"{ck} guard {g:g}" for ck in a.checkpoints for g in a.guard]
     overrides: dict = {}
-    for item in [*([f"graph.step_s={a.step}"] if a.step else []), *([f"satellite.slew_model={a.slew}"] if a.slew else []),
-                 *a.set]:
+    given = [*([f"graph.step_s={a.step}"] if a.step else []), *([f"satellite.slew_model={a.slew}"] if a.slew else [])]
+    for item in [*given, *a.set]:
         key, _, value = item.partition("=")
         section, _, name = key.partition(".")
         if not value or not name:
@@ -82,7 +82,8 @@ def main() -> None:
         for name in names:
             v = np.array([r[name] for r in sel])
             below = sum(r[name] < r["greedy"] * (1 - 1e-9) for r in sel)
-            parts.append(f"{name} {np.mean(v / ref):.4f} (worst {np.min(v / ref):.4f}; below Greedy {below}/{len(sel)}; "
+            parts.append(f"{name} {np.mean(v / ref):.4f} (worst {np.min(v / ref):.4f}; "
+                         f"below Greedy {below}/{len(sel)}; "
                          f"{np.mean([r[name + ' s'] for r in sel]):.2f} s)")
         print(f"  {family:9s} " + " | ".join(parts))
     if a.out:

@@ -192,8 +192,8 @@ def _parent_recipe(cfg: dict, shipped: Path) -> tuple[list[str], str]:
     lines, ancestor = _parent_recipe(up, shipped)
     if not lines:
         return [], ""
-    return lines + [f"# then (its checkpoint {start.name} starts the next command):",
-                    "python jobs/pretrain.py " + " ".join(f"--{k.replace('_', '-')} {v}" for k, v in _flags(up))], ancestor
+    command = "python jobs/pretrain.py " + " ".join(f"--{k.replace('_', '-')} {v}" for k, v in _flags(up))
+    return lines + [f"# then (its checkpoint {start.name} starts the next command):", command], ancestor
 
 
 def _flags(cfg: dict) -> list[tuple[str, str]]:
