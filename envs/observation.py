@@ -338,22 +338,21 @@ def _completion(g, cand, plan, start, skip):
     `plan` (:data:`PLAN_ORDERS`): (acquisitions, nodes, worth), of the better order when there are two (ties to
     the first).  Worth: the sum of utilities, or the count for codes 2 and 4 (unitary)."""
     unitary = plan == 2 or plan == 4
-    first = cand.order_utility if plan == 1 or plan == 3 else cand.order_start
-    acqs, nodes, _ = greedy_insert(cand.plan_indptr, cand.plan_dst, g.acq_ptr, g.node_time, first, start, skip)
-    worth = float(acqs.shape[0]) if unitary else 0.0
-    if not unitary:
-        for k in range(acqs.shape[0]):
-            worth += cand.utility[acqs[k]]
-    if plan >= 3:
-        second = cand.order_class if plan == 3 else cand.order_deadline
-        acqs2, nodes2, _ = greedy_insert(cand.plan_indptr, cand.plan_dst, g.acq_ptr, g.node_time, second, start, skip)
-        worth2 = float(acqs2.shape[0]) if unitary else 0.0
+    best_acqs, best_nodes, best = np.empty(0, dtype=np.int32), np.empty(0, dtype=np.int32), -1.0
+    for k in range(2 if plan >= 3 else 1):
+        if k == 0:
+            order = cand.order_utility if plan == 1 or plan == 3 else cand.order_start
+        else:
+            order = cand.order_class if plan == 3 else cand.order_deadline
+        acqs, nodes, _ = greedy_insert(cand.plan_indptr, cand.plan_dst, g.acq_ptr, g.node_time, order, start, skip)
+        worth = float(acqs.shape[0])
         if not unitary:
-            for k in range(acqs2.shape[0]):
-                worth2 += cand.utility[acqs2[k]]
-        if worth2 > worth * (1.0 + 1e-12):
-            return acqs2, nodes2, worth2
-    return acqs, nodes, worth
+            worth = 0.0
+            for i in range(acqs.shape[0]):
+                worth += cand.utility[acqs[i]]
+        if worth > best * (1.0 + 1e-12) or best < 0.0:
+            best_acqs, best_nodes, best = acqs, nodes, worth
+    return best_acqs, best_nodes, best
 
 
 @numba.njit(cache=True)

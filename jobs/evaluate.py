@@ -169,9 +169,7 @@ def run(cfg: EvalConfig, ray_cfg: RayConfig) -> "object":
     from eosp.shards.io import ShardReader
 
     if set(LEARNED) & set(cfg.solvers) and not cfg.checkpoint:
-        from eosp.models.pretrained import pretrained_dir
-
-        from eosp.models.pretrained import FAST, FAST_ABOVE
+        from eosp.models.pretrained import FAST, FAST_ABOVE, pretrained_dir
 
         fast = (f" (searches with a time limit on more than {FAST_ABOVE} acquisitions: "
                 f"{pretrained_dir(FAST[cfg.mode])})") if cfg.mode in FAST else ""

@@ -94,7 +94,8 @@ class LearnedConfig(SolverConfig):
     guard: float = ranged(0.3, 0, 1)
     """Rollout guard of the decisions, for models that read Greedy's plan (--env.plan): an allowed action whose
     Greedy rollout value is below (1 - guard) times the best allowed action's is never chosen (the best never
-    is, so an action always remains); 1: off.  Relative, so it means the same on any utility scale.  Why: the
+    is, so an action always remains); 1: off; 0: only actions of the best rollout value (the rollout of Greedy,
+    the network breaking ties).  Relative, so it means the same on any utility scale.  Why: the
     policy's rare costliest errors give up a top acquisition that Greedy's rollout shows another action keeps."""
 
 
