@@ -165,8 +165,9 @@ def target_node(g, alive, last, action):
 
 
 @numba.njit(cache=True)
-def horizon(g, alive, last, action):
-    """The latest time a node can lose its last way in when `action` follows `last`, before the cascade:
+def sweep_horizon(g, alive, last, action):
+    """The latest time a node can lose its last way in when `action` follows `last`, before the cascade (the
+    sweep's starting horizon):
     the ends of the longest arcs out of `last` (no longer a root) and out of the alive nodes of `action`
     (which die).  Call before :func:`kill`."""
     h = g.node_time[last] + g.span[last]
@@ -197,7 +198,7 @@ def apply_action(g, ep, action):
     w = target_node(g, ep.alive, ep.last[0], action)
     if w < 0:
         return -1
-    h = horizon(g, ep.alive, ep.last[0], action)
+    h = sweep_horizon(g, ep.alive, ep.last[0], action)
     kill(g, ep.alive, ep.alive_count, action)  # (2) the other nodes of the acquisition
     sweep(g, ep.alive, ep.alive_count, g.pos[w], ep.last_pos[0], h)  # (3) unreachable nodes
     ep.path[ep.n_scheduled[0]] = w

@@ -33,7 +33,7 @@ import numba
 import numpy as np
 
 from eosp.config import CLASS_UTILITIES, N_CLASSES
-from eosp.envs.core import EnvGraph, Episode, horizon, kill, step, sweep
+from eosp.envs.core import EnvGraph, Episode, kill, step, sweep, sweep_horizon
 from eosp.graphs.discrete import arc_to_acq
 from eosp.graphs.insertion import greedy_insert, insertion_order
 
@@ -416,7 +416,7 @@ def plan_features(g, ep, cand, plan, x):
         w = arc_to_acq(g.indptr, g.dst, g.acq_ptr, last, a)  # the node the step would start a at
         alive2[:] = ep.alive
         count2[:] = alive_count
-        h = horizon(g, alive2, last, a)  # eosp.envs.core.apply_action on copies
+        h = sweep_horizon(g, alive2, last, a)  # eosp.envs.core.apply_action on copies
         kill(g, alive2, count2, a)
         sweep(g, alive2, count2, g.pos[w], ep.last_pos[0], h)
         for i in range(n):

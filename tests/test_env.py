@@ -193,7 +193,7 @@ def test_the_bounded_sweep_kills_what_the_whole_orbit_sweep_kills(family, n, see
                 core.sweep(g, alive, count, g.pos[w], ep.last_pos[0])
                 np.testing.assert_array_equal(bounded.alive, alive)
                 np.testing.assert_array_equal(bounded.alive_count, count)
-                h = core.horizon(g, ep.alive, ep.last[0], int(a))
+                h = core.sweep_horizon(g, ep.alive, ep.last[0], int(a))
                 stopped_early += bool(h < g.node_time.max())
             env.step(int(rng.choice(np.flatnonzero(env.action_mask()))))
     assert stopped_early > 0
