@@ -166,10 +166,9 @@ def target_node(g, alive, last, action):
 
 @numba.njit(cache=True)
 def sweep_horizon(g, alive, last, action):
-    """The latest time a node can lose its last way in when `action` follows `last`, before the cascade (the
-    sweep's starting horizon):
-    the ends of the longest arcs out of `last` (no longer a root) and out of the alive nodes of `action`
-    (which die).  Call before :func:`kill`."""
+    """The sweep's starting horizon: the latest time a node can lose its last way in when `action` follows
+    `last`, before the cascade: the ends of the longest arcs out of `last` (no longer a root) and out of the
+    alive nodes of `action` (which die).  Call before :func:`kill`."""
     h = g.node_time[last] + g.span[last]
     for v in range(g.acq_ptr[action], g.acq_ptr[action + 1]):
         if alive[v]:
