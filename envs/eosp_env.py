@@ -52,7 +52,7 @@ import gymnasium as gym
 import numpy as np
 
 from eosp.envs import core
-from eosp.envs.observation import (N_EDGE_FEATURES, N_NODE_FEATURES, PLAN_ORDERS, build_observation,
+from eosp.envs.observation import (N_EDGE_FEATURES, N_NODE_FEATURES, PLAN_ORDERS, build_observation, plan_completion,
                                    step_and_observe_fields)
 from eosp.envs.sources import FixedSource, PreparedInstance, ShardSource, expand_shards, owned_shards, prepare_instance
 from eosp.config import CLASS_UTILITIES, N_CLASSES, EnvConfig, from_dict
@@ -211,6 +211,20 @@ class EOSPEnv(gym.Env):
     def restore(self, snap: Snapshot) -> None:
         self.state = Snapshot(snap.prepared, snap.ep.copy(), snap.value)
         self._publish_mask()
+
+    def completion(self) -> tuple[np.ndarray, float, float]:
+        """Greedy's completion of the current partial schedule, the plan the plan features show (EnvConfig.plan
+        set): the nodes that follow :meth:`path` (a path of the instance's unpruned graph), the utility of the
+        whole schedule (path + completion) and its worth in the plan's units (utility; unitary reward: the
+        count).  Every state's completion is a complete feasible schedule: the decoder keeps the best one seen
+        (eosp.solvers.policy.rollout's `incumbent`)."""
+        if not self._plan:
+            raise ValueError("completion() needs the plan features (EnvConfig.plan)")
+        s = self.state
+        acqs, nodes, worth = plan_completion(s.prepared.eg, s.ep, s.prepared.cand, self._plan)
+        value = s.value + float(s.prepared.inst.acqs.utility[acqs].sum())
+        unitary = PLAN_ORDERS[self._plan].startswith("start")
+        return nodes.copy(), value, (int(s.ep.n_scheduled[0]) + worth) if unitary else value
 
     def action_mask(self) -> np.ndarray:
         return self.state.ep.mask.copy()

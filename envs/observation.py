@@ -356,6 +356,18 @@ def _completion(g, cand, plan, start, skip):
 
 
 @numba.njit(cache=True)
+def plan_completion(g, ep, cand, plan):
+    """Greedy's completion of the current partial schedule, the plan :func:`plan_features` shows (kernel code
+    `plan` > 0): (acquisitions, nodes, worth) after the last scheduled node, a path of the unpruned graph."""
+    n = cand.order_utility.shape[0]
+    skip = np.zeros(n, dtype=np.uint8)
+    for i in range(n):
+        if ep.alive_count[i] == 0:
+            skip[i] = 1
+    return _completion(g, cand, plan, ep.last[0], skip)
+
+
+@numba.njit(cache=True)
 def plan_features(g, ep, cand, plan, x):
     """Fill the :data:`N_PLAN` columns from :data:`PLAN` of x with Greedy's completion of the current partial
     schedule, and of the state after each allowed action: the operational greedy insertion

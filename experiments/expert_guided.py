@@ -3,6 +3,7 @@
     python experiments/expert_guided.py data                 # the mixed data sets and their demos
     python experiments/expert_guided.py data --more --modes unitary   # a second, larger mix (train2/)
     python experiments/expert_guided.py data --dense --modes utility  # a third mix, dense targets (train3/)
+    python experiments/expert_guided.py data --large --modes utility  # a fourth, dense at 200-300 (train4/)
     python experiments/expert_guided.py data --scale        # unseen test sets at 300 and 1000 acquisitions
     python experiments/expert_guided.py run --minutes 10     # the comparison (unitary and utility)
     python experiments/expert_guided.py report               # table of every finished run
@@ -81,6 +82,15 @@ TRAIN3 = {
     "x120-s1-pw-k3": ("conflict", 120, 48, 540_000, [K, "3"]),
     "c140-s1-pw-k8-r120": ("clusters", 140, 32, 550_000, [K, "8", RADIUS, "120"]),
 }
+# A fourth mix (``data --large``, linked into ``train4/``): the dense families at 200-300 acquisitions, where the
+# twelfth session's plan model gave up top-class acquisitions that Greedy's rollout also misses (conflict 300:
+# 0.967 x RAMP); the first three mixes have conflict only up to 150 acquisitions.
+TRAIN4 = {
+    "x250-s2-pw": ("conflict", 250, 24, 600_000, [STEP, "2"]),
+    "x300-s1-bcb-a650": ("conflict", 300, 16, 610_000, [*BCB, A, "650"]),
+    "c250-s2-pw-k4": ("clusters", 250, 16, 620_000, [STEP, "2", K, "4"]),
+    "x200-s3-pw-r40": ("conflict", 200, 24, 630_000, [STEP, "3", ROLL, "40"]),
+}
 VAL = {
     "val-u100": ("uniform", 100, 8, 200_000, ["--instance.graph.step-s", "2"]),
     "val-c100": ("clusters", 100, 4, 210_000, ["--instance.satellite.slew-model", "bang_coast_bang"]),
@@ -128,8 +138,8 @@ def cmd_data(a) -> None:
     if a.scale:
         build(base, SCALE, None)
         return
-    if a.more or a.dense:
-        name, sets = ("train2", TRAIN2) if a.more else ("train3", TRAIN3)
+    if a.more or a.dense or a.large:
+        name, sets = ("train2", TRAIN2) if a.more else ("train3", TRAIN3) if a.dense else ("train4", TRAIN4)
         build(base, sets, name)
         sh([PY, "jobs/build_demos.py", "--data", str(base / name), "--modes", *a.modes, "--action-sets", "true",
             "--beam", "1", "--time-limit", "30", "--sets-max-acquisitions", "150"])
@@ -278,6 +288,7 @@ def main() -> None:
     p.add_argument("--tests", nargs="+", default=list(TEST))
     p.add_argument("--more", action="store_true", help="data: build the second training mix (train2/) instead")
     p.add_argument("--dense", action="store_true", help="data: build the third mix, dense targets (train3/) instead")
+    p.add_argument("--large", action="store_true", help="data: build the fourth mix, dense at 200-300 (train4/)")
     p.add_argument("--scale", action="store_true", help="data: build the test sets at 300 and 1000 acquisitions")
     a = p.parse_args()
     {"data": cmd_data, "run": cmd_run, "report": cmd_report}[a.stage](a)

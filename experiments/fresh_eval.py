@@ -4,7 +4,7 @@
         --seed 970000 --reference exact --checkpoints pretrained:utility pretrained:utility-fast
 
 Instance k of each family uses seed + k (the generator's defaults, or --step, --slew and --set), so a draw is
-reproducible and disjoint from the training seeds (100000-559999) when the seed is chosen so.
+reproducible and disjoint from the training seeds (100000-639999) when the seed is chosen so.
 Prints, per family and policy: the mean of per-instance ratios to the reference, the worst ratio, how many
 instances end below Greedy, and the decision time; with ``--out``, one CSV row per instance and solver.
 Greedy decoding (the shipped models' figures are of the argmax policy).
@@ -40,10 +40,19 @@ def main() -> None:
                    help="other generator settings, e.g. orbit.altitude_km=550 satellite.roll_max_deg=40")
     p.add_argument("--guard", type=float, nargs="+", default=[PolicyConfig().guard],
                    help="rollout guard(s) of the decisions (eosp.solvers.base.LearnedConfig.guard); 1: off")
+    p.add_argument("--incumbent", nargs="+", choices=["on", "off"], default=["on"],
+                   help="keep the best Greedy-completed state (eosp.solvers.policy.PolicyConfig.incumbent); both: "
+                        "`on off`")
     p.add_argument("--out", default="", help="CSV of every (instance, solver) result")
     a = p.parse_args()
     agents = {ck: resolve_agent("policy", ck, None, a.mode) for ck in a.checkpoints}
-    names = [ck if len(a.guard) == 1 else f"{ck} guard {g:g}" for ck in a.checkpoints for g in a.guard]
+    variants = [(g, inc == "on") for g in a.guard for inc in a.incumbent]
+
+    def label(ck: str, guard: float, incumbent: bool) -> str:
+        return ck + ("" if len(a.guard) == 1 else f" guard {guard:g}") + (
+            "" if len(a.incumbent) == 1 else " incumbent" if incumbent else " raw")
+
+    names = [label(ck, g, inc) for ck in a.checkpoints for g, inc in variants]
     overrides: dict = {}
     given = [*([f"graph.step_s={a.step}"] if a.step else []), *([f"satellite.slew_model={a.slew}"] if a.slew else [])]
     for item in [*given, *a.set]:
@@ -65,10 +74,11 @@ def main() -> None:
                 ref = ramp.solve(inst, ramp.RampConfig(mode=a.mode)).value
             row = {"family": family, "seed": a.seed + k, "greedy": g, a.reference: ref}
             for ck, agent in agents.items():
-                for guard in a.guard:
-                    name = ck if len(a.guard) == 1 else f"{ck} guard {guard:g}"
+                for guard, incumbent in variants:
+                    name = label(ck, guard, incumbent)
                     t0 = time.perf_counter()
-                    row[name] = policy.solve(inst, policy.PolicyConfig(mode=a.mode, guard=guard), agent=agent).value
+                    cfg = policy.PolicyConfig(mode=a.mode, guard=guard, incumbent=incumbent)
+                    row[name] = policy.solve(inst, cfg, agent=agent).value
                     row[name + " s"] = time.perf_counter() - t0
             rows.append(row)
             print(f"[fresh_eval] {family} {a.seed + k}: greedy {g / ref:.4f} "

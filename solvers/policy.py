@@ -75,14 +75,28 @@ def make_env_for(prepared: PreparedInstance, env_cfg: EnvConfig) -> EOSPEnv:
 
 
 def rollout(agent: EOSPAgent, prepared: PreparedInstance, env_cfg: EnvConfig, sample: bool = False,
-            seed: int = 0, guard: float = 1.0) -> tuple[np.ndarray, float]:
+            seed: int = 0, guard: float = 1.0, incumbent: bool = False) -> tuple[np.ndarray, float]:
     """Play one episode with the agent (`guard`: see :func:`guarded`); returns the scheduled nodes and the
-    schedule's utility."""
+    schedule's utility.
+
+    `incumbent` (models with plan features, EnvConfig.plan): every state's partial schedule completed by
+    Greedy (the plan the features show, :meth:`EOSPEnv.completion`) is a complete feasible schedule; the best
+    of them, in the plan's worth, is returned instead of the episode's when strictly better.  The state at
+    reset completes into Greedy's own schedule (the better of two orders with ``greedy2``), so the result is
+    never below Greedy's, and never below the episode's."""
     env = make_env_for(prepared, env_cfg)
     obs, _ = env.reset(seed=seed)
     rng = np.random.default_rng(seed)
+    keep = incumbent and bool(env_cfg.plan)
+    best = None  # (worth, prefix nodes, completion nodes, utility) of the best completed state; ties: the later
     done = not obs["action_mask"].any()
-    while not done:
+    while True:
+        if keep:
+            nodes, value, worth = env.completion()
+            if best is None or worth >= best[0] * (1.0 - 1e-12):
+                best = (worth, env.path(), nodes, value)
+        if done:
+            break
         logits, _ = evaluate(agent, obs, guard)
         if sample:
             allowed = np.flatnonzero(obs["action_mask"])
@@ -92,6 +106,8 @@ def rollout(agent: EOSPAgent, prepared: PreparedInstance, env_cfg: EnvConfig, sa
         else:
             a = int(np.argmax(logits))
         obs, _, done, _, info = env.step(a)
+    if keep:  # the last state's completion is the episode's own schedule (completed when Greedy still fits one)
+        return np.concatenate([best[1], best[2]]), best[3]
     return env.path(), env.state.value
 
 
@@ -119,6 +135,11 @@ class PolicyConfig(LearnedConfig):
 
     sample: bool = False
     """Sample actions (seeded by --seed) instead of taking the argmax."""
+
+    incumbent: bool = True
+    """Keep the best complete schedule seen (models with plan features): every state's partial schedule
+    completed by Greedy is one, the first of them Greedy's own; the best is returned when it beats the episode's.
+    Never below Greedy nor below the policy's own episode, at the cost of one Greedy completion a step."""
 
     NAME = "policy"
     ONE_SHOT = True
@@ -191,5 +212,7 @@ def solve(inst: Instance, cfg: PolicyConfig | None = None, *, agent: tuple | Non
     cfg.validate()
     agent, env_cfg, _ = resolve_agent("policy", cfg.checkpoint, agent, cfg.mode)
     prepared = prepare_instance(inst, env_cfg.prune)
-    nodes, _ = rollout(agent, prepared, env_cfg, sample=cfg.sample, seed=cfg.seed, guard=cfg.guard)
-    return Solution.from_path(inst, nodes, cfg.mode, {"solver": "policy", "sample": cfg.sample})
+    nodes, _ = rollout(agent, prepared, env_cfg, sample=cfg.sample, seed=cfg.seed, guard=cfg.guard,
+                       incumbent=cfg.incumbent)
+    return Solution.from_path(inst, nodes, cfg.mode, {"solver": "policy", "sample": cfg.sample,
+                                                      "incumbent": cfg.incumbent})

@@ -380,3 +380,34 @@ def test_the_rollout_guard_never_takes_an_action_greedys_rollout_values_far_belo
     assert list(out[0] < -1e8) == [False, True, False, True]
     assert not (guarded(np.zeros((1, 4)), x, 1.0) < -1e8).any()
     assert not (guarded(np.zeros((1, 4)), np.zeros_like(x), 0.1) < -1e8).any()
+
+
+@pytest.mark.parametrize("mode,reward", [("utility", "normalized"), ("unitary", "unitary")])
+def test_the_incumbent_is_never_below_greedy_nor_the_episode_and_is_feasible(mode, reward):
+    """With `incumbent` (the policy solver's default), the schedule returned is the best of the states' Greedy
+    completions: an untrained agent that ends below Greedy comes back at least at Greedy's value and at its own
+    episode's, feasible for the independent checker, its value the sum of its acquisitions' utilities."""
+    import torch
+
+    from eosp.instances.schedule import check, from_internal_nodes
+    from eosp.models.agent import EOSPAgent
+    from eosp.solvers import policy
+    from eosp.solvers.base import run_solver
+
+    torch.manual_seed(0)
+    agent = (EOSPAgent(ModelConfig(hidden_dim=8, n_layers=1, heads=1)).eval(),
+             EnvConfig(reward=reward, plan="greedy2"), {})
+    below = 0
+    for family, n, seed in (("conflict", 40, 5), ("clusters", 40, 3), ("uniform", 30, 7)):
+        inst = generated(family, n, seed, step=1.0)
+        greedy = run_solver("greedy", inst, mode=mode).value
+        raw = policy.solve(inst, policy.PolicyConfig(mode=mode, guard=1.0, incumbent=False), agent=agent)
+        kept = policy.solve(inst, policy.PolicyConfig(mode=mode, guard=1.0), agent=agent)
+        below += raw.value < greedy * (1 - 1e-9)
+        assert kept.value >= greedy * (1 - 1e-12) and kept.value >= raw.value * (1 - 1e-12)
+        verdict = check(inst, from_internal_nodes(inst, kept.nodes))
+        assert verdict.feasible
+        nodes, value = policy.rollout(agent[0], prepare_instance(inst), agent[1], incumbent=True)
+        np.testing.assert_array_equal(nodes, kept.nodes)
+        assert value == pytest.approx(verdict.value, rel=1e-12)
+    assert below >= 2  # the untrained agent does end below Greedy: the incumbent had work to do

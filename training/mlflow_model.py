@@ -35,7 +35,7 @@ class EOSPPolicyModel(mlflow.pyfunc.PythonModel):
         for d in model_input["instance_dir"]:
             inst = read_instance(d)
             nodes, value = rollout(self.agent, prepare_instance(inst, self.env_cfg.prune), self.env_cfg,
-                                   guard=PolicyConfig().guard)
+                                   guard=PolicyConfig().guard, incumbent=PolicyConfig().incumbent)
             rows.append({"instance_dir": d, "n_acquisitions": len(nodes), "value": value,
                          "nodes": inst.node_ids[nodes].tolist()})
         return pd.DataFrame(rows)
