@@ -43,6 +43,8 @@ def main() -> None:
     p.add_argument("--incumbent", nargs="+", choices=["on", "off"], default=["on"],
                    help="keep the best Greedy-completed state (eosp.solvers.policy.PolicyConfig.incumbent); both: "
                         "`on off`")
+    p.add_argument("--known", default="", help="CSV of an earlier run of the same draw (--out): its greedy and "
+                   "reference columns are taken instead of solving")
     p.add_argument("--out", default="", help="CSV of every (instance, solver) result")
     a = p.parse_args()
     agents = {ck: resolve_agent("policy", ck, None, a.mode) for ck in a.checkpoints}
@@ -63,15 +65,25 @@ def main() -> None:
         number = value.lstrip("-")
         parsed = int(value) if number.isdigit() else float(value) if number.replace(".", "", 1).isdigit() else value
         overrides.setdefault(section, {})[name] = parsed
+    known = {}
+    if a.known:
+        with open(a.known, newline="") as f:
+            for r in csv.DictReader(f):
+                if a.reference not in r:
+                    p.error(f"--known {a.known}: no {a.reference!r} column")
+                known[(r["family"], int(r["seed"]))] = (float(r["greedy"]), float(r[a.reference]))
     rows = []
     for family in a.families:
         for k in range(a.count):
             inst = generate(family_config(family, a.n, a.seed + k, **overrides))
-            g = greedy.solve(inst, greedy.GreedyConfig(mode=a.mode)).value
-            if a.reference == "exact":
-                ref = exact.solve(inst, exact.ExactConfig(mode=a.mode, time_limit=a.time_limit)).value
+            if known:
+                if (family, a.seed + k) not in known:
+                    p.error(f"--known {a.known}: no row for {family} {a.seed + k}")
+                g, ref = known[(family, a.seed + k)]
             else:
-                ref = ramp.solve(inst, ramp.RampConfig(mode=a.mode)).value
+                g = greedy.solve(inst, greedy.GreedyConfig(mode=a.mode)).value
+                ref = (exact.solve(inst, exact.ExactConfig(mode=a.mode, time_limit=a.time_limit)).value
+                       if a.reference == "exact" else ramp.solve(inst, ramp.RampConfig(mode=a.mode)).value)
             row = {"family": family, "seed": a.seed + k, "greedy": g, a.reference: ref}
             for ck, agent in agents.items():
                 for guard, incumbent in variants:
