@@ -121,8 +121,8 @@ class EOSPEnv(gym.Env):
         self.cfg = cfg
         # the plan features' kernel code (envs/observation.PLAN_ORDERS): Greedy's order for this reward
         order = "start+deadline" if cfg.reward == "unitary" else "utility+class"
-        order = order if cfg.plan == "greedy2" else order.split("+")[0]
-        self._plan = 0 if not cfg.plan else PLAN_ORDERS.index(order)
+        self._plan = 0 if not cfg.plan else PLAN_ORDERS.index(order if cfg.plan == "greedy2" else order.split("+")[0])
+        self._completion_orders = self._plan or PLAN_ORDERS.index(order)  # without plan features: both orders
         self.worker_index, self.vector_index = worker_index, vector_index
         if source is None:
             if cfg.shards:
@@ -212,18 +212,19 @@ class EOSPEnv(gym.Env):
         self.state = Snapshot(snap.prepared, snap.ep.copy(), snap.value)
         self._publish_mask()
 
-    def completion(self) -> tuple[np.ndarray, float, float]:
-        """Greedy's completion of the current partial schedule, the plan the plan features show (EnvConfig.plan
-        set): the nodes that follow :meth:`path` (a path of the instance's unpruned graph), the utility of the
-        whole schedule (path + completion) and its worth in the plan's units (utility; unitary reward: the
-        count).  Every state's completion is a complete feasible schedule: the decoder keeps the best one seen
-        (eosp.solvers.policy.rollout's `incumbent`)."""
-        if not self._plan:
-            raise ValueError("completion() needs the plan features (EnvConfig.plan)")
+    def completion(self) -> tuple[np.ndarray, float, float] | None:
+        """Greedy's completion of the current partial schedule: the plan the plan features show (EnvConfig.plan's
+        order(s); without plan features, the better of the reward's two orders, as ``greedy2``): the nodes that
+        follow :meth:`path` (a path of the instance's unpruned graph), the utility of the whole schedule (path +
+        completion) and its worth in the plan's units (utility; unitary reward: the count).  None when the
+        instance's unpruned graph is not loaded.  Every state's completion is a complete feasible schedule: the
+        decoder keeps the best one seen (eosp.solvers.policy.rollout's `incumbent`)."""
         s = self.state
-        acqs, nodes, worth = plan_completion(s.prepared.eg, s.ep, s.prepared.cand, self._plan)
+        if s.prepared.cand.plan_indptr.shape[0] != s.prepared.eg.node_time.shape[0] + 1:
+            return None
+        acqs, nodes, worth = plan_completion(s.prepared.eg, s.ep, s.prepared.cand, self._completion_orders)
         value = s.value + float(s.prepared.inst.acqs.utility[acqs].sum())
-        unitary = PLAN_ORDERS[self._plan].startswith("start")
+        unitary = PLAN_ORDERS[self._completion_orders].startswith("start")
         return nodes.copy(), value, (int(s.ep.n_scheduled[0]) + worth) if unitary else value
 
     def action_mask(self) -> np.ndarray:

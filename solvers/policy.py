@@ -79,15 +79,15 @@ def rollout(agent: EOSPAgent, prepared: PreparedInstance, env_cfg: EnvConfig, sa
     """Play one episode with the agent (`guard`: see :func:`guarded`); returns the scheduled nodes and the
     schedule's utility.
 
-    `incumbent` (models with plan features, EnvConfig.plan): every state's partial schedule completed by
-    Greedy (the plan the features show, :meth:`EOSPEnv.completion`) is a complete feasible schedule; the best
-    of them, in the plan's worth, is returned instead of the episode's when strictly better.  The state at
-    reset completes into Greedy's own schedule (the better of two orders with ``greedy2``), so the result is
-    never below Greedy's, and never below the episode's."""
+    `incumbent` (instances with their unpruned graph): every state's partial schedule completed by Greedy (the
+    plan the plan features show, or Greedy's two orders for models without them, :meth:`EOSPEnv.completion`)
+    is a complete feasible schedule; the best of them, in the plan's worth, is returned, the episode's own
+    when tied.  The state at reset completes into Greedy's own schedule (or the better of two orders), so the
+    result is never below Greedy's, and never below the episode's."""
     env = make_env_for(prepared, env_cfg)
     obs, _ = env.reset(seed=seed)
     rng = np.random.default_rng(seed)
-    keep = incumbent and bool(env_cfg.plan)
+    keep = incumbent and env.completion() is not None
     best = None  # (worth, prefix nodes, completion nodes, utility) of the best completed state; ties: the later
     done = not obs["action_mask"].any()
     while True:
@@ -137,9 +137,10 @@ class PolicyConfig(LearnedConfig):
     """Sample actions (seeded by --seed) instead of taking the argmax."""
 
     incumbent: bool = True
-    """Keep the best complete schedule seen (models with plan features): every state's partial schedule
-    completed by Greedy is one, the first of them Greedy's own; the best is returned when it beats the episode's.
-    Never below Greedy nor below the policy's own episode, at the cost of one Greedy completion a step."""
+    """Keep the best complete schedule seen: every state's partial schedule completed by Greedy is one, the first
+    of them Greedy's own; the best is returned when it beats the episode's.  Never below Greedy nor below the
+    policy's own episode, at the cost of one Greedy completion a step (two orders for models without plan
+    features).  Needs the instance's unpruned graph (loaded by every generator and interchange import)."""
 
     NAME = "policy"
     ONE_SHOT = True

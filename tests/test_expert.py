@@ -382,11 +382,13 @@ def test_the_rollout_guard_never_takes_an_action_greedys_rollout_values_far_belo
     assert not (guarded(np.zeros((1, 4)), np.zeros_like(x), 0.1) < -1e8).any()
 
 
+@pytest.mark.parametrize("plan", ["greedy2", ""])
 @pytest.mark.parametrize("mode,reward", [("utility", "normalized"), ("unitary", "unitary")])
-def test_the_incumbent_is_never_below_greedy_nor_the_episode_and_is_feasible(mode, reward):
+def test_the_incumbent_is_never_below_greedy_nor_the_episode_and_is_feasible(mode, reward, plan):
     """With `incumbent` (the policy solver's default), the schedule returned is the best of the states' Greedy
-    completions: an untrained agent that ends below Greedy comes back at least at Greedy's value and at its own
-    episode's, feasible for the independent checker, its value the sum of its acquisitions' utilities."""
+    completions: an untrained agent (with or without plan features) that ends below Greedy comes back at least
+    at Greedy's value and at its own episode's, feasible for the independent checker, its value the sum of its
+    acquisitions' utilities."""
     import torch
 
     from eosp.instances.schedule import check, from_internal_nodes
@@ -396,7 +398,7 @@ def test_the_incumbent_is_never_below_greedy_nor_the_episode_and_is_feasible(mod
 
     torch.manual_seed(0)
     agent = (EOSPAgent(ModelConfig(hidden_dim=8, n_layers=1, heads=1)).eval(),
-             EnvConfig(reward=reward, plan="greedy2"), {})
+             EnvConfig(reward=reward, plan=plan), {})
     below = 0
     for family, n, seed in (("conflict", 40, 5), ("clusters", 40, 3), ("uniform", 30, 7)):
         inst = generated(family, n, seed, step=1.0)
