@@ -87,14 +87,13 @@ def rollout(agent: EOSPAgent, prepared: PreparedInstance, env_cfg: EnvConfig, sa
     env = make_env_for(prepared, env_cfg)
     obs, _ = env.reset(seed=seed)
     rng = np.random.default_rng(seed)
-    keep = incumbent and env.completion() is not None
     best = None  # (worth, prefix nodes, completion nodes, utility) of the best completed state; ties: the later
     done = not obs["action_mask"].any()
     while True:
-        if keep:
-            nodes, value, worth = env.completion()
-            if best is None or worth >= best[0] * (1.0 - 1e-12):
-                best = (worth, env.path(), nodes, value)
+        completed = env.completion() if incumbent else None  # None: no unpruned graph, and so at every state
+        if completed is not None and (best is None or completed[2] >= best[0] * (1.0 - 1e-12)):
+            nodes, value, worth = completed
+            best = (worth, env.path(), nodes, value)
         if done:
             break
         logits, _ = evaluate(agent, obs, guard)
@@ -106,7 +105,7 @@ def rollout(agent: EOSPAgent, prepared: PreparedInstance, env_cfg: EnvConfig, sa
         else:
             a = int(np.argmax(logits))
         obs, _, done, _, info = env.step(a)
-    if keep:  # the last state's completion is the episode's own schedule (completed when Greedy still fits one)
+    if best is not None:  # the last state's completion is the episode's own schedule (completed if Greedy fits more)
         return np.concatenate([best[1], best[2]]), best[3]
     return env.path(), env.state.value
 

@@ -1,7 +1,9 @@
 """Best of K policy samples, batched: ``eosp solve INST --solver sample --samples 32 --time-limit 5``.
 
 One network call per step for all K episodes (:func:`eosp.search.rollouts.sample`);
-the first episode is the greedy one, so the result is never below ``--solver policy``.
+the first episode is the greedy one, so the result is never below the policy's own greedy episode
+(``--solver policy --incumbent false``; the policy solver's incumbent, a Greedy completion of one of its
+states, can be above it).
 With a time limit, rounds of K episodes go on until it is reached (anytime).
 """
 

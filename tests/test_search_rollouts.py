@@ -23,7 +23,7 @@ def agent():
 @pytest.mark.parametrize("family,n,seed", [("uniform", 30, 1), ("conflict", 30, 2)])
 def test_sample_and_beam_never_below_the_policy_and_feasible(agent, family, n, seed):
     inst = generated(family, n, seed)
-    policy = run_solver("policy", inst, mode="unitary", agent=agent)
+    policy = run_solver("policy", inst, mode="unitary", agent=agent, incumbent=False)  # the greedy episode itself
     one = run_solver("sample", inst, mode="unitary", agent=agent, samples=1, polish=False)
     assert one.value == policy.value and list(one.nodes) == list(policy.nodes)  # the first episode is greedy
     polished = run_solver("sample", inst, mode="unitary", agent=agent, samples=1)
