@@ -404,12 +404,9 @@ def plan_features(g, ep, cand, plan, x):
         return
     unitary = plan == 2 or plan == 4
     alive_count, mask = ep.alive_count, ep.mask
-    skip = np.zeros(n, dtype=np.uint8)
-    for i in range(n):
-        if alive_count[i] == 0:
-            skip[i] = 1
+    skip = np.empty(n, dtype=np.uint8)  # the acquisitions each action's rollout leaves out, filled per action
     last = ep.last[0]
-    acqs, nodes, _ = _completion(g, cand, plan, last, skip)
+    acqs, nodes, _ = plan_completion(g, ep, cand, plan)
     t_now = g.node_finish[last]
     for k in range(acqs.shape[0]):
         a = acqs[k]
