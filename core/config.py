@@ -379,13 +379,17 @@ class EnvConfig:
     """Fill the six lookahead node features (what each allowed action would remove from the graph,
     envs/observation.py); false: they are zeros and the step skips that work (~0.08 ms a step at 100
     acquisitions, ~2 ms at 1000).  Recorded in checkpoints with the other env settings."""
-    plan: str = choice("", "", "greedy", "greedy2")
+    plan: str = choice("", "", "greedy", "greedy2", "label")
     """'greedy': fill the six plan node features: Greedy's completion of the current partial schedule (the
     operational greedy insertion from the last scheduled node, in Greedy's order for the reward: decreasing
     utility, window start for 'unitary') and, for each allowed action, the worth of Greedy's completion after
     it (envs/observation.py).  'greedy2': the better of two insertion orders each time (utility: also by class
     then window start; unitary: also by latest start), at up to twice the insertion work.  Needs the
-    instances' unpruned arcs.  Empty: zeros, no work.  Recorded in checkpoints with the other env settings."""
+    instances' unpruned arcs.  'label': the same six features from one backward label sweep per step over the
+    environment's graph (one label per node; envs/observation.label_togo) instead of Greedy: each allowed action's
+    value is the best chain found from the node it would start at, the plan the best of them; counts in
+    'unitary', utilities otherwise; no unpruned arcs needed.  Empty: zeros, no work.  Recorded in checkpoints
+    with the other env settings."""
     shards: tuple[str, ...] = ()
     """Shard files (or data set directories) the environment copies share out among themselves."""
     seed: int = 0

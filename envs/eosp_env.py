@@ -52,7 +52,8 @@ import gymnasium as gym
 import numpy as np
 
 from eosp.envs import core
-from eosp.envs.observation import (N_EDGE_FEATURES, N_NODE_FEATURES, PLAN_ORDERS, build_observation, plan_completion,
+from eosp.envs.observation import (LABEL_PLANS, N_EDGE_FEATURES, N_NODE_FEATURES, PLAN_ORDERS, UNITARY_PLANS,
+                                   build_observation, plan_completion,
                                    step_and_observe_fields)
 from eosp.envs.sources import FixedSource, PreparedInstance, ShardSource, expand_shards, owned_shards, prepare_instance
 from eosp.config import CLASS_UTILITIES, N_CLASSES, EnvConfig, from_dict
@@ -121,13 +122,19 @@ class EOSPEnv(gym.Env):
         self.cfg = cfg
         # the plan features' kernel code (envs/observation.PLAN_ORDERS): Greedy's order for this reward
         order = "start+deadline" if cfg.reward == "unitary" else "utility+class"
-        self._plan = 0 if not cfg.plan else PLAN_ORDERS.index(order if cfg.plan == "greedy2" else order.split("+")[0])
+        if cfg.plan == "label":
+            self._plan = PLAN_ORDERS.index("label:count" if cfg.reward == "unitary" else "label:utility")
+        else:
+            self._plan = 0 if not cfg.plan else PLAN_ORDERS.index(order if cfg.plan == "greedy2"
+                                                                  else order.split("+")[0])
         self._completion_orders = self._plan or PLAN_ORDERS.index(order)  # without plan features: both orders
+        self._needs_unpruned = self._plan not in LABEL_PLANS  # Greedy's plans and completions use its arcs
         self.worker_index, self.vector_index = worker_index, vector_index
         if source is None:
             if cfg.shards:
                 source = ShardSource(owned_shards(expand_shards(cfg.shards), worker_index, num_workers),
-                                     max_cached=cfg.max_cached_instances, prune=cfg.prune, unpruned=bool(cfg.plan))
+                                     max_cached=cfg.max_cached_instances, prune=cfg.prune,
+                                     unpruned=bool(cfg.plan) and self._needs_unpruned)
             else:
                 source = FixedSource(_embedded_default(cfg.seed), prune=cfg.prune)
         self.source = source
@@ -166,7 +173,8 @@ class EOSPEnv(gym.Env):
                 raise ValueError(f"instance has {prepared.inst.n_acq} acquisitions > max_acquisitions={self.n_max}")
         else:
             prepared = self.source.sample(self.np_random)
-        if self._plan and prepared.cand.plan_indptr.shape[0] != prepared.eg.node_time.shape[0] + 1:
+        if self._plan and self._needs_unpruned and \
+                prepared.cand.plan_indptr.shape[0] != prepared.eg.node_time.shape[0] + 1:
             prepared.inst.unpruned("the plan features (--env.plan greedy)")  # not loaded: a one-line InputError
             raise ValueError(f"{prepared.inst.name}: its unpruned graph does not have the environment graph's nodes")
         self.state = Snapshot(prepared=prepared, ep=core.Episode.start(prepared.eg), value=0.0)
@@ -220,11 +228,11 @@ class EOSPEnv(gym.Env):
         instance's unpruned graph is not loaded.  Every state's completion is a complete feasible schedule: the
         decoder keeps the best one seen (eosp.solvers.policy.rollout's `incumbent`)."""
         s = self.state
-        if s.prepared.cand.plan_indptr.shape[0] != s.prepared.eg.node_time.shape[0] + 1:
+        if self._needs_unpruned and s.prepared.cand.plan_indptr.shape[0] != s.prepared.eg.node_time.shape[0] + 1:
             return None
         acqs, nodes, worth = plan_completion(s.prepared.eg, s.ep, s.prepared.cand, self._completion_orders)
         value = s.value + float(s.prepared.inst.acqs.utility[acqs].sum())
-        unitary = PLAN_ORDERS[self._completion_orders].startswith("start")
+        unitary = self._completion_orders in UNITARY_PLANS
         return nodes.copy(), value, (int(s.ep.n_scheduled[0]) + worth) if unitary else value
 
     def action_mask(self) -> np.ndarray:

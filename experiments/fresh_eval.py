@@ -43,18 +43,22 @@ def main() -> None:
     p.add_argument("--incumbent", nargs="+", choices=["on", "off"], default=["on"],
                    help="keep the best Greedy-completed state (eosp.solvers.policy.PolicyConfig.incumbent); both: "
                         "`on off`")
+    p.add_argument("--polish", nargs="+", choices=["on", "off"], default=["on"],
+                   help="improve the decoded schedule by local moves (eosp.solvers.policy.PolicyConfig.polish); "
+                        "both: `on off`")
     p.add_argument("--known", default="", help="CSV of an earlier run of the same draw (--out): its greedy and "
                    "reference columns are taken instead of solving")
     p.add_argument("--out", default="", help="CSV of every (instance, solver) result")
     a = p.parse_args()
     agents = {ck: resolve_agent("policy", ck, None, a.mode) for ck in a.checkpoints}
-    variants = [(g, inc == "on") for g in a.guard for inc in a.incumbent]
+    variants = [(g, inc == "on", pol == "on") for g in a.guard for inc in a.incumbent for pol in a.polish]
 
-    def label(ck: str, guard: float, incumbent: bool) -> str:
+    def label(ck: str, guard: float, incumbent: bool, polish: bool) -> str:
         return ck + ("" if len(a.guard) == 1 else f" guard {guard:g}") + (
-            "" if len(a.incumbent) == 1 else " incumbent" if incumbent else " raw")
+            "" if len(a.incumbent) == 1 else " incumbent" if incumbent else " raw") + (
+            "" if len(a.polish) == 1 else " polish" if polish else "")
 
-    names = [label(ck, g, inc) for ck in a.checkpoints for g, inc in variants]
+    names = [label(ck, *v) for ck in a.checkpoints for v in variants]
     overrides: dict = {}
     given = [*([f"graph.step_s={a.step}"] if a.step else []), *([f"satellite.slew_model={a.slew}"] if a.slew else [])]
     for item in [*given, *a.set]:
@@ -86,10 +90,10 @@ def main() -> None:
                        if a.reference == "exact" else ramp.solve(inst, ramp.RampConfig(mode=a.mode)).value)
             row = {"family": family, "seed": a.seed + k, "greedy": g, a.reference: ref}
             for ck, agent in agents.items():
-                for guard, incumbent in variants:
-                    name = label(ck, guard, incumbent)
+                for guard, incumbent, polish in variants:
+                    name = label(ck, guard, incumbent, polish)
                     t0 = time.perf_counter()
-                    cfg = policy.PolicyConfig(mode=a.mode, guard=guard, incumbent=incumbent)
+                    cfg = policy.PolicyConfig(mode=a.mode, guard=guard, incumbent=incumbent, polish=polish)
                     row[name] = policy.solve(inst, cfg, agent=agent).value
                     row[name + " s"] = time.perf_counter() - t0
             rows.append(row)

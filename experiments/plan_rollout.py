@@ -9,7 +9,8 @@
   where something else fits) the allowed plan member that can start first: Greedy's schedule
   played in the environment.
 * ``rollout``: take an action of largest V(a) (Greedy's completion after it), ties to the
-  earliest start: the classic rollout of Greedy.
+  earliest start: the classic rollout of Greedy (``--plan label``: of the label sweep,
+  eosp.envs.observation.label_togo).
 
 Prints, per test set, the mean ratio to the recorded Greedy and exact values, the instances below
 Greedy, and the seconds per instance (the features' cost: no network is run).
@@ -57,7 +58,8 @@ def main() -> None:
     ap.add_argument("--tests", nargs="+", required=True, help="test set directories (shards with unpruned arcs)")
     ap.add_argument("--baselines", required=True, help="record of Greedy and exact values (experiments/records)")
     ap.add_argument("--policies", nargs="+", default=["follow", "rollout"], choices=("follow", "rollout"))
-    ap.add_argument("--plan", default="greedy", choices=("greedy", "greedy2"), help="the features' --env.plan")
+    ap.add_argument("--plan", default="greedy", choices=("greedy", "greedy2", "label"),
+                    help="the features' --env.plan")
     args = ap.parse_args()
     base = {r["instance"]: r for r in csv.DictReader(open(args.baselines))}
     print("| test | policy | instances | / Greedy | / exact | below Greedy | s / instance |")

@@ -416,6 +416,68 @@ def test_plan_features_without_the_unpruned_arcs_are_refused_in_one_line():
         make_env(inst, plan="greedy").reset(seed=0)
 
 
+@pytest.mark.parametrize("reward", ["normalized", "unitary"])
+def test_label_plan_values_each_action_by_a_chain_the_environment_can_play(reward):
+    """With --env.plan label (no unpruned arcs needed): at every state of a random walk, each allowed action's
+    value is the worth of the label sweep's chain from the node the step would start it at; that chain,
+    played after the partial schedule, is allowed action by action and feasible for the independent checker;
+    the loss, best and ratio columns compare the values; the plan shown is the best action's chain, and
+    EOSPEnv.completion() returns it."""
+    import copy
+
+    from eosp.envs.observation import PLAN, _label_plan
+    from eosp.graphs.discrete import arc_to_acq
+    from eosp.instances.schedule import Schedule
+
+    for family, n, seed in (("clusters", 40, 3), ("conflict", 30, 5), ("uniform", 40, 7)):
+        ref = generated(family, n, seed, step=1.0)  # with its unpruned arcs, for the checker
+        ref.pruned()
+        inst = copy.copy(ref)
+        inst.unpruned_graph = None  # the label sweep runs on the environment's own graph
+        w = np.ones(n) if reward == "unitary" else inst.acqs.utility
+        env = make_env(inst, reward=reward, plan="label")
+        obs, _ = env.reset(seed=0)
+        rng = np.random.default_rng(seed)
+        while obs["action_mask"].any():
+            s = env.state
+            eg = s.prepared.eg
+            togo, nxt, start = _label_plan(eg, s.ep, s.prepared.cand, env._plan)
+            last, value = int(s.ep.last[0]), s.value  # (the steps below play on s.ep; restore() replaces it)
+            allowed = np.flatnonzero(obs["action_mask"])
+            x = obs["x"]
+            v = {}
+            for a in allowed:
+                node = arc_to_acq(eg.indptr, eg.dst, eg.acq_ptr, last, int(a))
+                chain = [node]
+                while nxt[chain[-1]] >= 0:
+                    chain.append(int(nxt[chain[-1]]))
+                acqs = eg.node_acq[chain]
+                v[a] = w[acqs].sum()
+                assert togo[node] == pytest.approx(v[a], rel=1e-12) and acqs[0] == a
+                snap = env.snapshot()
+                for b in acqs:  # the environment plays the chain, node for node
+                    o, *_ = env.step(int(b))
+                assert list(env.path()[-len(chain):]) == chain
+                nodes = env.path()
+                sched = Schedule(acq=inst.node_acq[nodes].astype(np.int32), node=inst.node_ids[nodes].astype(np.int32),
+                                 start=inst.node_time[nodes].astype(np.float64))
+                assert check(ref, sched).feasible
+                env.restore(snap)
+            best = max(v.values())
+            for a in allowed:
+                loss = best - v[a]
+                expect = np.log10(1 + loss) / 8 if reward != "unitary" else loss / 10
+                assert x[a, PLAN + 3] == pytest.approx(expect, abs=1e-5)
+                assert x[a, PLAN + 4] == (1.0 if loss <= 1e-9 * best else 0.0)
+                assert x[a, PLAN + 5] == pytest.approx(v[a] / best, rel=1e-5)
+            nodes, total, worth = env.completion()
+            assert sorted(eg.node_acq[nodes]) == sorted(np.flatnonzero(x[:n, PLAN]))
+            assert x[eg.node_acq[nodes[0]], PLAN + 1] == 1 and v[eg.node_acq[nodes[0]]] == best
+            assert worth == pytest.approx(best + (len(env.path()) if reward == "unitary" else value), rel=1e-12)
+            assert total == pytest.approx(value + inst.acqs.utility[eg.node_acq[nodes]].sum(), rel=1e-12)
+            obs, *_ = env.step(int(rng.choice(allowed)))
+
+
 @pytest.mark.parametrize("plan", ["greedy", "greedy2"])
 @pytest.mark.parametrize("reward", ["normalized", "unitary"])
 def test_rollout_features_value_each_action_by_greedys_completion_after_it(reward, plan):

@@ -23,7 +23,8 @@ def agent():
 @pytest.mark.parametrize("family,n,seed", [("uniform", 30, 1), ("conflict", 30, 2)])
 def test_sample_and_beam_never_below_the_policy_and_feasible(agent, family, n, seed):
     inst = generated(family, n, seed)
-    policy = run_solver("policy", inst, mode="unitary", agent=agent, incumbent=False)  # the greedy episode itself
+    policy = run_solver("policy", inst, mode="unitary", agent=agent, incumbent=False,
+                        polish=False)  # the greedy episode itself
     one = run_solver("sample", inst, mode="unitary", agent=agent, samples=1, polish=False)
     assert one.value == policy.value and list(one.nodes) == list(policy.nodes)  # the first episode is greedy
     polished = run_solver("sample", inst, mode="unitary", agent=agent, samples=1)
@@ -74,7 +75,7 @@ def test_every_search_takes_a_lexicographic_model():
     lex = (EOSPAgent(ModelConfig(hidden_dim=8, n_layers=1, heads=1, n_values=7, value_scale=5.0)),
            EnvConfig(reward="lexicographic"), {})
     inst = generated("conflict", 30, 6)
-    policy = run_solver("policy", inst, mode="utility", agent=lex)
+    policy = run_solver("policy", inst, mode="utility", agent=lex, polish=False)
     for name, kw in (("mcts", {"budget": 8}), ("sample", {"samples": 4}), ("beam", {"beam_width": 2})):
         sol = run_solver(name, inst, mode="utility", agent=lex, **kw)
         assert check(inst, from_internal_nodes(inst, sol.nodes)).feasible
