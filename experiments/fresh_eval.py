@@ -7,7 +7,8 @@ Instance k of each family uses seed + k (the generator's defaults, or --step, --
 reproducible and disjoint from the training seeds (100000-639999) when the seed is chosen so.
 Prints, per family and policy: the mean of per-instance ratios to the reference, the worst ratio, how many
 instances end below Greedy, and the decision time; with ``--out``, one CSV row per instance and solver.
-Greedy decoding (the shipped models' figures are of the argmax policy).
+Greedy decoding (the shipped models' figures are of the argmax policy).  ``--rollouts label`` adds the rollout
+of the plan features alone (no network), what a model reading them starts from.
 """
 
 from __future__ import annotations
@@ -22,6 +23,24 @@ from eosp.config import family_config
 from eosp.instances.generator import generate
 from eosp.solvers import exact, greedy, policy, ramp
 from eosp.solvers.policy import PolicyConfig, resolve_agent
+
+
+def plan_rollout(inst, mode: str, plan: str) -> float:
+    """The objective value of the rollout of the plan features alone: at every step the first allowed action
+    of largest V(a) (column after_best)."""
+    from eosp.config import EnvConfig
+    from eosp.envs.observation import PLAN
+    from eosp.envs.sources import prepare_instance
+    from eosp.solvers.policy import make_env_for
+
+    env = make_env_for(prepare_instance(inst), EnvConfig(reward="unitary" if mode == "unitary" else "normalized",
+                                                         plan=plan))
+    obs, _ = env.reset(seed=0)
+    done = not obs["action_mask"].any()
+    while not done:
+        obs, _, done, _, _ = env.step(int(np.flatnonzero(obs["x"][:, PLAN + 4] == 1)[0]))
+    nodes = env.path()
+    return float(len(nodes)) if mode == "unitary" else float(inst.acqs.utility[inst.node_acq[nodes]].sum())
 
 
 def main() -> None:
@@ -46,6 +65,9 @@ def main() -> None:
     p.add_argument("--polish", nargs="+", choices=["on", "off"], default=["on"],
                    help="improve the decoded schedule by local moves (eosp.solvers.policy.PolicyConfig.polish); "
                         "both: `on off`")
+    p.add_argument("--rollouts", nargs="*", default=[], choices=["greedy", "greedy2", "label"],
+                   help="also the rollout of these plan features alone (the allowed action of largest V(a) at every "
+                        "step, no network): what the features know by themselves")
     p.add_argument("--known", default="", help="CSV of an earlier run of the same draw (--out): its greedy and "
                    "reference columns are taken instead of solving")
     p.add_argument("--out", default="", help="CSV of every (instance, solver) result")
@@ -58,7 +80,7 @@ def main() -> None:
             "" if len(a.incumbent) == 1 else " incumbent" if incumbent else " raw") + (
             "" if len(a.polish) == 1 else " polish" if polish else "")
 
-    names = [label(ck, *v) for ck in a.checkpoints for v in variants]
+    names = [label(ck, *v) for ck in a.checkpoints for v in variants] + [f"rollout:{r}" for r in a.rollouts]
     overrides: dict = {}
     given = [*([f"graph.step_s={a.step}"] if a.step else []), *([f"satellite.slew_model={a.slew}"] if a.slew else [])]
     for item in [*given, *a.set]:
@@ -96,6 +118,10 @@ def main() -> None:
                     cfg = policy.PolicyConfig(mode=a.mode, guard=guard, incumbent=incumbent, polish=polish)
                     row[name] = policy.solve(inst, cfg, agent=agent).value
                     row[name + " s"] = time.perf_counter() - t0
+            for plan in a.rollouts:
+                t0 = time.perf_counter()
+                row[f"rollout:{plan}"] = plan_rollout(inst, a.mode, plan)
+                row[f"rollout:{plan} s"] = time.perf_counter() - t0
             rows.append(row)
             print(f"[fresh_eval] {family} {a.seed + k}: greedy {g / ref:.4f} "
                   + " ".join(f"{name} {row[name] / ref:.4f}" for name in names), flush=True)
