@@ -222,10 +222,11 @@ class EOSPEnv(gym.Env):
 
     def completion(self) -> tuple[np.ndarray, float, float] | None:
         """Greedy's completion of the current partial schedule: the plan the plan features show (EnvConfig.plan's
-        order(s); without plan features, the better of the reward's two orders, as ``greedy2``): the nodes that
-        follow :meth:`path` (a path of the instance's unpruned graph), the utility of the whole schedule (path +
-        completion) and its worth in the plan's units (utility; unitary reward: the count).  None when the
-        instance's unpruned graph is not loaded.  Every state's completion is a complete feasible schedule: the
+        order(s); without plan features, the better of the reward's two orders, as ``greedy2``; with 'label', the
+        label sweep's chain, a path of the environment's graph): the nodes that follow :meth:`path` (a path of
+        the instance's unpruned graph), the utility of the whole schedule (path + completion) and its worth in the
+        plan's units (utility; unitary reward: the count).  None when Greedy needs the instance's unpruned graph
+        and it is not loaded.  Every state's completion is a complete feasible schedule: the
         decoder keeps the best one seen (eosp.solvers.policy.rollout's `incumbent`)."""
         s = self.state
         if self._needs_unpruned and s.prepared.cand.plan_indptr.shape[0] != s.prepared.eg.node_time.shape[0] + 1:

@@ -420,7 +420,7 @@ def test_the_incumbent_is_never_below_greedy_nor_the_episode_and_is_feasible(mod
 def test_the_polished_policy_is_feasible_and_never_worse(mode):
     """`polish` (the policy solver's default) improves the decoded schedule by local moves: with an untrained
     agent, never below the unpolished schedule, strictly above it on some instance, feasible for the independent
-    checker, its value the checker's."""
+    checker, its value the checker's; with the incumbent too, never below the polished episode."""
     import torch
 
     from eosp.instances.schedule import check, from_internal_nodes
@@ -436,6 +436,10 @@ def test_the_polished_policy_is_feasible_and_never_worse(mode):
         plain = policy.solve(inst, policy.PolicyConfig(mode=mode, incumbent=False, polish=False), agent=agent)
         polished = policy.solve(inst, policy.PolicyConfig(mode=mode, incumbent=False), agent=agent)
         assert polished.info["polish"] and polished.value >= plain.value * (1 - 1e-12)
+        # with the incumbent, its schedule and the episode are both polished: never below the episode polished
+        both = policy.solve(inst, policy.PolicyConfig(mode=mode), agent=agent)
+        assert both.value >= polished.value * (1 - 1e-12)
+        assert check(inst, from_internal_nodes(inst, both.nodes)).feasible
         gained += polished.value > plain.value * (1 + 1e-9)
         verdict = check(inst, from_internal_nodes(inst, polished.nodes))
         assert verdict.feasible

@@ -23,19 +23,19 @@ class EOSPPolicyModel(mlflow.pyfunc.PythonModel):
 
         torch.set_num_threads(1)
         # a logged checkpoint, or (model logged without one) the shipped pretrained model of model_config["mode"]
-        mode = (context.model_config or {}).get("mode", "utility")
+        self.mode = mode = (context.model_config or {}).get("mode", "utility")
         self.agent, self.env_cfg, self.meta = resolve_agent("policy", context.artifacts.get("agent", ""), None, mode)
 
     def predict(self, context, model_input: pd.DataFrame, params=None) -> pd.DataFrame:
-        from eosp.envs.sources import prepare_instance
         from eosp.instances.interchange import read_instance
-        from eosp.solvers.policy import PolicyConfig, rollout
+        from eosp.solvers.policy import PolicyConfig, solve
 
         rows = []
         for d in model_input["instance_dir"]:
             inst = read_instance(d)
-            nodes, value = rollout(self.agent, prepare_instance(inst, self.env_cfg.prune), self.env_cfg,
-                                   guard=PolicyConfig().guard, incumbent=PolicyConfig().incumbent)
+            # the policy solver's defaults (guard, incumbent, polish), as `eosp solve --solver policy`
+            nodes = solve(inst, PolicyConfig(mode=self.mode), agent=(self.agent, self.env_cfg, self.meta)).nodes
+            value = float(inst.acqs.utility[inst.node_acq[nodes]].sum())
             rows.append({"instance_dir": d, "n_acquisitions": len(nodes), "value": value,
                          "nodes": inst.node_ids[nodes].tolist()})
         return pd.DataFrame(rows)
