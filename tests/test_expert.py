@@ -205,7 +205,7 @@ def test_shipped_models_solve_without_a_checkpoint(tmp_path, mode):
 
 
 def test_the_fast_variant_and_the_old_name_are_one_flag_away_and_an_unknown_name_is_one_line(tmp_path, capsys):
-    """The utility model reads Greedy's plan; `--checkpoint pretrained:utility-fast` (no plan features) and the
+    """The utility model reads plan features; `--checkpoint pretrained:utility-fast` (no plan features) and the
     plan model's former name `pretrained:utility-plan` solve too (the plan model's schedule is at least Greedy's
     here); a name that is not shipped is refused in one line, nothing written."""
     from eosp.cli import main
@@ -215,7 +215,7 @@ def test_the_fast_variant_and_the_old_name_are_one_flag_away_and_an_unknown_name
     from eosp.solvers.base import run_solver
 
     _, env_cfg, _ = load_pretrained("utility")
-    assert env_cfg.plan in ("greedy", "greedy2") and env_cfg.reward == "normalized"
+    assert env_cfg.plan in ("greedy", "greedy2", "label") and env_cfg.reward == "normalized"
     assert load_pretrained("utility-fast")[1].plan == ""
     assert pretrained_dir("utility-plan") == pretrained_dir("utility")
     inst = generated("conflict", 30, 5)
