@@ -416,6 +416,21 @@ def test_plan_features_without_the_unpruned_arcs_are_refused_in_one_line():
         make_env(inst, plan="greedy").reset(seed=0)
 
 
+def assert_rollout_columns(x, v: dict, reward: str) -> float:
+    """The loss, best and ratio plan columns of x for the allowed actions' values `v` (action -> V(a));
+    returns the best value."""
+    from eosp.envs.observation import PLAN
+
+    best = max(v.values())
+    for a, va in v.items():
+        loss = best - va
+        expect = np.log10(1 + loss) / 8 if reward != "unitary" else loss / 10
+        assert x[a, PLAN + 3] == pytest.approx(expect, abs=1e-5)
+        assert x[a, PLAN + 4] == (1.0 if loss <= 1e-9 * best else 0.0)
+        assert x[a, PLAN + 5] == pytest.approx(va / best, rel=1e-5)
+    return best
+
+
 @pytest.mark.parametrize("reward", ["normalized", "unitary"])
 def test_label_plan_values_each_action_by_a_chain_the_environment_can_play(reward):
     """With --env.plan label (no unpruned arcs needed): at every state of a random walk, each allowed action's
@@ -463,13 +478,7 @@ def test_label_plan_values_each_action_by_a_chain_the_environment_can_play(rewar
                                  start=inst.node_time[nodes].astype(np.float64))
                 assert check(ref, sched).feasible
                 env.restore(snap)
-            best = max(v.values())
-            for a in allowed:
-                loss = best - v[a]
-                expect = np.log10(1 + loss) / 8 if reward != "unitary" else loss / 10
-                assert x[a, PLAN + 3] == pytest.approx(expect, abs=1e-5)
-                assert x[a, PLAN + 4] == (1.0 if loss <= 1e-9 * best else 0.0)
-                assert x[a, PLAN + 5] == pytest.approx(v[a] / best, rel=1e-5)
+            best = assert_rollout_columns(x, v, reward)
             nodes, total, worth = env.completion()
             assert sorted(eg.node_acq[nodes]) == sorted(np.flatnonzero(x[:n, PLAN]))
             assert x[eg.node_acq[nodes[0]], PLAN + 1] == 1 and v[eg.node_acq[nodes[0]]] == best
@@ -499,13 +508,7 @@ def test_rollout_features_value_each_action_by_greedys_completion_after_it(rewar
                 after, *_ = env.step(int(a))
                 v[a] = w[a] + w[after["x"][:n, PLAN] > 0].sum()
                 env.restore(snap)
-            best = max(v.values())
             x = obs["x"]
-            for a in allowed:
-                loss = best - v[a]
-                expect = np.log10(1 + loss) / 8 if reward != "unitary" else loss / 10
-                assert x[a, PLAN + 3] == pytest.approx(expect, abs=1e-5)
-                assert x[a, PLAN + 4] == (1.0 if loss <= 1e-9 * best else 0.0)
-                assert x[a, PLAN + 5] == pytest.approx(v[a] / best, rel=1e-5)
+            assert_rollout_columns(x, v, reward)
             assert np.all(x[np.setdiff1d(np.arange(n), allowed), PLAN + 3:] == 0)
             obs, *_ = env.step(int(rng.choice(allowed)))
