@@ -145,6 +145,10 @@ class EOSPEnv(gym.Env):
         if cfg.max_out_degree < 1:
             raise ValueError("max_out_degree must be at least 1")
         self.n_max = n_max
+        # the plan the last observation showed (plan_features' plan_out: length, then nodes) and the episode state
+        # it belongs to: completion() reads it instead of computing the plan again (a restore() makes it stale)
+        self._plan_out = np.full(n_max + 1, -1, dtype=np.int32)
+        self._plan_of = None
         # 'full' keeps every surviving arc of the continuous graph: room for all of them by default
         self.e_max = cfg.max_edges or (n_max * max(n_max - 1, 1) if cfg.obs_edges == "full"
                                        else n_max * (cfg.max_out_degree + 4))
@@ -183,7 +187,8 @@ class EOSPEnv(gym.Env):
         bufs = self._buffers()
         m = build_observation(prepared.eg, self.state.ep, prepared.cand, self.cfg.max_out_degree,
                               self.cfg.last_edges_cap, self.cfg.obs_edges == "full", *bufs, self.cfg.obs_horizon_s,
-                              self.cfg.lookahead, self._plan)
+                              self.cfg.lookahead, self._plan, self._plan_out)
+        self._plan_of = self.state.ep
         return self._observation(bufs, m), {"instance": prepared.inst.name, "n_acquisitions": prepared.inst.n_acq}
 
     def step(self, action):
@@ -200,8 +205,9 @@ class EOSPEnv(gym.Env):
         cfg = self.cfg
         w, m = step_and_observe_fields(tuple(eg), tuple(ep), tuple(s.prepared.cand), a, cfg.max_out_degree,
                                        cfg.last_edges_cap, cfg.obs_edges == "full", *bufs, cfg.obs_horizon_s,
-                                       cfg.lookahead, self._plan)
+                                       cfg.lookahead, self._plan, self._plan_out)
         assert w >= 0
+        self._plan_of = ep
         u = float(s.prepared.inst.acqs.utility[a])
         s.value += u
         self._publish_mask()
@@ -231,9 +237,15 @@ class EOSPEnv(gym.Env):
         s = self.state
         if self._needs_unpruned and s.prepared.cand.plan_indptr.shape[0] != s.prepared.eg.node_time.shape[0] + 1:
             return None
-        acqs, nodes, worth = plan_completion(s.prepared.eg, s.ep, s.prepared.cand, self._completion_orders)
-        value = s.value + float(s.prepared.inst.acqs.utility[acqs].sum())
         unitary = self._completion_orders in UNITARY_PLANS
+        m = int(self._plan_out[0])
+        if self._plan_of is s.ep and m >= 0:  # the plan the current observation shows (plan features on)
+            nodes = self._plan_out[1:1 + m]
+            acqs = s.prepared.eg.node_acq[nodes]
+            worth = float(m) if unitary else float(s.prepared.cand.utility[acqs].sum())
+        else:
+            acqs, nodes, worth = plan_completion(s.prepared.eg, s.ep, s.prepared.cand, self._completion_orders)
+        value = s.value + float(s.prepared.inst.acqs.utility[acqs].sum())
         return nodes.copy(), value, (int(s.ep.n_scheduled[0]) + worth) if unitary else value
 
     def action_mask(self) -> np.ndarray:

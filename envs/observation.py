@@ -129,14 +129,15 @@ def _clip(x):
 
 @numba.njit(cache=True)
 def build_observation(g, ep, cand, k_out, k_last_cap, full, x, edge_index, edge_attr, horizon=0.0, look=False,
-                      plan=0):
+                      plan=0, plan_out=None):
     """Fill x [N_max, F], edge_index [2, E_max], edge_attr [E_max, 2]; returns the number of edges.
 
     `g`: eosp.envs.core.EnvGraph, `ep`: eosp.envs.core.Episode (with first_alive advanced),
     `cand`: :class:`Candidates`.  `horizon` > 0 (seconds): acquisitions that cannot be chosen now and
     whose earliest start is more than `horizon` after the end of the last scheduled one are left out
     of the graph (marked removed, no edge): the network's cost follows the near future only.  `look`:
-    fill the lookahead features; `plan` (:data:`PLAN_ORDERS` code): fill the plan features.
+    fill the lookahead features; `plan` (:data:`PLAN_ORDERS` code): fill the plan features, and `plan_out`
+    (int32 [n + 1], optional) with the plan's nodes (see :func:`plan_features`).
     """
     node_acq, node_time, node_finish, indptr, dst, acq_ptr = g.node_acq, g.node_time, g.node_finish, g.indptr, \
         g.dst, g.acq_ptr
@@ -175,7 +176,7 @@ def build_observation(g, ep, cand, k_out, k_last_cap, full, x, edge_index, edge_
         for i in range(n):
             for f in range(N_LOOKAHEAD):
                 x[i, LOSES + f] = 0.0
-    plan_features(g, ep, cand, plan, x)
+    plan_features(g, ep, cand, plan, x, plan_out)
     beyond = np.zeros(n, dtype=np.bool_)
     if horizon > 0.0:
         for i in range(n):
@@ -453,14 +454,16 @@ def plan_completion(g, ep, cand, plan):
 
 
 @numba.njit(cache=True)
-def plan_features(g, ep, cand, plan, x):
+def plan_features(g, ep, cand, plan, x, plan_out=None):
     """Fill the :data:`N_PLAN` columns from :data:`PLAN` of x with Greedy's completion of the current partial
     schedule, and of the state after each allowed action: the operational greedy insertion
     (eosp.graphs.insertion) run over the acquisitions still in the graph, in Greedy's order (`plan` 1:
     decreasing utility, 2: window start, every acquisition worth 1; 0: zeros, no work).  Codes 5 and 6
     (``--env.plan label``): the same columns from one backward label sweep (:func:`label_togo`, counting or
     summing utilities) instead: V(a) is the sweep's value of the node the step would start a at, and the plan
-    the chain of the best action (a path of the environment's graph, starting with that action).
+    the chain of the best action (a path of the environment's graph, starting with that action).  With
+    `plan_out` (int32 [n + 1]): plan_out[0] = the plan's length (-1 with `plan` 0), then its nodes, so that a
+    decoder keeping the best completed state reads the plan instead of computing it again.
 
     Columns, from the last scheduled node: the acquisition is in the plan; it is the plan's first; the start
     the plan gives it, relative to the end of the last scheduled acquisition (units of :data:`TIME_SCALE`; 0
@@ -488,6 +491,8 @@ def plan_features(g, ep, cand, plan, x):
     for i in range(n):
         for f in range(N_PLAN):
             x[i, PLAN + f] = 0.0
+    if plan_out is not None:
+        plan_out[0] = -1  # no plan (features off) until it is written below
     if plan == 0:
         return
     unitary = plan == 2 or plan == 4 or plan == 5
@@ -508,6 +513,10 @@ def plan_features(g, ep, cand, plan, x):
         x[a, PLAN + 2] = _clip((g.node_time[nodes[k]] - t_now) / TIME_SCALE)
     if acqs.shape[0] > 0:
         x[acqs[0], PLAN + 1] = 1.0
+    if plan_out is not None:  # the plan itself, for the policy solver's incumbent (EOSPEnv.completion)
+        plan_out[0] = nodes.shape[0]
+        for k in range(nodes.shape[0]):
+            plan_out[1 + k] = nodes[k]
     # Greedy's rollout after each allowed action, from the state the environment's step would reach (codes 5, 6:
     # the label sweep's value of the node the step would start it at)
     value = np.full(n, -1.0)
@@ -545,26 +554,27 @@ def plan_features(g, ep, cand, plan, x):
 
 @numba.njit(cache=True)
 def step_and_observe(g, ep, cand, action, k_out, k_last_cap, full, x, edge_index, edge_attr, horizon=0.0, look=False,
-                     plan=0):
+                     plan=0, plan_out=None):
     """eosp.envs.core.step, then :func:`build_observation` of the new state: one kernel call per environment
     step (each call unpacks the tuples again).  Returns (new node, number of edges); (-1, 0) and the state
     unchanged if `action` is not allowed."""
     w = step(g, ep, action)
     if w < 0:
         return w, 0
-    return w, build_observation(g, ep, cand, k_out, k_last_cap, full, x, edge_index, edge_attr, horizon, look, plan)
+    return w, build_observation(g, ep, cand, k_out, k_last_cap, full, x, edge_index, edge_attr, horizon, look, plan,
+                                plan_out)
 
 
 @numba.njit(cache=True)
 def step_and_observe_fields(g_fields, ep_fields, cand_fields, action, k_out, k_last_cap, full, x, edge_index,
-                            edge_attr, horizon=0.0, look=False, plan=0):
+                            edge_attr, horizon=0.0, look=False, plan=0, plan_out=None):
     """:func:`step_and_observe` called with ``tuple(g), tuple(ep), tuple(cand)``: the environment's hot path.
 
     Numba's dispatcher types a plain tuple of arrays about twice as fast as a NamedTuple (measured 1.2 vs
     2.1 us for 12 arrays: a third of a small instance's step); the NamedTuples are rebuilt here, for free.
     """
     return step_and_observe(EnvGraph(*g_fields), Episode(*ep_fields), Candidates(*cand_fields), action, k_out,
-                            k_last_cap, full, x, edge_index, edge_attr, horizon, look, plan)
+                            k_last_cap, full, x, edge_index, edge_attr, horizon, look, plan, plan_out)
 
 
 @numba.njit(cache=True)

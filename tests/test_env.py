@@ -368,7 +368,7 @@ def test_plan_features_are_greedys_feasible_completion_of_the_partial_schedule(r
     orders); at every state of a random walk the plan's acquisitions, in the order of their plan starts,
     complete the partial schedule into one the independent checker accepts, with those starts; off, the
     columns are zeros."""
-    from eosp.envs.observation import PLAN, TIME_SCALE
+    from eosp.envs.observation import PLAN, TIME_SCALE, plan_completion
     from eosp.graphs.discrete import arc_to_acq
     from eosp.instances.schedule import Schedule
 
@@ -401,6 +401,9 @@ def test_plan_features_are_greedys_feasible_completion_of_the_partial_schedule(r
             sched = Schedule(acq=inst.node_acq[nodes].astype(np.int32), node=inst.node_ids[nodes].astype(np.int32),
                              start=inst.node_time[nodes].astype(np.float64))
             assert check(inst, sched).feasible
+            st = env.state  # the incumbent's completion is the plan the observation computed, read back
+            np.testing.assert_array_equal(env.completion()[0],
+                                          plan_completion(st.prepared.eg, st.ep, st.prepared.cand, env._plan)[1])
             a = int(rng.choice(np.flatnonzero(obs["action_mask"])))
             obs, *_ = env.step(a)
             obs_off, *_ = off.step(a)
@@ -440,7 +443,7 @@ def test_label_plan_values_each_action_by_a_chain_the_environment_can_play(rewar
     EOSPEnv.completion() returns it."""
     import copy
 
-    from eosp.envs.observation import PLAN, _label_plan
+    from eosp.envs.observation import PLAN, _label_plan, plan_completion
     from eosp.graphs.discrete import arc_to_acq
     from eosp.instances.schedule import Schedule
 
@@ -479,7 +482,8 @@ def test_label_plan_values_each_action_by_a_chain_the_environment_can_play(rewar
                 assert check(ref, sched).feasible
                 env.restore(snap)
             best = assert_rollout_columns(x, v, reward)
-            nodes, total, worth = env.completion()
+            nodes, total, worth = env.completion()  # the plan the observation computed, read back
+            np.testing.assert_array_equal(nodes, plan_completion(eg, env.state.ep, s.prepared.cand, env._plan)[1])
             assert sorted(eg.node_acq[nodes]) == sorted(np.flatnonzero(x[:n, PLAN]))
             assert x[eg.node_acq[nodes[0]], PLAN + 1] == 1 and v[eg.node_acq[nodes[0]]] == best
             assert worth == pytest.approx(best + (len(env.path()) if reward == "unitary" else value), rel=1e-12)
