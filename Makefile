@@ -7,10 +7,11 @@ PY     := $(VENV)/bin/python
 
 .PHONY: install demo test test-all bench platform-up platform-down
 
+# (setuptools prints an informational notice for every editable install of a mapped package layout: silenced)
 $(VENV)/.installed: pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(VENV)/bin/pip install -q --upgrade pip
-	$(VENV)/bin/pip install -q -e '.[dev]'
+	PYTHONWARNINGS=ignore::UserWarning $(VENV)/bin/pip install -q -e '.[dev]'
 	touch $@
 
 install: $(VENV)/.installed

@@ -146,7 +146,11 @@ def cmd_solve(ns: argparse.Namespace) -> int:
         return 3
     write_schedule(sched, ns.out)
     extra = "".join(f", {k} {v}" for k, v in sol.info.items() if k in ("bound", "gap", "status"))
-    print(f"{ns.out}: {ns.solver}, {len(sched)} acquisitions, value {verdict.value:.6f}{extra} ({elapsed:.2f} s)")
+    if options.get("mode") == "unitary":  # the objective is the count; the utility sum is shown for reference
+        value = f"value {len(sched)} (acquisitions, unitary), utility sum {verdict.value:.6f}"
+    else:
+        value = f"{len(sched)} acquisitions, value {verdict.value:.6f}"
+    print(f"{ns.out}: {ns.solver}, {value}{extra} ({elapsed:.2f} s)")
     return 0
 
 

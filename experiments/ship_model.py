@@ -3,7 +3,7 @@
     python experiments/ship_model.py --mode unitary --run runs/ship-unitary-v1 \\
         --tests data/expert/parts/test-u100 data/expert/parts/test-c100 data/expert/parts/test-x100
 
-Copies ``RUN/checkpoints/best`` (weights + JSON only) to ``models/pretrained/MODE/``,
+Copies ``RUN/checkpoints/best`` (weights + JSON only) to ``models/pretrained-agents/MODE/``,
 decodes every unseen test instance greedily and compares with Greedy, RAMP and the
 exact optimum, and writes ``MODEL.md`` beside the weights: the training command (from
 the run's recorded configuration; when the run started from the shipped model, that
@@ -75,7 +75,7 @@ def main() -> None:
     p.add_argument("--exact-limit", type=float, default=60.0, help="seconds of exact search per instance")
     p.add_argument("--baselines", default="", help="an earlier ship-MODE.csv of the same tests: reuse its baselines")
     p.add_argument("--evaluate-only", action="store_true", help="write the record and print; do not ship")
-    p.add_argument("--name", default="", help="ship as models/pretrained/NAME (a variant, eosp.models.pretrained."
+    p.add_argument("--name", default="", help="ship as models/pretrained-agents/NAME (a variant, eosp.models.pretrained."
                                               "VARIANTS) instead of the mode's default model")
     p.add_argument("--checkpoint", default="best", choices=["best", "last"],
                    help="which checkpoint of the run: 'best' on its validation set, or 'last' (with a cosine decay and "
@@ -129,7 +129,7 @@ def main() -> None:
           f"{meta.get('epoch', meta.get('iteration'))}).",
           "", "## How it was trained", ""]
     if parent:
-        md += ["Descends from a model shipped before it (`--imitation.init-checkpoint models/pretrained/"
+        md += ["Descends from a model shipped before it (`--imitation.init-checkpoint models/pretrained-agents/"
                f"{ancestor}`, directly or through the runs named below), which was trained by:", "", "```bash",
                *parent, "```", "", "then:", ""]
     md.append("```bash")

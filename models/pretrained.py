@@ -1,6 +1,6 @@
 """Pretrained agents shipped with the package: one call away, no download.
 
-``models/pretrained/<name>/`` holds ``agent.pt`` (weights, read with
+``models/pretrained-agents/<name>/`` holds ``agent.pt`` (weights, read with
 ``weights_only=True``), ``agent.json`` (model and environment configuration) and
 ``MODEL.md`` (the command, data seeds and validation figures that produced it).
 ``eosp solve --solver policy|mcts --mode M`` without ``--checkpoint`` uses the model
@@ -23,7 +23,7 @@ from pathlib import Path
 
 from eosp.errors import InputError
 
-ROOT = Path(__file__).resolve().parent / "pretrained"
+ROOT = Path(__file__).resolve().parent / "pretrained-agents"
 MODES = ("unitary", "utility")
 VARIANTS = ("utility-fast",)
 ALIASES = {"utility-plan": "utility"}

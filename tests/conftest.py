@@ -1,7 +1,19 @@
 import functools
 import os
+import tempfile
+from pathlib import Path
 
 os.environ.setdefault("OMP_NUM_THREADS", "1")
+# what the tests compile and remember stays out of the repository tree: numba's cache (also for the subprocesses
+# the tests start) and hypothesis' example database go to the temp dir, kept between runs so that reruns are warm
+_TMP = Path(tempfile.gettempdir()) / f"eosp-tests-{os.getuid()}"
+os.environ.setdefault("NUMBA_CACHE_DIR", str(_TMP / "numba-cache"))
+
+from hypothesis import settings  # noqa: E402
+from hypothesis.database import DirectoryBasedExampleDatabase  # noqa: E402
+
+settings.register_profile("eosp", database=DirectoryBasedExampleDatabase(str(_TMP / "hypothesis")))
+settings.load_profile("eosp")
 
 import pytest  # noqa: E402
 

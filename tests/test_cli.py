@@ -107,3 +107,33 @@ def test_every_job_prints_its_help():
         assert r.returncode == 0 and "usage:" in r.stdout and not r.stderr.strip(), (job, r.stderr[-2000:])
         if job == "train":
             assert "--train.rollout-values" in r.stdout and "GAE's values come from" in r.stdout
+
+
+def test_the_plain_commands_import_neither_torch_ray_nor_mlflow(tmp_path):
+    """--help, info, validate, generate, import, export and the classical solvers start in a blink: one process
+    runs them all, then reports which heavy packages it imported."""
+    script = f"""
+import contextlib, io, sys
+from eosp.cli import main
+d = {str(tmp_path)!r}
+calls = [["generate", d + "/inst", "--n-acquisitions", "10", "--seed", "2"], ["info", d + "/inst"],
+         ["import", d + "/inst", "--out", d + "/s.parquet"], ["export", d + "/s.parquet", "--out", d + "/again"]]
+for solver in ("random", "greedy", "ramp", "exact", "lns"):
+    extra = ["--time-limit", "1"] if solver in ("exact", "lns") else []
+    calls += [["solve", d + "/inst", "--solver", solver, "--out", f"{{d}}/{{solver}}.parquet", *extra],
+              ["validate", d + "/inst", f"{{d}}/{{solver}}.parquet"]]
+with contextlib.redirect_stdout(io.StringIO()):
+    for argv in calls:
+        assert main(argv) == 0, argv
+    try:
+        main(["--help"])
+    except SystemExit:
+        pass
+print(sorted(m for m in ("torch", "ray", "mlflow") if m in sys.modules))
+"""
+    r = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.strip().splitlines()[-1] == "[]", r.stdout
+    r = eosp("solve", tmp_path / "inst", "--solver", "greedy", "--mode", "unitary", "--out", tmp_path / "u.parquet")
+    n = len(pq.read_table(tmp_path / "u.parquet"))
+    assert f"value {n} (acquisitions, unitary), utility sum" in r.stdout  # the count is the value

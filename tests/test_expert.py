@@ -265,8 +265,8 @@ def test_missing_or_corrupt_shipped_model_is_one_line(tmp_path, monkeypatch, cap
     assert err.count("\n") == 0 and "shipped pretrained model is missing" in err
     broken = tmp_path / "broken" / "unitary"
     broken.mkdir(parents=True)
-    (broken / "agent.json").write_text((pretrained.Path(__file__).parents[1] / "models" / "pretrained" / "unitary"
-                                        / "agent.json").read_text())
+    shipped = pretrained.Path(__file__).parents[1] / "models" / "pretrained-agents" / "unitary"
+    (broken / "agent.json").write_text((shipped / "agent.json").read_text())
     (broken / "agent.pt").write_bytes(b"\x00garbage")
     monkeypatch.setattr(pretrained, "ROOT", tmp_path / "broken")
     assert main(["solve", str(tmp_path / "inst"), "--solver", "policy", "--mode", "unitary",
