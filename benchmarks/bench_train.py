@@ -2,7 +2,6 @@
 
     python benchmarks/bench_train.py                          # 100 acquisitions, cpu preset, defaults
     python benchmarks/bench_train.py --acquisitions 300
-    python benchmarks/bench_train.py --compare 331088a        # old commit and this tree, alternated
 
 The algorithm is built by ``eosp.training.ppo.ppo_config`` from a ``RunConfig``
 (the path of jobs/train.py: same env, model preset, PPO settings), on a local
@@ -21,10 +20,7 @@ start-up), ``--iterations`` are timed.  Printed per iteration and in total:
 * peak RSS of the driver and of the env runners;
 
 and as the last line ``train_env_steps_per_s=<x>`` (env steps sampled per second
-of ``algo.train()`` over the timed iterations).  ``--compare REF`` installs the
-package at git commit REF in a temporary directory and runs the benchmark on
-it and on this tree in turn (``--rounds`` times each, same machine, same data),
-then prints both and the ratio.
+of ``algo.train()`` over the timed iterations).
 """
 
 from __future__ import annotations
@@ -34,9 +30,7 @@ import inspect
 import json
 import os
 import resource
-import subprocess
 import sys
-import tempfile
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -49,7 +43,7 @@ ROOT = Path(__file__).resolve().parents[1]
 @dataclass
 class Args:
     acquisitions: int = 100
-    """Acquisitions per training instance (100 or 300 in the issue; any size works)."""
+    """Acquisitions per training instance (any size works)."""
     instances: int = 32
     """Training instances (generated once under data/bench/, uniform family)."""
     iterations: int = 5
@@ -61,16 +55,13 @@ class Args:
     reward: str = "unitary"
     num_env_runners: int = 1
     num_envs_per_env_runner: int = 0
-    """0: the default of the code benchmarked (TrainConfig; a --compare commit keeps its own)."""
+    """0: the default of TrainConfig."""
     overlap_sampling: bool = True
     """Sample the next batch while learning (eosp.config.TrainConfig.overlap_sampling, on by default)."""
     num_gpus_per_learner: float = 0.0
     """GPU learner (refused in one line where Ray sees no GPU)."""
-    compare: str = ""
-    """A git commit to benchmark against: both run in turn, `rounds` times each."""
-    rounds: int = 2
     json_out: str = ""
-    """Write the figures of this run as JSON here (used by --compare)."""
+    """Write the figures of this run as JSON here."""
 
 
 def parse(argv: list[str] | None) -> Args:
@@ -201,9 +192,8 @@ def observation_share(data: Path, cfg, steps: int = 600) -> float:
         s = env.state
         bufs = env._buffers()
         t2 = time.perf_counter()
-        look = (cfg.lookahead,) if hasattr(cfg, "lookahead") else ()  # older commits (--compare) have none
         build_observation(s.prepared.eg, s.ep, s.prepared.cand, cfg.max_out_degree, cfg.last_edges_cap,
-                          cfg.obs_edges == "full", *bufs, cfg.obs_horizon_s, *look)
+                          cfg.obs_edges == "full", *bufs, cfg.obs_horizon_s, cfg.lookahead)
         t3 = time.perf_counter()
         if i >= 50:  # compiled by then
             t_step, t_obs = t_step + t1 - t0, t_obs + t3 - t2
@@ -229,16 +219,13 @@ def bench(a: Args) -> dict:
     if a.num_envs_per_env_runner:
         cfg.train.num_envs_per_env_runner = a.num_envs_per_env_runner
     cfg.env.reward = a.reward
-    cfg.train.overlap_sampling = a.overlap_sampling  # an older commit ignores it (plain PPO)
+    cfg.train.overlap_sampling = a.overlap_sampling
     cfg.train.num_gpus_per_learner = a.num_gpus_per_learner
     cfg.env.max_acquisitions = max(cfg.env.max_acquisitions, a.acquisitions)
     cfg.model.value_scale = estimate_value_scale(cfg)
-    try:
-        from eosp.jobs.preflight import ray_nodes, require_cluster_fits
-    except ImportError:  # an older commit benchmarked by --compare
-        pass
-    else:
-        require_cluster_fits(cfg.train, ray_nodes(), torch.cuda.device_count() if a.num_gpus_per_learner > 0 else None)
+    from eosp.jobs.preflight import ray_nodes, require_cluster_fits
+
+    require_cluster_fits(cfg.train, ray_nodes(), torch.cuda.device_count() if a.num_gpus_per_learner > 0 else None)
     obs_share = observation_share(data, cfg.env)
     algo = ppo_config(cfg).build_algo()
     clock = instrument(algo)
@@ -295,60 +282,8 @@ def report(res: dict, title: str = "") -> None:
           f"{', '.join(f'{x:.0f}' for x in rss['env runners'])} MB")
 
 
-def install_commit(ref: str, where: Path) -> Path:
-    """Install the package as of git commit `ref` into `where` (no dependencies: this venv has them)."""
-    src = where / "src"
-    subprocess.run(["git", "-C", str(ROOT), "worktree", "add", "--detach", str(src), ref], check=True,
-                   capture_output=True)
-    try:
-        subprocess.run([sys.executable, "-m", "pip", "install", "-q", "--no-deps", "--no-build-isolation",
-                        "--target", str(where / "site"), str(src)], check=True, capture_output=True)
-    finally:
-        subprocess.run(["git", "-C", str(ROOT), "worktree", "remove", "--force", str(src)], capture_output=True)
-    return where / "site"
-
-
-def compare(a: Args) -> None:
-    with tempfile.TemporaryDirectory(prefix="bench-train-") as tmp:
-        tmp = Path(tmp)
-        print(f"[bench] installing commit {a.compare} in {tmp}", flush=True)
-        sites = {a.compare: install_commit(a.compare, tmp), "this tree": None}
-        child = [a for a in sys.argv[1:]]
-        i = child.index("--compare")
-        del child[i:i + 2]
-        import ray
-
-        data_set(a)  # built once, by the current code, before any timing
-        ray.shutdown()
-        results: dict[str, list[dict]] = {k: [] for k in sites}
-        for r in range(a.rounds):
-            for name, site in sites.items():
-                out = tmp / f"{r}-{len(results[name])}-{name.replace(' ', '_')}.json"
-                env = dict(os.environ)
-                if site is not None:
-                    env["PYTHONPATH"] = f"{site}{os.pathsep}{env.get('PYTHONPATH', '')}"
-                print(f"[bench] round {r + 1}/{a.rounds}: {name}", flush=True)
-                subprocess.run([sys.executable, __file__, *child, "--json-out", str(out)], env=env, check=True)
-                results[name].append(json.loads(out.read_text()))
-        print()
-        best = {}
-        for name, runs in results.items():
-            best[name] = max(runs, key=lambda x: x["steps_per_s"])
-            report(best[name], title=f"{name} ({best[name]['package']}), best of {len(runs)}: ")
-        print()
-        for name, runs in results.items():
-            per_round = ", ".join(f"{x['steps_per_s']:.1f}" for x in runs)
-            print(f"{name:12s} env steps/s per round: {per_round}")
-        old, new = best[a.compare]["steps_per_s"], best["this tree"]["steps_per_s"]
-        print(f"speed-up (best of each): {new / old:.2f}x")
-        print(f"train_env_steps_per_s={new:.1f}")
-
-
 def main(argv: list[str] | None = None) -> int:
     a = parse(argv)
-    if a.compare:
-        compare(a)
-        return 0
     res = bench(a)
     if a.json_out:
         Path(a.json_out).write_text(json.dumps(res))

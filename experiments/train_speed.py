@@ -1,16 +1,14 @@
-"""Learning against env steps and against wall time: an old commit and this tree, same PPO problem.
+"""Learning against env steps and against wall time: PPO with and without overlapped sampling.
 
-    python experiments/train_speed.py --ref 331088a --iterations 40
-    python experiments/train_speed.py --variants new new-overlap --seeds 0 1   # this tree only
+    python experiments/train_speed.py --iterations 40 --seeds 0 1 2
 
 Each variant runs ``jobs/train.py`` (unitary reward, cpu preset, PPO defaults:
 batch 512, minibatch 128, 4 epochs) on the same 100-acquisition training set with
 greedy-decoding validation every ``--val-every`` iterations, one after the other
 (never two at once: they would share the 2 cores).  Variants:
 
-* ``old``: the package as of ``--ref`` (installed in a temporary directory);
-* ``new``: this tree with ``--train.overlap-sampling false`` (RLlib's PPO: sample, then learn);
-* ``new-overlap``: this tree with ``--train.overlap-sampling true`` (the default since).
+* ``plain``: ``--train.overlap-sampling false`` (RLlib's PPO: sample, then learn);
+* ``overlap``: ``--train.overlap-sampling true`` (the default: sample the next batch while learning).
 
 Prints, per run: env steps/s, the validation ratio to Greedy at the end, and
 the wall time and env steps at which the ratio first reached ``--target``
@@ -24,10 +22,8 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 import subprocess
 import sys
-import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -37,16 +33,14 @@ TRAIN = "import sys; from eosp.jobs.train import main; sys.exit(main(sys.argv[1:
 
 @dataclass
 class Args:
-    ref: str = "331088a"
-    """Old commit (variant 'old')."""
-    variants: tuple[str, ...] = ("old", "new", "new-overlap")
+    variants: tuple[str, ...] = ("plain", "overlap")
     seeds: tuple[int, ...] = (0,)
     iterations: int = 40
     val_every: int = 2
     target: float = 1.05
     """Ratio to Greedy on the validation set whose first crossing is timed."""
     out: str = "runs/train-speed"
-    plot: str = "docs/figures/train_speed"
+    plot: str = "runs/train-speed/curves"
 
 
 def parse(argv: list[str] | None) -> Args:
@@ -79,23 +73,19 @@ def data_sets() -> tuple[Path, Path]:
     return train, val
 
 
-def run(variant: str, seed: int, a: Args, train: Path, val: Path, site: Path | None) -> dict:
+def run(variant: str, seed: int, a: Args, train: Path, val: Path) -> dict:
     name = f"{variant}-s{seed}"
     out = (ROOT / a.out).resolve()
     flags = ["--train.train-data", str(train), "--train.val-data", str(val), "--env.reward", "unitary",
              "--train.iterations", str(a.iterations), "--train.validate-every", str(a.val_every),
              "--train.checkpoint-every", str(a.iterations), "--train.seed", str(seed),
              "--train.run-dir", str(out), "--train.run-name", name, "--train.experiment", "train-speed"]
-    if variant.startswith("new"):
-        flags += ["--train.overlap-sampling", "true" if variant == "new-overlap" else "false"]
-    env = dict(os.environ)
-    if site is not None:
-        env["PYTHONPATH"] = f"{site}{os.pathsep}{env.get('PYTHONPATH', '')}"
+    flags += ["--train.overlap-sampling", "true" if variant == "overlap" else "false"]
     log = out / f"{name}.log"
     out.mkdir(parents=True, exist_ok=True)
     print(f"[train_speed] {name}: log in {log}", flush=True)
     with open(log, "w") as f:
-        subprocess.run([sys.executable, "-c", TRAIN, *flags], env=env, stdout=f, stderr=subprocess.STDOUT,
+        subprocess.run([sys.executable, "-c", TRAIN, *flags], stdout=f, stderr=subprocess.STDOUT,
                        check=True, cwd=ROOT)
     history = json.loads((out / name / "run.json").read_text())["history"]
     return summarize(name, history, a.target)
@@ -172,33 +162,18 @@ def report(a: Args) -> None:
               f"mean ratio at validations: {' '.join(f'{x:.3f}' for x in mean_curve)}")
 
 
-def install_commit(ref: str, where: Path) -> Path:
-    """benchmarks/bench_train.py's installer of an old commit (loaded from its file: scripts are no package)."""
-    import importlib.util
-
-    spec = importlib.util.spec_from_file_location("bench_train", ROOT / "benchmarks" / "bench_train.py")
-    module = importlib.util.module_from_spec(spec)
-    sys.modules["bench_train"] = module  # its dataclasses look their module up
-    spec.loader.exec_module(module)
-    return module.install_commit(ref, where)
-
-
 def main(argv: list[str] | None = None) -> int:
     a = parse(argv)
     if a.report_only:
         report(a)
         return 0
     train, val = data_sets()
-    results = []
-    with tempfile.TemporaryDirectory(prefix="train-speed-") as tmp:
-        site = install_commit(a.ref, Path(tmp)) if "old" in a.variants else None
-        for seed in a.seeds:
-            for v in a.variants:
-                results.append(run(v, seed, a, train, val, site if v == "old" else None))
-                r = results[-1]
-                print(f"[train_speed] {r['run']}: {r['env_steps_per_s']:.0f} env steps/s, final ratio "
-                      f"{r['final_ratio']:.4f}, reached {a.target} at {r['reached_wall_s']} s / "
-                      f"{r['reached_env_steps']} env steps", flush=True)
+    for seed in a.seeds:
+        for v in a.variants:
+            r = run(v, seed, a, train, val)
+            print(f"[train_speed] {r['run']}: {r['env_steps_per_s']:.0f} env steps/s, final ratio "
+                  f"{r['final_ratio']:.4f}, reached {a.target} at {r['reached_wall_s']} s / "
+                  f"{r['reached_env_steps']} env steps", flush=True)
     report(a)
     return 0
 
