@@ -228,8 +228,8 @@ def lookahead(g, ep, static, x):
     otherwise have to learn).
 
     Why: the policy builds its schedule in time order and sees what an action kills only through a few
-    hops of message passing; its costliest mistakes in utility mode were such actions (a class-1
-    acquisition lost to a lower one: 0.92 x the optimum).  This is the environment's step (the sweep of
+    hops of message passing; its costliest mistakes in utility mode are such actions (e.g. a class-1
+    acquisition lost to a lower one).  This is the environment's step (the sweep of
     :func:`eosp.envs.core.sweep`) for every allowed action at once, without changing the state: one pass
     over the nodes in time order carries, per node, a bit set of the actions whose node reaches it
     (the OR of its predecessors'; an action's own other nodes die with it).  Only nodes starting within
@@ -368,10 +368,10 @@ def label_togo(g, ep, weight, togo, nxt):
     so from an allowed action's node it is a completion the environment can play.
 
     Why: in unitary mode Greedy's insertion is at 0.77-0.87 of the optimum, so its rollout values (the
-    'greedy' plan features) hardly tell apart the 3-10 allowed actions of which exactly one keeps the optimum
-    (where the policy loses, docs/results.md); a label sweep with one label per node (RAMP's sweep with a beam
-    of 1, backward so that one sweep values every action) told the optimal action apart in every such
-    decision measured.  Cost: one pass over the alive nodes' arcs; a candidate u is checked by walking its
+    'greedy' plan features) hardly tell apart the 3-10 allowed actions of which exactly one keeps the optimum,
+    the decisions where a unitary policy loses; a label sweep with one label per node (RAMP's sweep with a beam
+    of 1, backward so that one sweep values every action) tells the optimal action apart in such decisions.
+    Cost: one pass over the alive nodes' arcs; a candidate u is checked by walking its
     chain only while the chain is inside v's acquisition's window (an acquisition appears nowhere else).
     Ties go to the first arc."""
     node_acq, node_time, indptr, dst, acq_ptr, order = g.node_acq, g.node_time, g.indptr, g.dst, g.acq_ptr, g.order
@@ -570,8 +570,8 @@ def step_and_observe_fields(g_fields, ep_fields, cand_fields, action, k_out, k_l
                             edge_attr, horizon=0.0, look=False, plan=0, plan_out=None):
     """:func:`step_and_observe` called with ``tuple(g), tuple(ep), tuple(cand)``: the environment's hot path.
 
-    Numba's dispatcher types a plain tuple of arrays about twice as fast as a NamedTuple (measured 1.2 vs
-    2.1 us for 12 arrays: a third of a small instance's step); the NamedTuples are rebuilt here, for free.
+    Numba's dispatcher types a plain tuple of arrays about twice as fast as a NamedTuple, a noticeable share of
+    a small instance's step; the NamedTuples are rebuilt here, for free.
     """
     return step_and_observe(EnvGraph(*g_fields), Episode(*ep_fields), Candidates(*cand_fields), action, k_out,
                             k_last_cap, full, x, edge_index, edge_attr, horizon, look, plan, plan_out)
@@ -584,7 +584,7 @@ def _edges_from(node_acq, node_time, node_finish, indptr, dst, alive, beyond, u,
     earliest start times; returns the new number of edges.
 
     Called once per acquisition: it takes the few arrays it reads, not the EnvGraph tuple, whose every
-    array a call would reference-count (measured: +70% on build_observation)."""
+    array a call would reference-count (a large share of build_observation's time)."""
     e_max = edge_index.shape[1]
     best_t = np.full(k, np.inf)
     best_v = np.full(k, -1, dtype=np.int64)

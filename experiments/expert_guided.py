@@ -70,7 +70,7 @@ TRAIN2 = {
     "x150-s3-pw-r35": ("conflict", 150, 32, 480_000, [STEP, "3", ROLL, "35"]),
 }
 # A third mix (``data --dense``, linked into ``train3/``): the dense families only (clusters, conflict), where the
-# policies were furthest from the optimum (clusters at 100: 0.975-0.983), with what the first two mixes never vary:
+# policies are furthest from the optimum, with what the first two mixes never vary:
 # the number of clusters (2-8), their radius (120-450 km), high-priority targets clustered or not.
 K = "--instance.targets.n-clusters"
 RADIUS = "--instance.targets.cluster-radius-km"
@@ -82,9 +82,9 @@ TRAIN3 = {
     "x120-s1-pw-k3": ("conflict", 120, 48, 540_000, [K, "3"]),
     "c140-s1-pw-k8-r120": ("clusters", 140, 32, 550_000, [K, "8", RADIUS, "120"]),
 }
-# A fourth mix (``data --large``, linked into ``train4/``): the dense families at 200-300 acquisitions, where the
-# twelfth session's plan model gave up top-class acquisitions that Greedy's rollout also misses (conflict 300:
-# 0.967 x RAMP); the first three mixes have conflict only up to 150 acquisitions.
+# A fourth mix (``data --large``, linked into ``train4/``): the dense families at 200-300 acquisitions, where a
+# Greedy-plan model can give up top-class acquisitions that Greedy's rollout also misses; the first three mixes
+# have conflict only up to 150 acquisitions.
 TRAIN4 = {
     "x250-s2-pw": ("conflict", 250, 24, 600_000, [STEP, "2"]),
     "x300-s1-bcb-a650": ("conflict", 300, 16, 610_000, [*BCB, A, "650"]),

@@ -1,6 +1,6 @@
 """Local improvement of a complete schedule by insert and swap moves (numba; no torch, no Ray).
 
-Why: what the learned policy still loses is one or two decisions per episode, each
+Why: what a learned policy typically loses is one or two decisions per episode, each
 costing one acquisition in unitary mode or one low-priority acquisition in utility
 mode (docs/results.md).  Those are exactly the schedules that one insertion or one
 swap repairs, and checking a move costs a few binary searches, so every complete
@@ -432,8 +432,8 @@ class Polisher:
             probe = deadline is not None and rate == 0.0
             if use_windows and (deadline is None or (t_win <= self.window_ratio * t_rr and t1 < deadline)):
                 if deadline is None:
-                    # of the first round's size: nothing else bounds them, and a refinement without a time limit
-                    # (lns's default) costs what it did before the long windows (3M arcs a window at most)
+                    # of the first round's size: nothing else bounds them, so a refinement without a time limit
+                    # (lns's default) keeps each window to 3M arcs
                     count, budget, work = 16, np.iinfo(np.int64).max, self._first_work
                 elif probe:  # a probe of the rate: its windows stop early and say nothing of their cost
                     count, budget, work = 1 << 20, self._first_work, self._first_work

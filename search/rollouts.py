@@ -36,8 +36,8 @@ class Best:
     """The best complete episode met so far.  `improve(actions) -> (value, actions)`: applied to every episode
     offered (then `ret` is in the improver's units, not in reward units).  Past `deadline`
     (``time.perf_counter()``), episodes are no longer taken once one is: at 1000 acquisitions polishing one costs
-    ~0.2 s, and the 16 episodes of a sampling round, all finished at about the same time, overran the search's
-    share of the time limit by seconds, taken from the refinement after it."""
+    ~0.2 s, and the 16 episodes of a sampling round, all finished at about the same time, would overrun the
+    search's share of the time limit by seconds, taken from the refinement after it."""
 
     ret: float = -math.inf
     actions: list = field(default_factory=list)

@@ -150,7 +150,7 @@ class PolicyConfig(LearnedConfig):
     policy's own episode, at the cost of one Greedy completion a step (two orders for models without plan
     features).  Needs the instance's unpruned graph (loaded by every generator and interchange import).  A model
     reading the label plan (--env.plan label) completes each state by the label sweep's chain instead (no
-    unpruned graph needed): never below its own episode, and above Greedy wherever measured, though not by
+    unpruned graph needed): never below its own episode, and usually at or above Greedy, though not by
     construction."""
 
     polish: bool = True
