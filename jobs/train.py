@@ -211,11 +211,35 @@ def main(argv: list[str] | None = None) -> int:
             print(f"  {s:7s} mean {summary[f'val/{s}_mean']:.6g}  policy/{s} {summary[f'val/ratio_to_{s}']:.4f}  "
                   f"wins/ties/losses {summary[f'val/wins_vs_{s}']:.0f}/{summary[f'val/ties_vs_{s}']:.0f}/"
                   f"{summary[f'val/losses_vs_{s}']:.0f}")
+    if ns.demo and "val/ratio_to_greedy" in summary:
+        show_shipped(cfg, wall)
     uri = mlflow_uri(cfg)
     where = f"open {uri}" if uri.startswith("http") else f"mlflow ui --backend-store-uri {uri}"
     print(f"[train] MLflow: {where}   (run {run_id}, experiment '{t.experiment}')")
     ray.shutdown()
     return 0
+
+
+def show_shipped(cfg: RunConfig, wall: float) -> None:
+    """The demo's last words: what its numbers mean, then the shipped model of the same objective on the demo's
+    validation instances and on conflict-family ones (where Greedy is weak), against Greedy, RAMP and the optimum."""
+    from eosp.config import family_config
+    from eosp.evaluation.shipped import compare, reading
+    from eosp.instances.generator import generate
+    from eosp.shards.io import dataset_shards, read_instances
+
+    mode = "unitary" if cfg.env.reward == "unitary" else "utility"
+    print(f"[train] what this means: policy/X is the mean over the validation instances of the trained policy's value "
+          f"over X's (1.0 = as good); wins/ties/losses count the instances where it is above / equal / below. "
+          f"{wall:.0f} s of PPO from scratch rarely beats Greedy; imitation of the exact solver does. The shipped "
+          f"{mode} model (models/pretrained-agents/{mode}), solving with its defaults:", flush=True)
+    val = read_instances(dataset_shards(cfg.train.val_data))
+    conflict = [generate(family_config("conflict", DEMO_ACQ, 990_000 + i)) for i in range(8)]
+    comps = [compare(f"demo validation ({len(val)})", val, mode),
+             compare(f"conflict family ({len(conflict)})", conflict, mode)]
+    for c in comps:
+        print(c.line(), flush=True)
+    print(f"[train] {reading(comps)}", flush=True)
 
 
 def log_agent_model(checkpoint: Path) -> None:

@@ -394,3 +394,17 @@ def test_greedy_kernel_matches_a_plain_reference(family, n, seed, mode):
     g = inst.unpruned()
     sol = run_solver("greedy", inst, mode=mode)
     assert inst.node_acq[sol.nodes].tolist() == reference_greedy(g, insertion_order(inst, mode))
+
+
+def test_the_demo_comparison_of_the_shipped_model_is_bounded_by_the_proven_optimum():
+    """evaluation.shipped (the demo's last lines): every solver's value is at most the proven optimum, the ratios
+    are per instance, and the reading names the set where Greedy is weakest."""
+    from eosp.evaluation.shipped import compare, reading
+
+    insts = [generated("conflict", 14, seed) for seed in (1, 2)]
+    c = compare("conflict", insts, "utility", exact_limit=30)
+    assert c.proven == 2
+    for s in ("greedy", "ramp", "policy"):
+        assert np.all(c.values[s] <= c.values["exact"] * (1 + 1e-9))
+    assert c.ratio("exact") == pytest.approx(np.mean(c.values["policy"] / c.values["exact"]))
+    assert "conflict" in reading([c]) and "policy/optimum" in c.line()
