@@ -1,0 +1,149 @@
+"""Battery simulation of one satellite's timeline, as the aeossp_standard benchmark defines it.
+
+The horizon is cut at every resource-grid instant and at every observation and maneuver bound;
+on each segment the load (idle, plus imaging during an observation, plus slew during a maneuver)
+and the charging (when sunlit, cylindrical shadow) are taken at the segment's midpoint and held
+over the segment.  The charge is clipped at the capacity and the timeline is invalid as soon as
+it drops below -1e-9 Wh.  Instants are integer microseconds from the horizon start, the
+resolution of UTC timestamps, so cut points and midpoints are the benchmark's exactly.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+from numba import njit
+
+from eosp.fleet.geometry import Geometry, epochs, sunlit
+from eosp.fleet.model import Fleet
+
+US = 1_000_000
+
+
+class Intervals(NamedTuple):
+    """Sorted, non-overlapping [start, end) intervals in microseconds."""
+
+    start: np.ndarray
+    end: np.ndarray
+
+
+class BatteryRun(NamedTuple):
+    """Outcome of one satellite's simulation."""
+
+    ok: bool
+    gross_wh: float  # gross consumption up to the end (or up to the failing segment)
+    fail_us: int  # midpoint of the failing segment, -1 when ok
+    fail_action: int  # position (in the observations given) active at the failure, -1 if none
+    min_wh: float
+
+
+def half_even_div2(d: np.ndarray) -> np.ndarray:
+    """d / 2 rounded half to even, in integers (Python's ``timedelta / 2``)."""
+    q = d // 2
+    odd = (d % 2) == 1
+    return q + (odd & ((q % 2) == 1))
+
+
+def cut_points(fleet: Fleet, obs: Intervals, man: Intervals) -> np.ndarray:
+    h = fleet.horizon
+    total = h.seconds * US
+    grid = np.arange(0, total, h.resource_step_s * US, dtype=np.int64)
+    pts = np.concatenate([grid, [0, total], obs.start, obs.end, man.start, man.end]).astype(np.int64)
+    return np.unique(pts)
+
+
+def active(intervals: Intervals, t: np.ndarray) -> np.ndarray:
+    """Position of the interval holding each instant (start <= t < end), or -1."""
+    if len(intervals.start) == 0:
+        return np.full(len(t), -1, dtype=np.int64)
+    i = np.searchsorted(intervals.start, t, side="right") - 1
+    ok = (i >= 0) & (t < intervals.end[np.maximum(i, 0)])
+    return np.where(ok, i, -1)
+
+
+class SunCache:
+    """Sunlight of each satellite at arbitrary instants: ITRF positions rotated to GCRF with one
+    rotation per instant (shared by all satellites); instants within a metre of the shadow
+    boundary are recomputed with brahe's own GCRF state, the benchmark's path."""
+
+    def __init__(self, geo: Geometry):
+        self.geo = geo
+        self._rot: dict[int, np.ndarray] = {}
+        self._sun: dict[int, np.ndarray] = {}
+
+    def _frames(self, t_us: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        missing = [t for t in np.unique(t_us).tolist() if t not in self._rot]
+        if missing:
+            from eosp.fleet.geometry import brahe_module
+
+            bh = brahe_module()
+            eps = epochs(self.geo.fleet.horizon.start, missing)
+            for t, e in zip(missing, eps):
+                self._rot[t] = np.asarray(bh.rotation_ecef_to_eci(e), dtype=float).reshape(3, 3)
+                self._sun[t] = np.asarray(bh.sun_position(e), dtype=float)
+        keys = t_us.tolist()
+        return (np.asarray([self._rot[k] for k in keys]).reshape(-1, 3, 3),
+                np.asarray([self._sun[k] for k in keys]).reshape(-1, 3))
+
+    def positions_ecef(self, sat: int, t_us: np.ndarray) -> np.ndarray:
+        geo = self.geo
+        base = geo.base_step_s * US
+        on_grid = (t_us % base) == 0
+        out = np.empty((len(t_us), 3))
+        if on_grid.any():
+            out[on_grid] = geo.grid_positions(sat)[t_us[on_grid] // base]
+        if (~on_grid).any():
+            out[~on_grid] = geo.positions_ecef(sat, epochs(geo.fleet.horizon.start, t_us[~on_grid]))
+        return out
+
+    def sunlit(self, sat: int, t_us: np.ndarray) -> np.ndarray:
+        from eosp.fleet.geometry import brahe_module
+
+        if len(t_us) == 0:
+            return np.zeros(0, dtype=bool)
+        rot, sun = self._frames(t_us)
+        pos = np.einsum("nij,nj->ni", rot, self.positions_ecef(sat, t_us))
+        lit, margin = sunlit(pos, sun, brahe_module().R_EARTH)
+        close = np.flatnonzero(margin < 1.0)
+        if len(close):
+            eps = epochs(self.geo.fleet.horizon.start, t_us[close])
+            exact = self.geo.positions_eci(sat, eps)
+            lit[close] = sunlit(exact, sun[close], brahe_module().R_EARTH)[0]
+        return lit
+
+
+@njit(cache=True)
+def _run(load, charge, dur, initial, capacity):
+    battery = initial
+    gross = 0.0
+    low = initial
+    for k in range(len(load)):
+        gross += (load[k] * dur[k]) / 3600.0
+        battery += ((charge[k] - load[k]) * dur[k]) / 3600.0
+        if battery < -1.0e-9:
+            return k, gross, low
+        battery = min(capacity, battery)
+        if battery < low:
+            low = battery
+    return -1, gross, low
+
+
+def simulate(fleet: Fleet, sun: SunCache, sat: int, obs: Intervals, man: Intervals) -> BatteryRun:
+    """Simulate satellite `sat` over the horizon with observations `obs` and maneuvers `man`."""
+    b = fleet.satellites.battery
+    pts = cut_points(fleet, obs, man)
+    d = np.diff(pts)
+    keep = d > 0
+    seg_start, d = pts[:-1][keep], d[keep]
+    mid = seg_start + half_even_div2(d)
+    a_obs, a_man = active(obs, mid), active(man, mid)
+    load = b.idle_w[sat] + np.where(a_obs >= 0, b.imaging_w[sat], 0.0)
+    load = load + np.where(a_man >= 0, b.slew_w[sat], 0.0)
+    charge = np.where(sun.sunlit(sat, mid), b.sunlit_w[sat], 0.0)
+    dur = d.astype(np.float64) / 1e6
+    k, gross, low = _run(load, charge, dur, float(b.initial_wh[sat]), float(b.capacity_wh[sat]))
+    if k < 0:
+        return BatteryRun(True, float(gross), -1, -1, float(low))
+    return BatteryRun(False, float(gross), int(mid[k]), int(a_obs[k]), float(low))
+
