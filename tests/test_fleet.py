@@ -379,3 +379,22 @@ def test_cli_module_imports_light():
             "if m in sys.modules]; print(heavy)")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
     assert out.strip() == "[]"
+
+
+def test_pass_view_and_arc_cost():
+    from eosp.fleet.opportunities import compute, pass_view
+    from eosp.fleet.slew import LineOfSight
+
+    fleet = synthetic_fleet()
+    geo = Geometry(fleet)
+    opps = compute(fleet, geo)
+    off = opps.pass_offsets()
+    assert len(off) == opps.n_passes + 1 and len(opps.pass_satellite()) == opps.n_passes
+    p = int(np.argmax(np.diff(off)))
+    v = pass_view(fleet, opps, p, off)
+    assert np.all(opps.pass_id[v.rows] == p) and np.all(np.diff(v.start_s) >= 0)
+    assert np.array_equal(v.end_s - v.start_s, fleet.tasks.duration_s[v.task])
+    los = LineOfSight(fleet, geo)
+    need = los.between(v.satellite, v.task[:-1], v.end_s[:-1], v.task[1:], v.start_s[1:])
+    assert need.shape == (len(v.rows) - 1,)
+    assert np.all(need >= fleet.satellites.attitude.settling_s[v.satellite])
