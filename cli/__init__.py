@@ -13,10 +13,13 @@ import sys
 import time
 from pathlib import Path
 
-from eosp.args import add_config_args, config_from_args
+from eosp.args import Parser, add_config_args, add_memory_arg, config_from_args
 from eosp.config import InstanceConfig, family_config
 from eosp.errors import InputError
 from eosp.models.pretrained import PREFIX, pretrained_dir
+
+
+OVERWRITE_HELP = "replace an existing output that eosp wrote (a file or directory eosp did not write is never replaced)"
 
 
 def _load_instance(path: str):
@@ -41,6 +44,9 @@ def cmd_generate(ns: argparse.Namespace) -> int:
     # the family's settings first, then every flag given
     base = family_config(getattr(ns, "family", "uniform"), 100, 0)
     cfg = config_from_args(InstanceConfig, ns, base=base)
+    from eosp.instances.generator import require_generate_memory
+
+    require_generate_memory(cfg, "--n-acquisitions")  # from the request, before minutes of generation
     t0 = time.perf_counter()
     inst = generate(cfg)
     write_instance(inst, ns.out, overwrite=ns.overwrite)
@@ -53,7 +59,7 @@ def cmd_import(ns: argparse.Namespace) -> int:
     from eosp.instances.interchange import read_instance
     from eosp.shards.io import check_shard_out, write_shard
 
-    check_shard_out(ns.out)
+    check_shard_out(ns.out, ns.overwrite)
     insts, first = [], {}
     for d in ns.instance_dirs:
         inst = read_instance(d)
@@ -62,7 +68,7 @@ def cmd_import(ns: argparse.Namespace) -> int:
                                 "distinct instances (rename one in its meta.json)")
         first[inst.name] = d
         insts.append(inst)
-    write_shard(ns.out, insts, include_unpruned=not ns.pruned_only)
+    write_shard(ns.out, insts, include_unpruned=not ns.pruned_only, overwrite=ns.overwrite)
     print(f"{ns.out}: {len(insts)} instance(s)")
     return 0
 
@@ -129,22 +135,26 @@ def cmd_solve(ns: argparse.Namespace) -> int:
 
     options = solve_options(ns)
     make_config(ns.solver, **options)  # bad options are refused before any file is read
-    check_schedule_out(ns.out)
+    check_schedule_out(ns.out, ns.overwrite)
     ck = options.get("checkpoint") or ""
     if ck.startswith(PREFIX):
         pretrained_dir(ck[len(PREFIX):])  # a shipped model by name: refused in one line if there is none
     elif ck and not Path(ck).exists():
         raise InputError(ck, "checkpoint not found")
-    inst = _load_instance(ns.instance_dir)
+    inst = _load_instance(ns.instance_dir)  # the readers check their own memory from the files' headers
+    require_solve_memory(inst, ns.instance_dir)
     t0 = time.perf_counter()
-    sol = run_solver(ns.solver, inst, **options)
+    try:
+        sol = run_solver(ns.solver, inst, **options)
+    except KeyboardInterrupt:
+        return interrupted_solve(ns, inst)
     elapsed = time.perf_counter() - t0
     sched = from_internal_nodes(inst, sol.nodes)
     verdict = check(inst, sched)
     if not verdict.feasible:  # never write a schedule that the checker refuses
         print(f"solver {ns.solver} produced an infeasible schedule: {verdict.reason}", file=sys.stderr)
         return 3
-    write_schedule(sched, ns.out)
+    write_schedule(sched, ns.out, overwrite=ns.overwrite)
     extra = "".join(f", {k} {v}" for k, v in sol.info.items() if k in ("bound", "gap", "status"))
     if options.get("mode") == "unitary":  # the objective is the count; the utility sum is shown for reference
         value = f"value {len(sched)} (acquisitions, unitary), utility sum {verdict.value:.6f}"
@@ -154,39 +164,72 @@ def cmd_solve(ns: argparse.Namespace) -> int:
     return 0
 
 
+SOLVE_BYTES_PER_ARC = 24  # the solvers' copies of the graph (pruning, the polisher's and the environment's arrays)
+SOLVE_BYTES_PER_NODE = 512
+
+
+def require_solve_memory(inst, where: str) -> None:
+    """A one-line InputError when solving `inst` cannot fit (estimated from its arcs and nodes)."""
+    from eosp.memory import require_memory
+
+    arcs = inst.unpruned_graph.n_arcs if inst.unpruned_graph is not None else inst.pruned().n_arcs
+    require_memory(where, SOLVE_BYTES_PER_ARC * arcs + SOLVE_BYTES_PER_NODE * inst.n_nodes,
+                   f"solving {inst.n_acq:,} acquisitions ({inst.n_nodes:,} nodes, {arcs:,} arcs)")
+
+
+def interrupted_solve(ns: argparse.Namespace, inst) -> int:
+    """Ctrl-C during a solve: the search's best feasible schedule so far (:mod:`eosp.solvers.base`'s incumbent),
+    checked by the independent checker, written atomically; one line saying where, or that nothing was written."""
+    import signal
+
+    from eosp.instances.schedule import check, from_internal_nodes, write_schedule
+    from eosp.solvers.base import INCUMBENT
+
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # a second Ctrl-C must not leave a half-written file
+    prog = f"eosp {ns.command}"
+    nodes = INCUMBENT.take(inst)
+    if nodes is None:
+        print(f"{prog}: interrupted: no feasible schedule found yet, nothing written", file=sys.stderr)
+        return 130
+    sched = from_internal_nodes(inst, nodes)
+    verdict = check(inst, sched)
+    if not verdict.feasible:  # never write what the checker refuses
+        print(f"{prog}: interrupted: the best schedule so far is refused by the checker ({verdict.reason}), "
+              "nothing written", file=sys.stderr)
+        return 130
+    write_schedule(sched, ns.out, overwrite=ns.overwrite)
+    print(f"{prog}: interrupted: wrote the best feasible schedule so far to {ns.out} ({len(sched)} acquisitions, "
+          f"value {verdict.value:.6f})", file=sys.stderr)
+    return 130
+
+
 def cmd_build_shards(ns: argparse.Namespace, rest: list[str]) -> int:
     from eosp.jobs.build_shards import main as build_main
 
-    return build_main(rest)
+    return build_main(rest, prog="eosp build-shards")
 
 
 def cmd_plot(ns: argparse.Namespace) -> int:
-    from eosp.evaluation.plots import plot_trajectories
-    from eosp.instances.schedule import read_schedule
+    from eosp.evaluation.plots import check_plot_out, plot_trajectories
+    from eosp.instances.schedule import check, read_schedule
 
-    from eosp.instances.schedule import check
-
-    from eosp.atomic import check_output_file
-
-    for ext in (".png", ".svg"):
-        check_output_file(Path(ns.out).with_suffix(ext), what="plot")
+    check_plot_out(ns.out, ns.overwrite)
     inst = _load_instance(ns.instance_dir)
     schedules = {Path(s).stem: read_schedule(s) for s in ns.schedules}
     for name, sched in zip(ns.schedules, schedules.values()):
         verdict = check(inst, sched)  # plot only schedules that make sense for this instance
         if not verdict.feasible:
             raise InputError(name, f"not a feasible schedule of this instance: {verdict.reason}")
-    written = plot_trajectories(inst, schedules, ns.out)
+    written = plot_trajectories(inst, schedules, ns.out, overwrite=ns.overwrite)
     print("wrote " + ", ".join(str(p) for p in written))
     return 0
 
 
 def cmd_report(ns: argparse.Namespace) -> int:
-    from eosp.evaluation.html_report import write_report
-    from eosp.atomic import check_output_file
+    from eosp.evaluation.html_report import check_report_out, write_report
     from eosp.instances.schedule import read_schedule
 
-    check_output_file(ns.out, (".html", ".htm"), what="HTML report")
+    check_report_out(ns.out, ns.overwrite)
     inst = _load_instance(ns.instance_dir)
     schedules = {}
     for path in ns.schedules:
@@ -197,7 +240,7 @@ def cmd_report(ns: argparse.Namespace) -> int:
             label += "'"
         schedules[label] = read_schedule(path)
     try:
-        out = write_report(inst, schedules, ns.out, title=ns.title or None)
+        out = write_report(inst, schedules, ns.out, title=ns.title or None, overwrite=ns.overwrite)
     except InputError as exc:  # the label is the file's stem: name the file the user gave
         path = next((p for p, lab in zip(ns.schedules, schedules) if lab == exc.file), exc.file)
         raise InputError(path, exc.message) from None
@@ -217,12 +260,13 @@ def solver_of(argv: list[str]) -> str | None:
 def build_parser(solver: str | None = None) -> argparse.ArgumentParser:
     """The ``eosp`` parser.  `solver`: the --solver of a solve command (:func:`solver_of`), whose config
     (:mod:`eosp.solvers.base`) gives ``eosp solve`` its flags; "" or an unknown name: the shared ones."""
-    p = argparse.ArgumentParser(prog="eosp", description=__doc__.splitlines()[0])
+    p = Parser(prog="eosp", description=__doc__.splitlines()[0])
     sub = p.add_subparsers(dest="command", required=True)
 
     g = sub.add_parser("generate", help="generate an instance directory (interchange format)")
     g.add_argument("out", help="instance directory to create")
-    g.add_argument("--overwrite", action="store_true")
+    g.add_argument("--overwrite", action="store_true", help=OVERWRITE_HELP)
+    add_memory_arg(g)
     add_config_args(g, InstanceConfig)
     g.set_defaults(func=cmd_generate)
 
@@ -230,13 +274,15 @@ def build_parser(solver: str | None = None) -> argparse.ArgumentParser:
     i.add_argument("instance_dirs", nargs="+")
     i.add_argument("--out", required=True, help="shard file to write")
     i.add_argument("--pruned-only", action="store_true", help="do not store the unpruned arcs")
+    i.add_argument("--overwrite", action="store_true", help=OVERWRITE_HELP)
+    add_memory_arg(i)
     i.set_defaults(func=cmd_import)
 
     e = sub.add_parser("export", help="export one instance of a shard as an interchange directory")
     e.add_argument("shard")
     e.add_argument("--index", type=int, default=0)
     e.add_argument("--out", required=True)
-    e.add_argument("--overwrite", action="store_true")
+    e.add_argument("--overwrite", action="store_true", help=OVERWRITE_HELP)
     e.set_defaults(func=cmd_export)
 
     n = sub.add_parser("info", help="sizes of an instance (directory, or SHARD#INDEX)")
@@ -253,6 +299,8 @@ def build_parser(solver: str | None = None) -> argparse.ArgumentParser:
     s.add_argument("instance_dir", help="instance directory (or SHARD#INDEX)")
     s.add_argument("--solver", required=True, help="random, greedy, ramp, exact, lns, policy, sample, beam, mcts")
     s.add_argument("--out", required=True, help="schedule file (.parquet, or .jsonl)")
+    s.add_argument("--overwrite", action="store_true", help=OVERWRITE_HELP)
+    add_memory_arg(s)
     if solver is not None:
         from eosp.solvers.base import REGISTRY, SolverConfig, solver_config_class
 
@@ -267,6 +315,7 @@ def build_parser(solver: str | None = None) -> argparse.ArgumentParser:
     pl.add_argument("instance_dir")
     pl.add_argument("schedules", nargs="+")
     pl.add_argument("--out", required=True, help="output path without extension (PNG and SVG are written)")
+    pl.add_argument("--overwrite", action="store_true", help=OVERWRITE_HELP)
     pl.set_defaults(func=cmd_plot)
 
     r = sub.add_parser("report", help="one self-contained HTML page: map, timeline, roll/pitch and a summary "
@@ -275,6 +324,7 @@ def build_parser(solver: str | None = None) -> argparse.ArgumentParser:
     r.add_argument("schedules", nargs="+", help="schedule files (.parquet or .jsonl); infeasible ones are drawn too")
     r.add_argument("--out", required=True, help="HTML file to write")
     r.add_argument("--title", default="", help="page title (default: the instance name)")
+    r.add_argument("--overwrite", action="store_true", help=OVERWRITE_HELP)
     r.set_defaults(func=cmd_report)
     return p
 
@@ -283,6 +333,9 @@ def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else argv
     solver = solver_of(argv)
     parser = build_parser(solver)
+    if not argv:  # the usage only here and for --help; every other error is one line
+        parser.print_help(sys.stderr)
+        return 2
     if argv and argv[0] == "build-shards":
         return cmd_build_shards(argparse.Namespace(), argv[1:])
     ns, extra = parser.parse_known_args(argv)
@@ -293,16 +346,22 @@ def main(argv: list[str] | None = None) -> int:
 
         if solver in REGISTRY:  # a misspelled or foreign option: name it and the valid ones
             valid = ", ".join("--" + f.name.replace("_", "-") for f in fields(solver_config_class(solver)))
-            print(f"eosp solve: error: solver {solver!r} has no option {extra[0].partition('=')[0]}; its options: "
-                  f"{valid}", file=sys.stderr)
+            flag = extra[0].partition("=")[0]
+            print(f"eosp solve: error: solver {solver!r} has no option {flag}; its options: {valid}", file=sys.stderr)
             return 2
     if extra:
         parser.error(f"unrecognized arguments: {' '.join(extra)}")
+    from eosp.memory import set_max_memory_gb
+
+    set_max_memory_gb(getattr(ns, "max_memory_gb", None))
     try:
         return ns.func(ns)
     except (InputError, FileExistsError, ValueError, IndexError) as exc:
         print(f"eosp {ns.command}: error: {exc}", file=sys.stderr)
         return 2
+    except KeyboardInterrupt:  # the searches' incumbent is written by cmd_solve; here nothing was
+        print(f"eosp {ns.command}: interrupted: nothing written", file=sys.stderr)
+        return 130
     except BrokenPipeError:  # `eosp info X | head`: the reader left; stop quietly, as other tools do
         try:
             os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())

@@ -12,9 +12,64 @@ from __future__ import annotations
 import argparse
 import ast
 import inspect
+import re
+import sys
 import typing
 from dataclasses import MISSING, fields, is_dataclass
 from typing import Any
+
+
+class Parser(argparse.ArgumentParser):
+    """The parser of the CLI and of every job: a bad option is one line ``PROG: error: --option: reason``
+    (exit 2), without argparse's usage block, which only ``--help`` shows (and ``eosp`` with no arguments).
+    Sub-commands get the same class (``eosp solve`` is their PROG)."""
+
+    def error(self, message: str) -> typing.NoReturn:
+        message = re.sub(r"^argument ([^:]*?)(?:/[^:]*)?: ", r"\1: ", message)  # 'argument --x/-y: ...' -> '--x: ...'
+        print(f"{self.prog}: error: {message}", file=sys.stderr, flush=True)
+        sys.exit(2)
+
+    def parse_known_args(self, args=None, namespace=None):  # type: ignore[override]
+        from eosp import errors
+
+        errors.PROG = self.prog  # a sub-command's parser names itself in the errors that follow
+        return super().parse_known_args(args, namespace)
+
+
+def memory_gb(text: str) -> float:
+    """The argparse type of --max-memory-gb: a finite number > 0 (GiB)."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number of GiB, got {text!r}") from None
+    if not 0 < value < float("inf"):
+        raise argparse.ArgumentTypeError(f"must be a finite number > 0, got {text!r}")
+    return value
+
+
+def add_memory_arg(parser: argparse.ArgumentParser) -> None:
+    """--max-memory-gb: the user's ceiling, on top of the memory available (eosp.memory.require_memory)."""
+    parser.add_argument("--max-memory-gb", type=memory_gb, default=None, metavar="GB",
+                        help="refuse (one line, with the estimate) work estimated to need more memory than this; "
+                             "what the machine has available is always checked")
+
+
+def run_job(main: Any, argv: list[str] | None, prog: str) -> int:
+    """Run a job's `main(argv)` with the one error path of the jobs: a user error (:class:`eosp.errors.InputError`:
+    a bad file, option, data set, checkpoint or config) is one line ``PROG: error: ...`` and exit 2; Ctrl-C is one
+    line and exit 130 (what was completed before it is kept, e.g. checkpoints and finished shards)."""
+    from eosp import errors
+
+    errors.PROG = prog
+    try:
+        return main(argv)
+    except errors.InputError as exc:
+        print(errors.error_line(exc), file=sys.stderr, flush=True)
+        return 2
+    except KeyboardInterrupt:
+        print(f"{prog}: interrupted: stopped (files completed before the interrupt are kept)", file=sys.stderr,
+              flush=True)
+        return 130
 
 
 def _field_docs(cls: type) -> dict[str, str]:

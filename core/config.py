@@ -22,6 +22,9 @@ def ranged(default: Any, lo: float | None = None, hi: float | None = None, *, lo
     return field(default=default, metadata=meta)
 
 
+WEEK_S = 604_800.0  # the longest time limit a solve accepts: a larger one is a typo, not a plan
+
+
 def choice(default: str, *options: str) -> Any:
     """A string field restricted to `options`."""
     return field(default=default, metadata={"choices": options})
@@ -275,7 +278,7 @@ class DemoConfig:
     modes: tuple[str, ...] = ("unitary", "utility")
     """Objectives solved: 'unitary' (count) and/or 'utility' (sum of utilities; serves the normalized and
     lexicographic rewards too)."""
-    time_limit: float = ranged(30.0, 0, lo_open=True)
+    time_limit: float = ranged(30.0, 0, WEEK_S, lo_open=True)
     """Seconds of exact search per instance and mode; at the limit the best schedule found is kept with its gap."""
     action_sets: bool = True
     """Also label every step with the set of optimal actions (values of all allowed actions by RAMP's beam
@@ -339,6 +342,8 @@ class ImitationConfig:
     configuration and value scale replace --model.*; empty: random initialization."""
     run_dir: str = "runs"
     run_name: str = ""
+    overwrite: bool = False
+    """Replace an existing run of this name (only one eosp wrote); without it, an existing run is refused."""
     mlflow_uri: str = ""
     experiment: str = "eosp-imitation"
     seed: int = 0
@@ -471,6 +476,8 @@ class TrainConfig:
     run_name: str = ""
     """Name of the run; empty: a timestamp.  --resume continues the run of this name."""
     resume: bool = False
+    overwrite: bool = False
+    """Replace an existing run of this name (only one eosp wrote); without it, an existing run is refused."""
     time_budget: float = ranged(0.0, 0)
     """Make the iteration that starts past this many seconds of training the last one (0: no limit)."""
     init_checkpoint: str = ""
@@ -512,9 +519,9 @@ class EvalConfig:
     """Any of: random, greedy, ramp, exact, lns, policy, mcts, sample, beam."""
     mode: str = choice("utility", "utility", "unitary")
     """'utility' or 'unitary' (count acquisitions)."""
-    time_limit: float = ranged(60.0, 0, lo_open=True)
+    time_limit: float = ranged(60.0, 0, WEEK_S, lo_open=True)
     """Seconds per instance for the searching solvers (ramp, exact, lns)."""
-    search_time: float = 0.0
+    search_time: float = ranged(0.0, 0, WEEK_S)
     """Seconds of search per instance for the learned searches (sample, beam); 0: no limit (one round of
     samples, the whole beam)."""
     samples: int = 16
@@ -534,7 +541,11 @@ class EvalConfig:
     budgets: tuple[int, ...] = ranged((0, 10, 100, 1000), 0)
     """MCTS simulations per decision (mcts solver only)."""
     out: str = "runs/eval"
-    """Directory of the results: results.parquet, report.md, schedules/."""
+    """Directory of the results: results.parquet, report.md, schedules/.  A rerun with the same settings resumes
+    a killed evaluation; a finished one is replaced only with --overwrite; a directory eosp did not write is
+    refused."""
+    overwrite: bool = False
+    """Replace the finished evaluation in --out (only one eosp wrote)."""
     save_schedules: bool = True
     html_reports: int = ranged(3, 0)
     """Write the HTML report of `eosp report` (map, timeline, roll/pitch, summary of every solver's schedule) for

@@ -3,6 +3,19 @@
 from __future__ import annotations
 
 import sys
+from pathlib import Path
+
+PROG = ""  # the program that one-line errors name ("eosp solve", "train.py"); set by eosp.args.Parser
+
+
+def prog() -> str:
+    """The program name one-line errors start with: :data:`PROG`, else the script's file name."""
+    return PROG or Path(sys.argv[0]).name or "eosp"
+
+
+def error_line(message: object) -> str:
+    """The one line a user error prints: ``PROG: error: MESSAGE`` (MESSAGE names the file or option first)."""
+    return f"{prog()}: error: {message}"
 
 
 class InputError(ValueError):
@@ -30,12 +43,12 @@ class InputError(ValueError):
 
 
 class Refused(SystemExit):
-    """A job refuses its arguments or its surroundings: one line ``error: ...`` on stderr, exit status 2.
+    """A job refuses its arguments or its surroundings: one line ``PROG: error: ...`` on stderr, exit status 2.
 
-    ``message`` keeps the line.  Printed when raised, because Python prints a SystemExit's code only
+    ``message`` keeps ``error: ...``.  Printed when raised, because Python prints a SystemExit's code only
     when it is not an int, and then exits with status 1."""
 
     def __init__(self, message: str):
         self.message = f"error: {message}"
-        print(self.message, file=sys.stderr, flush=True)
+        print(error_line(message), file=sys.stderr, flush=True)
         super().__init__(2)

@@ -56,8 +56,21 @@ def available_bytes() -> int | None:
     return min(vals) if vals else None
 
 
+MAX_BYTES: int | None = None  # the user's own ceiling (--max-memory-gb), on top of what the machine has
+
+
+def set_max_memory_gb(gb: float | None) -> None:
+    """Set (or clear, with None or 0) the ceiling every :func:`require_memory` also applies (--max-memory-gb)."""
+    global MAX_BYTES
+    MAX_BYTES = int(gb * GiB) if gb else None
+
+
 def require_memory(file: object, need: int, what: str) -> None:
-    """Raise a one-line :class:`InputError` when `need` bytes are clearly not available."""
+    """Raise a one-line :class:`InputError` when `need` bytes are clearly not available, or exceed the user's
+    ceiling (:func:`set_max_memory_gb`): before the work, with the estimate, instead of the kernel's OOM killer."""
+    if MAX_BYTES is not None and need > MAX_BYTES:
+        raise InputError(file, f"too large for --max-memory-gb {MAX_BYTES / GiB:g}: {what} needs about "
+                               f"{need / GiB:.1f} GiB")
     have = available_bytes()
     if have is not None and need > have:
         raise InputError(file, f"too large for the memory available: {what} needs about {need / GiB:.1f} GiB, "

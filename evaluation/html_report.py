@@ -32,6 +32,7 @@ from pathlib import Path
 import numpy as np
 
 from eosp.atomic import atomic_path
+from eosp.ownership import check_output, html_mark
 from eosp.config import CLASS_UTILITIES
 from eosp.errors import InputError
 from eosp.instances.instance import ATTITUDE_COLUMNS, Instance
@@ -434,17 +435,27 @@ def build_report(inst: Instance, schedules: dict[str, Schedule], title: str | No
             + f"; {len(views)} schedule(s); values are sums of utilities, checked by the independent checker")
     title = title or f"{inst.name}: schedules"
     note_html = "".join(f"<p class='note'>{html.escape(n)}</p>" for n in notes)
-    return ("<!DOCTYPE html>\n<html lang='en'><head><meta charset='utf-8'>"
+    return ("<!DOCTYPE html>\n<html lang='en'><head><meta charset='utf-8'>" + html_mark(REPORT_KIND) +
             f"<title>{html.escape(title)}</title><style>{_STYLE}</style></head>\n"
             f"<body data-instance='{html.escape(inst.name, quote=True)}' data-acquisitions='{inst.n_acq}' "
             f"data-schedules='{len(views)}'>\n<h1>{html.escape(title)}</h1><p class='meta'>{meta}</p>{note_html}\n"
             f"{_summary_table(inst, views)}\n" + "\n".join(sections) + "\n</body></html>\n")
 
 
-def write_report(inst: Instance, schedules: dict[str, Schedule], out: str | Path, title: str | None = None) -> Path:
-    """Build the report and write it atomically (nothing is written when a schedule is refused)."""
+REPORT_KIND = "report"  # the mark (eosp.ownership): a meta tag in the page's head
+
+
+def check_report_out(out: str | Path, overwrite: bool = False) -> Path:
+    """Refuse, before any work, an HTML output path eosp must not write (:func:`eosp.ownership.check_output`)."""
+    return check_output(out, REPORT_KIND, overwrite, suffixes=(".html", ".htm"))
+
+
+def write_report(inst: Instance, schedules: dict[str, Schedule], out: str | Path, title: str | None = None,
+                 overwrite: bool = False) -> Path:
+    """Build the report and write it atomically (nothing is written when a schedule is refused); an existing page
+    is replaced only when eosp wrote it and `overwrite` is given."""
+    out = check_report_out(out, overwrite)
     text = build_report(inst, schedules, title)
-    out = Path(out)
     with atomic_path(out, suffix=".html") as tmp:
         tmp.write_text(text, encoding="utf-8")  # atomic_path gives it the usual permissions (umask)
     return out

@@ -17,6 +17,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
 from eosp.atomic import atomic_path  # noqa: E402
+from eosp.ownership import check_output, mark_svg, png_mark  # noqa: E402
 from eosp.instances.instance import Instance  # noqa: E402
 from eosp.instances.schedule import Schedule, to_internal_nodes  # noqa: E402
 
@@ -39,8 +40,11 @@ def node_rolls(inst: Instance) -> tuple[np.ndarray, np.ndarray] | None:
 
 
 def plot_trajectories(inst: Instance, schedules: dict[str, Schedule], out: str | Path,
-                      title: str | None = None) -> list[Path]:
+                      title: str | None = None, overwrite: bool = False) -> list[Path]:
+    """Roll against time of `schedules`, written as OUT.png and OUT.svg (an existing one replaced only when eosp
+    wrote it and `overwrite` is given)."""
     out = Path(out)
+    check_plot_out(out, overwrite)
     out.parent.mkdir(parents=True, exist_ok=True)
     g, a = inst.node_graph, inst.acqs
     rolls = node_rolls(inst)
@@ -78,15 +82,33 @@ def plot_trajectories(inst: Instance, schedules: dict[str, Schedule], out: str |
     ax.set_xlabel("time (s)")
     ax.set_ylabel(ylabel)
     ax.set_title(title or f"{inst.name}: {inst.n_acq} candidates")
-    if schedules:
+    if ax.get_legend_handles_labels()[0]:  # empty schedules draw nothing to name (matplotlib would warn)
         ax.legend(loc="upper right", fontsize=8)
     fig.tight_layout()
-    paths = [out.with_suffix(".png"), out.with_suffix(".svg")]
+    paths = check_plot_out(out, overwrite)
     for p in paths:
-        with atomic_path(p, suffix=p.suffix) as tmp:
-            fig.savefig(tmp, dpi=130, format=p.suffix[1:])
+        save_marked(fig, p, dpi=130)
     plt.close(fig)
     return paths
+
+
+PLOT_KIND = "plot"  # the mark (eosp.ownership): a PNG text chunk, an SVG comment
+
+
+def check_plot_out(out: str | Path, overwrite: bool = False) -> list[Path]:
+    """The PNG and SVG paths of plot `out` (its suffix replaced), each refused before any work when eosp must not
+    write it (:func:`eosp.ownership.check_output`)."""
+    return [check_output(Path(out).with_suffix(ext), PLOT_KIND, overwrite, suffixes=(ext,)) for ext in (".png", ".svg")]
+
+
+def save_marked(fig, path: Path, **kwargs) -> Path:
+    """Save `fig` atomically as PNG or SVG (by the suffix), with eosp's mark."""
+    fmt = path.suffix[1:].lower()
+    with atomic_path(path, suffix=path.suffix) as tmp:
+        fig.savefig(tmp, format=fmt, metadata=png_mark(PLOT_KIND) if fmt == "png" else None, **kwargs)
+        if fmt == "svg":
+            mark_svg(tmp, PLOT_KIND)
+    return path
 
 
 def plot_class_counts(results, out: str | Path) -> Path:

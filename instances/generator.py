@@ -222,6 +222,36 @@ def _csv_points(path: str) -> tuple[np.ndarray, np.ndarray]:
 
 # --------------------------------------------------------------------------- instance
 
+# Sizes of a generated instance per acquisition, measured on the default orbit and agility (300 and 600
+# acquisitions, steps of 1 and 2 s): ~109 nodes per acquisition at a 1 s step, ~54 n^2 unpruned arcs at a 1 s
+# step (each acquisition reaches most later ones), 28-45 bytes per arc at the peak of generation and writing.
+NODES_PER_ACQ_STEP = 110.0
+ARCS_PER_ACQ2_STEP = 55.0
+BYTES_PER_ARC = 48
+BYTES_PER_NODE = 64
+BASE_BYTES = 128 * 1024 ** 2
+
+
+def estimate_size(cfg: InstanceConfig) -> tuple[int, int, int]:
+    """(nodes, unpruned arcs, peak bytes) of generating `cfg`, from the request alone (no generation): what
+    :func:`require_generate_memory` compares with the memory available before a long generation starts."""
+    n, step = cfg.n_acquisitions, max(float(cfg.graph.step_s), 1e-3)
+    nodes = int(NODES_PER_ACQ_STEP * n / step) + 1
+    arcs = int(min(ARCS_PER_ACQ2_STEP * n * n / step, nodes * (nodes - 1) / 2))
+    return nodes, arcs, BASE_BYTES + BYTES_PER_ARC * arcs + BYTES_PER_NODE * nodes
+
+
+def require_generate_memory(cfg: InstanceConfig, where: object, parallel: int = 1) -> None:
+    """A one-line InputError (naming `where`, e.g. ``--n-acquisitions``) when generating `cfg`, `parallel` at a
+    time, cannot fit in the memory available or in --max-memory-gb (:func:`eosp.memory.require_memory`)."""
+    from eosp.memory import require_memory
+
+    nodes, arcs, need = estimate_size(cfg)
+    times = f"{parallel} at a time, each " if parallel > 1 else ""
+    require_memory(where, need * parallel, f"generating {times}{cfg.n_acquisitions:,} acquisitions (about "
+                                          f"{nodes:,} nodes, {arcs:,} arcs)")
+
+
 def generate(cfg: InstanceConfig, name: str | None = None) -> Instance:
     """Generate one instance (acquisitions and the unpruned discrete graph)."""
     rng = np.random.default_rng(cfg.seed)

@@ -18,7 +18,8 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
 
-from eosp.atomic import atomic_dir, check_output_dir
+from eosp.atomic import atomic_dir
+from eosp.ownership import check_output, json_mark, kind_of
 from eosp.errors import InputError
 from eosp.memory import require_memory
 from eosp.graphs.discrete import DiscreteGraph, acq_ptr_from_node_acq
@@ -396,6 +397,7 @@ def read_instance(directory: str | Path, name: str | None = None) -> Instance:
             raise InputError(mpath, f"not valid JSON: {exc}") from None
         if not isinstance(meta, dict):
             raise InputError(mpath, "must hold a JSON object")
+        meta.pop("eosp", None)  # the mark of a directory eosp wrote (eosp.ownership): about the files, not the instance
     return Instance(name=name or str(meta.get("name", d.name)), acqs=acqs, unpruned_graph=graph, node_ids=node_ids,
                     meta=meta)
 
@@ -426,31 +428,42 @@ def acquisitions_table(acqs: Acquisitions) -> pa.Table:
 INSTANCE_FILES = ("acquisitions.parquet", "nodes.parquet", "arcs.parquet", "meta.json")
 
 
+INSTANCE_KIND = "instance"  # the mark (eosp.ownership) of the directories write_instance writes, in meta.json
+
+
 def is_instance_dir(directory: str | Path) -> bool:
-    """Whether `directory` looks written by :func:`write_instance`: its four files and nothing else."""
+    """Whether `directory` was written by :func:`write_instance`: its four files, nothing else, and the mark
+    ``"eosp": "instance"`` in its meta.json (a user's directory of the same files is not eosp's)."""
     d = Path(directory)
     try:
         names = {p.name for p in d.iterdir()}
     except OSError:
         return False
-    return names == set(INSTANCE_FILES) and all((d / f).is_file() for f in INSTANCE_FILES)
+    return (names == set(INSTANCE_FILES) and all((d / f).is_file() for f in INSTANCE_FILES)
+            and kind_of(d) == INSTANCE_KIND)
 
 
 def check_instance_out(directory: str | Path, overwrite: bool = False) -> Path:
-    """Refuse, before any work, an output directory that :func:`write_instance` must not write."""
-    return check_output_dir(directory, overwrite=overwrite, owned=is_instance_dir, what="instance directory")
+    """Refuse, before any work, an output directory that :func:`write_instance` must not write
+    (:func:`eosp.ownership.check_output`)."""
+    d = check_output(directory, INSTANCE_KIND, overwrite, directory=True)
+    if d.exists() and not is_instance_dir(d):
+        raise InputError(d, "exists and is not an instance directory written by eosp: refusing to replace it "
+                            "(it holds other files)")
+    return d
 
 
 def write_instance(inst: Instance, directory: str | Path, overwrite: bool = False) -> Path:
     """Write `inst` as an interchange directory (atomically); `overwrite` replaces only an instance directory."""
     g = inst.unpruned("the interchange format")
     ids = inst.node_ids
+    check_instance_out(directory, overwrite)
     with atomic_dir(directory, overwrite=overwrite, owned=is_instance_dir) as tmp:
         pq.write_table(acquisitions_table(inst.acqs), tmp / "acquisitions.parquet")
         pq.write_table(pa.table({"node": pa.array(ids, pa.int32()), "acq": pa.array(g.node_acq, pa.int32()),
                                  "time": pa.array(g.node_time, pa.float64())}), tmp / "nodes.parquet")
         pq.write_table(pa.table({"src": pa.array(ids[g.src()], pa.int32()), "dst": pa.array(ids[g.dst], pa.int32())}),
                        tmp / "arcs.parquet")
-        meta = {"name": inst.name, **inst.meta}
+        meta = {"name": inst.name, **inst.meta, **json_mark(INSTANCE_KIND)}
         (tmp / "meta.json").write_text(json.dumps(meta, indent=1, sort_keys=True))
     return Path(directory)

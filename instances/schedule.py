@@ -17,8 +17,9 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
 
-from eosp.atomic import atomic_path, check_output_file
+from eosp.atomic import atomic_path
 from eosp.errors import InputError
+from eosp.ownership import check_output, json_mark, parquet_mark
 from eosp.instances.instance import Instance
 from eosp.instances.interchange import TIME_TOL, check_columns, column, read_parquet
 
@@ -56,9 +57,13 @@ def value(inst: Instance, schedule: Schedule) -> float:
 SCHEDULE_SUFFIXES = (".parquet", ".jsonl", ".json")
 
 
-def check_schedule_out(path: str | Path) -> Path:
-    """Refuse, before any work, a schedule output path that is a directory or has an unknown extension."""
-    return check_output_file(path, SCHEDULE_SUFFIXES, what="schedule file")
+SCHEDULE_KIND = "schedule"  # the mark (eosp.ownership) of the schedule files eosp writes
+
+
+def check_schedule_out(path: str | Path, overwrite: bool = False) -> Path:
+    """Refuse, before any work, a schedule output path that is a directory, has an unknown extension, or is an
+    existing file that eosp did not write (or did, without `overwrite`): :func:`eosp.ownership.check_output`."""
+    return check_output(path, SCHEDULE_KIND, overwrite, suffixes=SCHEDULE_SUFFIXES)
 
 
 def _column(values: np.ndarray, dtype: type) -> pa.Array:
@@ -68,17 +73,24 @@ def _column(values: np.ndarray, dtype: type) -> pa.Array:
     return pa.Array.from_buffers(pa.from_numpy_dtype(values.dtype), len(values), [None, pa.py_buffer(values)])
 
 
-def write_schedule(schedule: Schedule, path: str | Path) -> Path:
-    """Write a schedule as Parquet, or as JSON lines when the name ends in .jsonl/.json (atomically)."""
-    path = check_schedule_out(path)
+def write_schedule(schedule: Schedule, path: str | Path, overwrite: bool = False) -> Path:
+    """Write a schedule as Parquet, or as JSON lines when the name ends in .jsonl/.json (atomically), marked as
+    eosp's (Parquet metadata; the key "eosp" of the first JSON line, alone on its line for an empty schedule).
+    An existing file is replaced only when eosp wrote it and `overwrite` is given."""
+    path = check_schedule_out(path, overwrite)
+    mark = json_mark(SCHEDULE_KIND)
     with atomic_path(path) as tmp:
-        if path.suffix in (".jsonl", ".json"):
+        if path.suffix.lower() in (".jsonl", ".json"):
             with open(tmp, "w") as fh:
-                for a, n, s in zip(schedule.acq.tolist(), schedule.node.tolist(), schedule.start.tolist()):
-                    fh.write(json.dumps({"acq": a, "node": n, "start": s}) + "\n")
+                rows = zip(schedule.acq.tolist(), schedule.node.tolist(), schedule.start.tolist())
+                for k, (a, n, s) in enumerate(rows):
+                    fh.write(json.dumps({"acq": a, "node": n, "start": s, **(mark if k == 0 else {})}) + "\n")
+                if len(schedule) == 0:
+                    fh.write(json.dumps(mark) + "\n")
         else:
-            pq.write_table(pa.table({"acq": _column(schedule.acq, np.int32), "node": _column(schedule.node, np.int32),
-                                     "start": _column(schedule.start, np.float64)}), tmp)
+            table = pa.table({"acq": _column(schedule.acq, np.int32), "node": _column(schedule.node, np.int32),
+                              "start": _column(schedule.start, np.float64)})
+            pq.write_table(table.replace_schema_metadata(parquet_mark(SCHEDULE_KIND)), tmp)
     return path
 
 
@@ -94,13 +106,21 @@ def read_schedule(path: str | Path) -> Schedule:
                                " (CSV is not read: convert it)")
     if path.suffix.lower() in (".jsonl", ".json"):
         rows = []
-        for k, line in enumerate(path.read_text().splitlines()):
+        try:
+            text = path.read_text(encoding="utf-8")
+        except UnicodeDecodeError as exc:
+            raise InputError(path, f"not UTF-8 text (JSON lines expected): byte {exc.start} cannot be read") from None
+        for k, line in enumerate(text.splitlines()):
             if not line.strip():
                 continue
             try:
                 row = json.loads(line)
             except json.JSONDecodeError as exc:
                 raise InputError(path, f"not valid JSON: {exc}", row=k) from None
+            if isinstance(row, dict):
+                row.pop("eosp", None)  # the mark of a file eosp wrote (eosp.ownership), not a column
+                if not row:
+                    continue
             if not isinstance(row, dict) or set(row) != set(SCHEDULE_COLUMNS):
                 raise InputError(path, f"each line must be an object with keys {sorted(SCHEDULE_COLUMNS)}", row=k)
             for key in ("acq", "node"):

@@ -16,7 +16,6 @@ environment variable ``EOSP_FAULT_KILL_AFTER=N``.)
 
 from __future__ import annotations
 
-import argparse
 import json
 import os
 import signal
@@ -24,7 +23,7 @@ import sys
 import time
 from pathlib import Path
 
-from eosp.args import add_config_args, config_from_args, prefixed_config  # noqa: E402
+from eosp.args import Parser, add_config_args, add_memory_arg, config_from_args, prefixed_config, run_job  # noqa: E402
 from eosp.config import DatasetConfig, InstanceConfig, RayConfig, changed, family_config, to_dict  # noqa: E402
 
 
@@ -55,28 +54,46 @@ def _same_dataset(a: dict, b: dict) -> bool:
 def existing_shard(cfg: DatasetConfig, shard: int, path: Path) -> dict | None:
     """The manifest entry of a complete shard `path` of this data set, None when it is not there yet.
 
-    SystemExit (one line) when the file is not a readable shard of this very data set: it is the user's to remove.
+    InputError (one line) when the file is not a readable shard of this very data set: never replaced.
     """
     from eosp.errors import InputError
-    from eosp.shards.io import ShardReader
+    from eosp.shards.io import ShardReader, is_shard
 
     if not path.exists():
         return None
+    if not is_shard(path):
+        raise InputError(path, "exists and is not a shard written by eosp: refusing to replace it (use another --out)")
     first = shard * cfg.per_shard
     expected = min(cfg.n_instances, first + cfg.per_shard) - first
     try:
         reader = ShardReader(path)
         if not _same_dataset(reader.extra.get("dataset", {}), to_dict(cfg)):
-            raise SystemExit(f"error: {path} belongs to a data set with other settings: use another --out, "
-                             "or remove it")
+            raise InputError(path, "belongs to a data set with other settings: use another --out")
         if len(reader) != expected:
             raise InputError(path, f"holds {len(reader)} instances, expected {expected}")
         insts = list(reader)
     except InputError as exc:
-        raise SystemExit(f"error: {exc} (not a complete shard of this data set: remove it to rebuild it)") from None
+        if "other settings" in exc.message:
+            raise
+        raise InputError(path, f"{exc.message} (not a complete shard of this data set: use another --out)") from None
     return {"file": path.name, "instances": [i.name for i in insts], "seconds": 0.0, "resumed": True,
             "nodes": int(sum(i.n_nodes for i in insts)), "arcs": int(sum(i.unpruned().n_arcs for i in insts)),
             "pruned_arcs": int(sum(i.pruned().n_arcs for i in insts)), "bytes": path.stat().st_size}
+
+
+DATASET_KIND = "dataset"  # the mark (eosp.ownership) of a data set directory: its .eosp.json and manifest.json
+
+
+def check_dataset_out(cfg: DatasetConfig) -> Path:
+    """Refuse, before Ray starts or anything is written, an --out that is a file or a directory eosp did not write
+    (a user's files are never written beside); an empty directory or one of eosp's data sets (resumed) is kept."""
+    from eosp.errors import InputError
+    from eosp.ownership import check_output
+
+    try:
+        return check_output(cfg.out, DATASET_KIND, directory=True, reuse=True)
+    except InputError as exc:
+        raise InputError(f"--out {cfg.out}", exc.message) from None
 
 
 def run(cfg: DatasetConfig, ray_cfg: RayConfig) -> dict:
@@ -84,14 +101,21 @@ def run(cfg: DatasetConfig, ray_cfg: RayConfig) -> dict:
 
     from eosp.atomic import atomic_path
     from eosp.jobs.ray_init import init_ray
+    from eosp.ownership import json_mark, kind_of, mark_dir
 
-    out = Path(cfg.out)
-    if out.exists() and not out.is_dir():
-        raise SystemExit(f"error: --out {out} is a file, not a directory")
+    out = check_dataset_out(cfg)
+    n_shards = (cfg.n_instances + cfg.per_shard - 1) // cfg.per_shard
+    from eosp.instances.generator import require_generate_memory
+
+    extra = {k: v for k, v in changed(cfg.instance, InstanceConfig()).items()
+             if k not in ("n_acquisitions", "seed", "family")}
+    require_generate_memory(family_config(cfg.family, cfg.n_acquisitions, cfg.seed, **extra), "--n-acquisitions",
+                            parallel=max(1, min(n_shards, ray_cfg.num_cpus or 1)))
     out.mkdir(parents=True, exist_ok=True)
+    if kind_of(out) != DATASET_KIND:
+        mark_dir(out, DATASET_KIND)  # from now on eosp's: a rerun resumes in it
     for stale in out.glob(".shard-*.parquet.*"):  # temporaries of a killed run, never renamed into place
         stale.unlink(missing_ok=True)
-    n_shards = (cfg.n_instances + cfg.per_shard - 1) // cfg.per_shard
     done: dict[int, dict] = {}
     for s in range(n_shards):
         entry = existing_shard(cfg, s, out / f"shard-{s:05d}.parquet")
@@ -114,18 +138,29 @@ def run(cfg: DatasetConfig, ray_cfg: RayConfig) -> dict:
               f"instances, {done[s]['seconds']:.1f} s)", flush=True)
         if built == kill_after:  # fault injection for the tests: die like a killed job
             os.kill(os.getpid(), signal.SIGKILL)
-    manifest = {"dataset": to_dict(cfg), "shards": [done[s] for s in range(n_shards)],
+    manifest = {**json_mark(DATASET_KIND), "dataset": to_dict(cfg), "shards": [done[s] for s in range(n_shards)],
                 "wall_seconds": round(time.perf_counter() - t0, 3)}
     with atomic_path(Path(cfg.out) / "manifest.json") as tmp:
         tmp.write_text(json.dumps(manifest, indent=1))
     return manifest
 
 
-def main(argv: list[str] | None = None) -> int:
-    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    add_config_args(p, DatasetConfig)
+def main(argv: list[str] | None = None, prog: str = "build_shards.py") -> int:
+    """The job (`prog`: how errors name it, e.g. ``eosp build-shards``); user errors are one line, exit 2."""
+    return run_job(_main, argv, prog)
+
+
+def _main(argv: list[str] | None) -> int:
+    from eosp import errors
+
+    p = Parser(prog=errors.PROG, description=__doc__.splitlines()[0])
+    add_config_args(p, DatasetConfig)  # (--max-memory-gb is not a setting of the data set: not in its config)
     add_config_args(p, RayConfig, prefix="ray.")
+    add_memory_arg(p)
     ns = p.parse_args(argv)
+    from eosp.memory import set_max_memory_gb
+
+    set_max_memory_gb(ns.max_memory_gb)
     cfg = config_from_args(DatasetConfig, ns)
     ray_cfg = prefixed_config(RayConfig, ns, "ray.")
     from eosp.jobs.preflight import require_findable

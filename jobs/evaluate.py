@@ -27,6 +27,7 @@ import hashlib
 import json
 import os
 import re
+import shutil
 import signal
 import sys
 import time
@@ -34,7 +35,7 @@ from pathlib import Path
 
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 
-from eosp.args import add_config_args, config_from_args, prefixed_config  # noqa: E402
+from eosp.args import Parser, add_config_args, config_from_args, prefixed_config, run_job  # noqa: E402
 from eosp.config import EvalConfig, RayConfig, default_mlflow_uri, flatten  # noqa: E402
 
 
@@ -76,7 +77,7 @@ class SolverWorker:
         label = f"mcts({budget})" if solver == "mcts" else solver
         if cfg.save_schedules and verdict.feasible:  # only schedules that pass the checker are written
             folder = re.sub(r"[^\w.-]", "_", f"{Path(shard).stem}-{index}-{inst.name}")
-            write_schedule(sched, Path(cfg.out) / "schedules" / folder / f"{label}.parquet")
+            write_schedule(sched, Path(cfg.out) / "schedules" / folder / f"{label}.parquet", overwrite=True)
         value = float(len(sched)) if cfg.mode == "unitary" else verdict.value
         counts = np.bincount(inst.priorities()[sched.acq].astype(np.int64), minlength=N_CLASSES)
         return {**{f"class_{c}": int(counts[c]) for c in range(N_CLASSES)},
@@ -100,6 +101,7 @@ class SolverWorker:
 
 
 LEARNED = ("policy", "mcts", "sample", "beam")
+SOLVERS = ("random", "greedy", "ramp", "exact", "lns", *LEARNED)
 
 
 RESUME_KEYS = ("mode", "time_limit", "search_time", "samples", "beam_width", "polish", "refine", "windows",
@@ -166,6 +168,7 @@ def run(cfg: EvalConfig, ray_cfg: RayConfig) -> "object":
     from eosp.jobs.ray_init import init_ray
     from eosp.evaluation.plots import plot_class_counts
     from eosp.evaluation.report import markdown
+    from eosp.ownership import kind_of, mark_dir
     from eosp.shards.io import ShardReader
 
     if set(LEARNED) & set(cfg.solvers) and not cfg.checkpoint:
@@ -174,8 +177,13 @@ def run(cfg: EvalConfig, ray_cfg: RayConfig) -> "object":
         fast = (f" (searches with a time limit on more than {FAST_ABOVE} acquisitions: "
                 f"{pretrained_dir(FAST[cfg.mode])})") if cfg.mode in FAST else ""
         print(f"[evaluate] policy/mcts: the shipped model {pretrained_dir(cfg.mode)}{fast}", flush=True)
-    if Path(cfg.out).exists() and not Path(cfg.out).is_dir():
-        raise SystemExit(f"error: --out {cfg.out} is a file, not a directory")
+    check_eval_out(cfg)
+    out = Path(cfg.out)
+    if cfg.overwrite and kind_of(out) == EVAL_KIND and not (out / "partial").exists():
+        shutil.rmtree(out)  # a finished evaluation of eosp's, replaced as asked
+    out.mkdir(parents=True, exist_ok=True)
+    if kind_of(out) != EVAL_KIND:
+        mark_dir(out, EVAL_KIND)
     jobs = []
     for shard in expand_shards(list(cfg.data)):
         for i in range(len(ShardReader(shard))):
@@ -232,11 +240,26 @@ def run(cfg: EvalConfig, ray_cfg: RayConfig) -> "object":
         mlflow.log_artifact(str(counts_png))
         for p in html:
             mlflow.log_artifact(str(p), artifact_path="reports")
-    import shutil
-
     shutil.rmtree(partial, ignore_errors=True)  # complete: the results are in results.parquet
     print(report)
     return results
+
+
+EVAL_KIND = "evaluation"  # the mark (eosp.ownership) of an evaluation's --out directory
+
+
+def check_eval_out(cfg: EvalConfig) -> Path:
+    """Refuse, before Ray or MLflow start, an --out that eosp must not write: a file, a directory eosp did not write
+    (never written into), or a finished evaluation without --overwrite.  A killed one (OUT/partial/) resumes."""
+    from eosp.errors import InputError
+    from eosp.ownership import check_output
+
+    out = Path(cfg.out)
+    resumable = (out / "partial").is_dir() or not (out / "results.parquet").exists()
+    try:
+        return check_output(out, EVAL_KIND, cfg.overwrite, directory=True, reuse=resumable and not cfg.overwrite)
+    except InputError as exc:
+        raise InputError(f"--out {cfg.out}", exc.message) from None
 
 
 def _label(job: tuple) -> str:
@@ -257,20 +280,33 @@ def write_html_reports(cfg: EvalConfig, jobs: list[tuple], rows: list[dict]) -> 
         inst = ShardReader(shard).read(index)
         folder = re.sub(r"[^\w.-]", "_", f"{Path(shard).stem}-{index}-{inst.name}")
         written.append(write_report(inst, scheds, Path(cfg.out) / "reports" / f"{folder}.html",
-                                    title=f"{inst.name} ({Path(shard).name} #{index}): {cfg.mode} mode"))
+                                    title=f"{inst.name} ({Path(shard).name} #{index}): {cfg.mode} mode",
+                                    overwrite=True))
     return written
 
 
 def main(argv: list[str] | None = None) -> int:
-    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    """The job; user errors are one line ``evaluate.py: error: ...`` and exit 2 before Ray or MLflow start."""
+    return run_job(_main, argv, "evaluate.py")
+
+
+def _main(argv: list[str] | None) -> int:
+    p = Parser(prog="evaluate.py", description=__doc__.splitlines()[0])
     add_config_args(p, EvalConfig)
     add_config_args(p, RayConfig, prefix="ray.")
     ns = p.parse_args(argv)
     cfg = config_from_args(EvalConfig, ns)
     ray_cfg = prefixed_config(RayConfig, ns, "ray.")
-    from eosp.jobs.preflight import check_mlflow, require_findable
+    from eosp.jobs.preflight import check_mlflow, require_checkpoint, require_data, require_findable
 
     require_findable(cfg.out, "--out")
+    require_data(cfg.data, "--data")
+    unknown = [s for s in cfg.solvers if s not in SOLVERS]
+    if unknown:
+        p.error(f"--solvers: unknown solver {unknown[0]!r}; one of {', '.join(SOLVERS)}")
+    if set(LEARNED) & set(cfg.solvers):
+        require_checkpoint(cfg.checkpoint, "--checkpoint")
+    check_eval_out(cfg)
     check_mlflow(cfg.mlflow_uri)
     run(cfg, ray_cfg)
     return 0

@@ -145,3 +145,79 @@ def ray_nodes() -> list[dict[str, float]]:
     import ray
 
     return [dict(node["Resources"]) for node in ray.nodes() if node.get("Alive")]
+
+
+# --------------------------------------------------------------------------- data sets and run directories, before any service
+
+def require_data(paths, flag: str) -> None:
+    """InputError (one line, exit 2 through the job's error path) unless every path of `paths` (one or a tuple)
+    is a data set: a shard file, or a directory of shards written by eosp.  Checked from the files' headers
+    before Ray or MLflow start; an instance directory is told apart (it needs ``eosp import`` first)."""
+    from eosp.errors import InputError
+    from eosp.shards.io import is_shard
+
+    for path in (paths,) if isinstance(paths, (str, Path)) else paths:
+        p = Path(path)
+        where = f"{flag} {path}"
+        if not p.exists():
+            raise InputError(where, "not found (a data set directory of shards, or a shard file)")
+        if p.is_dir() and all((p / f).is_file() for f in ("acquisitions.parquet", "nodes.parquet", "arcs.parquet")):
+            raise InputError(where, "is an instance directory, not a data set of shards: import it first "
+                                    "(eosp import DIR --out SHARD.parquet) and pass the shard")
+        files = [p] if p.is_file() else sorted(p.glob("*.parquet"))
+        if not files:
+            raise InputError(where, "no shard (*.parquet) in this directory")
+        foreign = next((f for f in files if not is_shard(f)), None)
+        if foreign is not None:
+            raise InputError(foreign, f"not a shard written by eosp (given as {flag})")
+
+
+def require_run_dir(path: str | Path, kind: str, prefix: str, resume: bool = False, overwrite: bool = False) -> Path:
+    """Refuse, before any service starts or any directory is created, a run directory that eosp must not write:
+    an existing one eosp did not write (never written into), or one it did unless the job resumes it (`resume`)
+    or replaces it (`overwrite`).  `prefix`: the flags' ('--train': --train.run-dir, --train.overwrite,
+    --train.resume).  :func:`eosp.ownership.check_output`; a one-line InputError naming the flag."""
+    from eosp.errors import InputError
+    from eosp.ownership import check_output, kind_of
+
+    p = Path(path)
+    where = f"{prefix}.run-dir {p.parent} {prefix}.run-name {p.name}" if kind == "run" else f"{prefix}.run-dir {p}"
+    if p.is_dir() and kind_of(p) == kind and not (resume or overwrite):
+        raise InputError(where, f"{p} already exists: pass {prefix}.resume true to continue it, "
+                                f"{prefix}.overwrite true to replace it, or another run name")
+    try:
+        return check_output(p, kind, overwrite, directory=True, reuse=resume or overwrite)
+    except InputError as exc:
+        raise InputError(where, f"{p} {exc.message}") from None
+
+
+def make_run_dir(run_dir: Path, replace: bool, kind: str = "run") -> None:
+    """Create the run directory with eosp's mark (eosp.ownership), an old one of eosp's removed first when
+    `replace` (--train.overwrite; require_run_dir refused anything else before any service started)."""
+    import shutil
+
+    from eosp.ownership import kind_of, mark_dir
+
+    if replace and run_dir.is_dir() and kind_of(run_dir) == kind:
+        shutil.rmtree(run_dir)
+    run_dir.mkdir(parents=True, exist_ok=True)
+    if kind_of(run_dir) != kind:
+        mark_dir(run_dir, kind)
+
+
+def require_checkpoint(checkpoint: str, flag: str = "--checkpoint") -> None:
+    """A one-line InputError, before any service starts, unless `checkpoint` is empty (the shipped model), a
+    shipped model by name (``pretrained:NAME``) or an agent checkpoint that loads (:func:`load_agent`)."""
+    from eosp.errors import InputError
+    from eosp.models.pretrained import PREFIX, pretrained_dir
+
+    if not checkpoint:
+        return
+    if checkpoint.startswith(PREFIX):
+        pretrained_dir(checkpoint[len(PREFIX):])
+        return
+    if not Path(checkpoint).exists():
+        raise InputError(f"{flag} {checkpoint}", "checkpoint not found")
+    from eosp.models.checkpoint import load_agent
+
+    load_agent(checkpoint)

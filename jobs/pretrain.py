@@ -23,14 +23,14 @@ from pathlib import Path
 
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 
-from eosp.args import add_config_args, config_from_args  # noqa: E402
+from eosp.args import Parser, add_config_args, config_from_args, run_job  # noqa: E402
 from eosp.config import MODEL_PRESETS, ModelConfig, PretrainConfig, flatten, from_dict, to_dict  # noqa: E402
 from eosp.errors import InputError  # noqa: E402
 
 
 def parse(argv: list[str] | None) -> PretrainConfig:
-    p = argparse.ArgumentParser(description=__doc__.splitlines()[0],
-                                formatter_class=argparse.RawDescriptionHelpFormatter, epilog=__doc__)
+    p = Parser(prog="pretrain.py", description=__doc__.splitlines()[0],
+               formatter_class=argparse.RawDescriptionHelpFormatter, epilog=__doc__)
     add_config_args(p, PretrainConfig)
     ns = p.parse_args(argv)
     preset = vars(ns).get("imitation.preset", "cpu")
@@ -80,7 +80,9 @@ def run(cfg: PretrainConfig) -> dict:
         validator = Validator(im.val_data, cfg.env, im.max_val_instances, baselines=("greedy", "ramp", "exact"))
     run_dir = Path(im.run_dir) / im.run_name
     ckpt = run_dir / "checkpoints"
-    run_dir.mkdir(parents=True, exist_ok=True)
+    from eosp.jobs.preflight import make_run_dir
+
+    make_run_dir(run_dir, im.overwrite)
 
     if agent is None:
         agent = EOSPAgent(cfg.model)
@@ -144,16 +146,24 @@ def run(cfg: PretrainConfig) -> dict:
 
 
 def main(argv: list[str] | None = None) -> int:
-    cfg = parse(argv)
-    from eosp.jobs.preflight import check_mlflow, require_findable
+    """The job; user errors are one line ``pretrain.py: error: ...`` and exit 2 before Ray or MLflow start."""
+    return run_job(_main, argv, "pretrain.py")
 
-    require_findable(cfg.imitation.run_dir, "--imitation.run-dir")
-    check_mlflow(cfg.imitation.mlflow_uri, "--imitation.mlflow-uri")
-    try:
-        out = run(cfg)
-    except InputError as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
+
+def _main(argv: list[str] | None) -> int:
+    cfg = parse(argv)
+    from eosp.jobs.preflight import check_mlflow, require_data, require_findable, require_run_dir
+
+    im = cfg.imitation
+    require_findable(im.run_dir, "--imitation.run-dir")
+    require_run_dir(Path(im.run_dir) / im.run_name, "run", "--imitation", overwrite=im.overwrite)
+    require_data(im.train_data, "--imitation.train-data")
+    if im.val_data:
+        require_data(im.val_data, "--imitation.val-data")
+    if im.init_checkpoint and not Path(im.init_checkpoint).exists():
+        raise InputError(f"--imitation.init-checkpoint {im.init_checkpoint}", "checkpoint not found")
+    check_mlflow(im.mlflow_uri, "--imitation.mlflow-uri")
+    out = run(cfg)
     h = out["history"][-1]
     print(f"[pretrain] done: checkpoints in {Path(out['checkpoint']).parent}"
           + (f"; last validation: policy / optimum {h['val/ratio_to_exact']:.4f}, / RAMP {h['val/ratio_to_ramp']:.4f}, "

@@ -27,21 +27,43 @@ from pathlib import Path
 
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 
-from eosp.args import add_config_args, config_from_args  # noqa: E402
+from eosp.args import Parser, add_config_args, config_from_args, run_job  # noqa: E402
 from eosp.config import MODEL_PRESETS, DatasetConfig, ModelConfig, RunConfig, flatten, from_dict, to_dict  # noqa: E402
+from eosp.errors import InputError  # noqa: E402
 
 DEMO = {
     "train.train_data": "data/demo/train", "train.val_data": "data/demo/val", "train.iterations": 6,
     "train.train_batch_size": 400, "train.minibatch_size": 100, "train.validate_every": 3,
     "train.checkpoint_every": 3, "env.max_acquisitions": 64, "train.run_name": "demo",
+    "train.overwrite": True,  # the demo's own run, replaced by each demo
 }
 DEMO_DATA = {"data/demo/train": (24, 1000), "data/demo/val": (8, 900_000)}
 DEMO_ACQ = 50
 
 
+def read_config_file(path: str, cls: type):
+    """The config dataclass `cls` of a JSON file (--config); a one-line InputError naming the file otherwise."""
+    from eosp.errors import InputError
+
+    try:
+        data = json.loads(Path(path).read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise InputError(f"--config {path}", "file not found") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise InputError(f"--config {path}", f"cannot be read: {exc}") from None
+    except json.JSONDecodeError as exc:
+        raise InputError(path, f"not valid JSON: {exc}") from None
+    if not isinstance(data, dict):
+        raise InputError(path, f"must hold a JSON object (a {cls.__name__}), not {type(data).__name__}")
+    try:
+        return from_dict(cls, data)
+    except (ValueError, TypeError, KeyError) as exc:
+        raise InputError(path, f"not a valid {cls.__name__}: {exc}") from None
+
+
 def parse(argv: list[str] | None) -> tuple[RunConfig, argparse.Namespace]:
-    p = argparse.ArgumentParser(description=__doc__.splitlines()[0],
-                                formatter_class=argparse.RawDescriptionHelpFormatter, epilog=__doc__)
+    p = Parser(prog="train.py", description=__doc__.splitlines()[0],
+               formatter_class=argparse.RawDescriptionHelpFormatter, epilog=__doc__)
     p.add_argument("--demo", action="store_true",
                    help="small embedded defaults: build a tiny data set if missing, train briefly, compare to Greedy")
     p.add_argument("--config", default="", help="a RunConfig JSON (e.g. a sweep's best_config.json) used as the "
@@ -56,8 +78,8 @@ def parse(argv: list[str] | None) -> tuple[RunConfig, argparse.Namespace]:
     if preset not in MODEL_PRESETS:
         p.error(f"unknown preset {preset!r}; one of {', '.join(MODEL_PRESETS)}")
     if ns.config:
-        base = from_dict(RunConfig, json.loads(Path(ns.config).read_text()))
-        base.train.resume, base.train.run_name = False, ""
+        base = read_config_file(ns.config, RunConfig)
+        base.train.resume, base.train.run_name, base.train.overwrite = False, "", False
     else:
         base = RunConfig(model=from_dict(ModelConfig, MODEL_PRESETS[preset]))
     cfg = config_from_args(RunConfig, ns, base=base)
@@ -85,10 +107,26 @@ def ensure_demo_data(cfg: RunConfig) -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
+    """The job; user errors are one line ``train.py: error: ...`` and exit 2 before Ray or MLflow start."""
+    return run_job(_main, argv, "train.py")
+
+
+def _main(argv: list[str] | None) -> int:
     cfg, ns = parse(argv)
-    from eosp.jobs.preflight import check_mlflow, ray_nodes, require_cluster_fits, require_findable
+    from eosp.jobs.preflight import (check_mlflow, make_run_dir, ray_nodes, require_cluster_fits, require_data,
+                                     require_findable, require_run_dir)
 
     require_findable(cfg.train.run_dir, "--train.run-dir")
+    run_dir = Path(cfg.train.run_dir) / cfg.train.run_name
+    if cfg.train.resume and not (run_dir / "run.json").exists():
+        raise InputError("--train.resume", f"no run {run_dir / 'run.json'} to resume")
+    require_run_dir(run_dir, "run", "--train", resume=cfg.train.resume, overwrite=cfg.train.overwrite)
+    if not ns.demo:  # the demo builds its data set when missing
+        require_data(cfg.train.train_data, "--train.train-data")
+        if cfg.train.val_data:
+            require_data(cfg.train.val_data, "--train.val-data")
+    if cfg.train.init_checkpoint and not Path(cfg.train.init_checkpoint).exists():
+        raise InputError(f"--train.init-checkpoint {cfg.train.init_checkpoint}", "checkpoint not found")
     check_mlflow(cfg.train.mlflow_uri, "--train.mlflow-uri")
     import mlflow
     import ray
@@ -111,8 +149,6 @@ def main(argv: list[str] | None = None) -> int:
     run_id = None
     history: list[dict] = []
     if t.resume:
-        if not run_file.exists():
-            raise SystemExit(f"--train.resume: no run {run_file} to resume")
         prev = json.loads(run_file.read_text())
         given = {k for k in vars(ns) if "." in k and k not in ("train.resume", "train.iterations", "train.run_name",
                                                                  "train.run_dir")}
@@ -128,7 +164,7 @@ def main(argv: list[str] | None = None) -> int:
     require_cluster_fits(t, ray_nodes(), torch.cuda.device_count() if t.num_gpus_per_learner > 0 else None)
     if ns.demo:
         ensure_demo_data(cfg)
-    run_dir.mkdir(parents=True, exist_ok=True)
+    make_run_dir(run_dir, t.overwrite and not t.resume)
     init = None
     if t.init_checkpoint and not t.resume:
         init = load_start(t.init_checkpoint, cfg.env.reward, "train")

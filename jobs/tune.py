@@ -27,7 +27,7 @@ from pathlib import Path
 
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 
-from eosp.args import add_config_args, config_from_args, prefixed_config  # noqa: E402
+from eosp.args import Parser, add_config_args, config_from_args, prefixed_config, run_job  # noqa: E402
 from eosp.config import MODEL_PRESETS, ModelConfig, RunConfig, TuneConfig, from_dict, to_dict  # noqa: E402
 
 
@@ -106,6 +106,10 @@ def run(cfg: RunConfig, tc: TuneConfig) -> dict:
     mlflow.set_tracking_uri(uri)
     exp = mlflow.set_experiment(cfg.train.experiment)
     sweep_dir.mkdir(parents=True, exist_ok=True)
+    from eosp.ownership import kind_of, mark_dir
+
+    if kind_of(sweep_dir) != SWEEP_KIND:
+        mark_dir(sweep_dir, SWEEP_KIND)
     state_file = sweep_dir / "sweep.json"
     client = mlflow.tracking.MlflowClient(uri)
     if state_file.exists():
@@ -163,20 +167,41 @@ def run(cfg: RunConfig, tc: TuneConfig) -> dict:
     return summary
 
 
+SWEEP_KIND = "sweep"  # the mark (eosp.ownership) of a sweep directory: rerunning the sweep resumes in it
+
+
 def main(argv: list[str] | None = None) -> int:
-    p = argparse.ArgumentParser(description=__doc__.splitlines()[0],
-                                formatter_class=argparse.RawDescriptionHelpFormatter, epilog=__doc__)
+    """The job; user errors are one line ``tune.py: error: ...`` and exit 2 before Ray or MLflow start."""
+    return run_job(_main, argv, "tune.py")
+
+
+def _main(argv: list[str] | None) -> int:
+    p = Parser(prog="tune.py", description=__doc__.splitlines()[0],
+               formatter_class=argparse.RawDescriptionHelpFormatter, epilog=__doc__)
     add_config_args(p, TuneConfig, prefix="tune.")
     add_config_args(p, RunConfig)
     ns = p.parse_args(argv)
     preset = vars(ns).get("train.preset", "cpu")
+    if preset not in MODEL_PRESETS:
+        p.error(f"--train.preset: unknown preset {preset!r}; one of {', '.join(MODEL_PRESETS)}")
     cfg = config_from_args(RunConfig, ns, base=RunConfig(model=from_dict(ModelConfig, MODEL_PRESETS[preset])))
     tc = prefixed_config(TuneConfig, ns, "tune.")
     if cfg.env.reward == "lexicographic":
         cfg.model.n_values = max(cfg.model.n_values, 7)
-    from eosp.jobs.preflight import check_mlflow, require_findable
+    from eosp.errors import InputError
+    from eosp.jobs.preflight import check_mlflow, require_data, require_findable
+    from eosp.ownership import check_output
 
     require_findable(cfg.train.run_dir, "--train.run-dir")
+    require_data(cfg.train.train_data, "--train.train-data")
+    if cfg.train.val_data:
+        require_data(cfg.train.val_data, "--train.val-data")
+    sweep_dir = Path(cfg.train.run_dir) / "tune" / tc.name
+    try:  # a sweep resumes in its own directory; one eosp did not write is never written into
+        check_output(sweep_dir, SWEEP_KIND, directory=True, reuse=True)
+    except InputError as exc:
+        raise InputError(f"--train.run-dir {cfg.train.run_dir} --tune.name {tc.name}", f"{sweep_dir} {exc.message}") \
+            from None
     check_mlflow(cfg.train.mlflow_uri, "--train.mlflow-uri")
     run(cfg, tc)
     return 0

@@ -46,24 +46,87 @@ def load_agent(directory: str | Path) -> tuple[EOSPAgent, EnvConfig, dict[str, A
     if not (d / WEIGHTS).exists() or not (d / CONFIG).exists():
         where = "this directory" if given.is_dir() else f"its directory {d}"
         raise InputError(given, f"not an agent checkpoint: expected {WEIGHTS} and {CONFIG} in {where}")
+    meta, model_cfg, env_cfg = read_agent_json(d / CONFIG)
     try:
-        meta = json.loads((d / CONFIG).read_text())
-    except json.JSONDecodeError as exc:
-        raise InputError(d / CONFIG, f"not valid JSON: {exc}") from None
-    if meta.get("format") != "eosp-agent":
-        raise InputError(d / CONFIG, "not an EOSP agent checkpoint (missing format 'eosp-agent')")
-    agent = EOSPAgent(from_dict(ModelConfig, meta["model"]))
-    try:
-        state = torch.load(d / WEIGHTS, map_location="cpu", weights_only=True)
-    except Exception as exc:  # truncated or foreign file
-        first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
-        raise InputError(d / WEIGHTS, f"cannot read the weights: {first}") from None  # one line: torch's are long
-    try:
-        agent.load_state_dict(with_lookahead_columns(state))
-    except RuntimeError as exc:
-        raise InputError(d / WEIGHTS, f"weights do not match the model configuration: {exc}") from None
+        agent = EOSPAgent(model_cfg)
+    except (ValueError, TypeError, RuntimeError) as exc:
+        raise InputError(d / CONFIG, f"'model' cannot build the agent: {one_line(exc)}") from None
+    state = read_weights(d / WEIGHTS)
+    load_weights(agent, state, d / WEIGHTS)
     agent.eval()
-    return agent, from_dict(EnvConfig, meta["env"]), meta
+    return agent, env_cfg, meta
+
+
+def one_line(exc: BaseException) -> str:
+    """The first line of an exception's message (torch's run over dozens of lines)."""
+    text = str(exc).strip()
+    return text.splitlines()[0] if text else type(exc).__name__
+
+
+def read_agent_json(path: Path) -> tuple[dict, ModelConfig, EnvConfig]:
+    """The metadata of agent.json and the model and environment configurations it holds; a one-line InputError
+    naming the file and what is wrong otherwise."""
+    try:
+        meta = json.loads(path.read_text(encoding="utf-8"))
+    except UnicodeDecodeError:
+        raise InputError(path, "not UTF-8 text (a JSON object expected)") from None
+    except json.JSONDecodeError as exc:
+        raise InputError(path, f"not valid JSON: {exc}") from None
+    if not isinstance(meta, dict):
+        raise InputError(path, f"must hold a JSON object, not a {type(meta).__name__}")
+    if meta.get("format") != "eosp-agent":
+        raise InputError(path, "not an EOSP agent checkpoint (missing format 'eosp-agent')")
+    cfgs = []
+    for key, cls in (("model", ModelConfig), ("env", EnvConfig)):
+        if not isinstance(meta.get(key), dict):
+            raise InputError(path, f"no '{key}' entry (a JSON object of {cls.__name__})" if key not in meta
+                             else f"'{key}' must be a JSON object of {cls.__name__}")
+        try:
+            cfgs.append(from_dict(cls, meta[key]))
+        except (ValueError, TypeError) as exc:
+            raise InputError(path, f"'{key}': {one_line(exc)}") from None
+    return meta, cfgs[0], cfgs[1]
+
+
+def read_weights(path: Path) -> dict[str, torch.Tensor]:
+    """The tensor state dict of agent.pt, read without unpickling anything (``weights_only=True``); a one-line
+    InputError otherwise (never torch's advice to load the file unsafely)."""
+    with open(path, "rb") as fh:
+        if fh.read(4) != b"PK\x03\x04":  # torch.save writes a zip archive
+            raise InputError(path, "not a torch weights file (torch.save's zip archive of tensors expected)")
+    try:
+        state = torch.load(path, map_location="cpu", weights_only=True)
+    except Exception as exc:  # noqa: BLE001 - truncated or foreign archives, pickled objects
+        text = str(exc)
+        if "Unsupported global" in text or "Unsupported operand" in text or "WeightsUnpickler" in text:
+            why = "holds Python objects besides tensors, which are never unpickled"
+        else:
+            why = f"unreadable or truncated torch archive ({type(exc).__name__})"
+        raise InputError(path, why) from None
+    if not isinstance(state, dict) or not all(isinstance(k, str) and isinstance(v, torch.Tensor)
+                                              for k, v in state.items()):
+        raise InputError(path, f"must hold a state dict (parameter name -> tensor), not a {type(state).__name__}")
+    return state
+
+
+def load_weights(agent: EOSPAgent, state: dict[str, torch.Tensor], path: Path) -> None:
+    """Load `state` into `agent`; a mismatch is one line: the first parameter at fault (and its two shapes)."""
+    state = with_lookahead_columns(state)
+    own = agent.state_dict()
+    missing = [k for k in own if k not in state]
+    extra = [k for k in state if k not in own]
+    if missing or extra:
+        parts = ([f"{len(missing)} parameter(s) missing, first {missing[0]!r}"] if missing else []) + \
+                ([f"{len(extra)} unexpected, first {extra[0]!r}"] if extra else [])
+        raise InputError(path, "weights do not match the model configuration of agent.json: " + "; ".join(parts))
+    for k, v in own.items():
+        if tuple(state[k].shape) != tuple(v.shape):
+            raise InputError(path, f"weights do not match the model configuration of agent.json: {k!r} has shape "
+                                   f"{tuple(state[k].shape)} in the file, {tuple(v.shape)} in the model")
+    try:
+        agent.load_state_dict(state)
+    except RuntimeError as exc:
+        raise InputError(path, f"weights do not match the model configuration: {one_line(exc)}") from None
 
 
 def with_lookahead_columns(state: dict[str, torch.Tensor]) -> dict[str, torch.Tensor]:

@@ -355,6 +355,8 @@ class Polisher:
         self.max_rounds = max_rounds
         self.max_replace = max_replace
         self.rounds = 0
+        # on_improve(nodes, value): told of each better schedule met (the solvers' incumbent, for Ctrl-C)
+        self.on_improve = None
         # compile (or load from numba's cache) the kernels for these array types now, with empty schedules, so
         # that a search's time limit, which starts after the set-up, never pays for the compilation
         empty = np.zeros(1, dtype=np.int32)
@@ -387,7 +389,13 @@ class Polisher:
         path[: nodes.size] = nodes
         n = _polish(eg.indptr, eg.dst, eg.acq_ptr, eg.node_acq, eg.node_time, self.weight, self.order, self.first_t,
                     self.last_t, self.span, path, nodes.size, self.max_rounds, self.tol, self.max_replace)
+        self._tell(path[:n])
         return path[:n].copy()
+
+    def _tell(self, nodes) -> None:
+        """Report `nodes` (a complete schedule) to :attr:`on_improve`, when one is set."""
+        if self.on_improve is not None:
+            self.on_improve(nodes, self.value(nodes))
 
     def refine(self, nodes, *, deadline: float | None = None, iterations: int = 2000, seed: int = 0,
                max_ruin: int = 6, noise: float = 1.0, windows: bool = True) -> np.ndarray:
@@ -467,6 +475,7 @@ class Polisher:
                         use_windows = span > 1
                         span = max(1, span // 2)
             done += chunk
+            self._tell(path[:n])
         self.rounds = done
         return self(path[:n])
 

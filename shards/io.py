@@ -28,7 +28,8 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
 
-from eosp.atomic import atomic_path, check_output_file
+from eosp.atomic import atomic_path
+from eosp.ownership import check_output
 from eosp.errors import InputError
 from eosp.memory import require_memory
 from eosp.graphs.discrete import DiscreteGraph, first_backward_arc
@@ -105,15 +106,18 @@ def is_shard(path: str | Path) -> bool:
     return md.get(b"eosp.kind") == KIND.encode()
 
 
-def check_shard_out(path: str | Path) -> Path:
-    """Refuse, before any work, a shard output path: a directory, not .parquet, or an existing foreign file."""
-    return check_output_file(path, (".parquet",), owned=is_shard, what="shard")
+def check_shard_out(path: str | Path, overwrite: bool = False) -> Path:
+    """Refuse, before any work, a shard output path: a directory, not .parquet, an existing file that is not a
+    shard eosp wrote, or one that is without `overwrite` (:func:`eosp.ownership.check_output`; the mark is the
+    metadata key ``eosp.kind``)."""
+    return check_output(path, KIND, overwrite, suffixes=(".parquet",))
 
 
 def write_shard(path: str | Path, instances: list[Instance], include_unpruned: bool = True,
-                extra_meta: dict | None = None) -> Path:
-    """Write instances (with their pruned graphs) to one Parquet shard, atomically."""
-    path = check_shard_out(path)
+                extra_meta: dict | None = None, overwrite: bool = False) -> Path:
+    """Write instances (with their pruned graphs) to one Parquet shard, atomically; an existing shard is replaced
+    only with `overwrite`."""
+    path = check_shard_out(path, overwrite)
     meta = {b"eosp.kind": KIND.encode(), b"eosp.schema_version": str(SCHEMA_VERSION).encode(),
             b"eosp.n_instances": str(len(instances)).encode(),
             b"eosp.extra": json.dumps(extra_meta or {}, sort_keys=True).encode()}

@@ -21,7 +21,7 @@ from typing import Any, Callable, ClassVar
 
 import numpy as np
 
-from eosp.config import check_value, choice, ranged
+from eosp.config import WEEK_S, check_value, choice, ranged
 from eosp.instances.instance import Instance
 
 
@@ -56,7 +56,7 @@ class SolverConfig:
 
     mode: str = choice("utility", "utility", "unitary")
     """'utility' (sum of utilities) or 'unitary' (count acquisitions)."""
-    time_limit: float | None = ranged(None, 0)
+    time_limit: float | None = ranged(None, 0, WEEK_S)
     """Seconds the search may run (ramp, exact, lns, sample, beam, mcts); unset: no limit (0 on the command line
     means unset).  The one-shot solvers (random, greedy, policy) always finish in one pass and refuse it."""
     seed: int = ranged(0, 0)
@@ -197,11 +197,40 @@ def make_config(name: str, **options: Any) -> SolverConfig:
     return cls(**options)
 
 
+class Incumbent:
+    """The best feasible schedule a search of this process has met so far, for Ctrl-C.
+
+    The searches with an incumbent (exact, lns, sample, beam, mcts; any later one) report each improved complete
+    schedule with :meth:`offer` (canonical node indices of the instance, and its objective value); the command
+    line's interrupt path takes the last one with :meth:`take`, checks it with the independent checker and
+    writes it.  :func:`run_solver` clears it at the start of each solve."""
+
+    def __init__(self) -> None:
+        self.clear(None)
+
+    def clear(self, inst: Instance | None) -> None:
+        self.inst, self.nodes, self.value = inst, None, float("-inf")
+
+    def offer(self, nodes: Any, value: float) -> None:
+        """Keep `nodes` when its `value` is above the best kept (copied: the caller may reuse its buffer)."""
+        if value > self.value:
+            self.nodes, self.value = np.array(nodes, dtype=np.int64, copy=True), float(value)
+
+    def take(self, inst: Instance) -> np.ndarray | None:
+        """The best schedule kept for `inst` (None when there is none)."""
+        return self.nodes if self.inst is inst else None
+
+
+INCUMBENT = Incumbent()
+
+
 def run_solver(name: str, inst: Instance, *, agent: tuple | None = None, **options: Any) -> Solution:
     """Solve `inst` with solver `name`, its config built from `options` (:func:`make_config`).
 
-    `agent`: an already loaded (agent, env config, metadata) for the learned solvers."""
+    `agent`: an already loaded (agent, env config, metadata) for the learned solvers.  The searches report their
+    improving schedules to :data:`INCUMBENT` (what Ctrl-C writes)."""
     cfg = make_config(name, **options)
+    INCUMBENT.clear(inst)
     if agent is not None:
         if not isinstance(cfg, LearnedConfig):
             raise ValueError(f"solver {name!r} plays no agent: agent= is only for "

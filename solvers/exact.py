@@ -45,7 +45,7 @@ import numpy as np
 
 from eosp.instances.instance import Instance
 from eosp.config import ranged
-from eosp.solvers.base import Solution, SolverConfig, objective_weights
+from eosp.solvers.base import INCUMBENT, Solution, SolverConfig, objective_weights
 from eosp.solvers.bound import completion_bound, lagrangian
 from eosp.solvers.greedy import GreedyConfig
 from eosp.solvers.greedy import solve as greedy
@@ -83,6 +83,7 @@ def solve(inst: Instance, cfg: ExactConfig | None = None) -> Solution:
               ramp(inst, RampConfig(mode=mode, time_limit=None if time_limit is None else 0.2 * time_limit))]
     best = max(starts, key=lambda s: s.value)
     nodes, value = best.nodes, best.value
+    INCUMBENT.offer(nodes, value)  # what Ctrl-C writes while the bound and the sweep run
     info = {"solver": "exact", "start": best.info["solver"], "start_value": value}
 
     budget = left()

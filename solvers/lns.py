@@ -15,7 +15,7 @@ from dataclasses import dataclass
 from eosp.config import choice, ranged
 from eosp.instances.instance import Instance
 from eosp.search.polish import Polisher
-from eosp.solvers.base import Solution, SolverConfig, objective_weights
+from eosp.solvers.base import INCUMBENT, Solution, SolverConfig, objective_weights
 from eosp.solvers.greedy import GreedyConfig
 from eosp.solvers.greedy import solve as greedy
 
@@ -42,8 +42,10 @@ def solve(inst: Instance, cfg: LnsConfig | None = None) -> Solution:
     cfg.validate()
     polisher = Polisher(inst.unpruned("the lns solver"), objective_weights(inst, cfg.mode),  # set-up: kernels
                         window_graph=inst.pruned() if cfg.window_graph == "pruned" else None)
+    polisher.on_improve = INCUMBENT.offer  # each better schedule is the incumbent (Ctrl-C writes it)
     t0 = time.perf_counter()
     start = greedy(inst, GreedyConfig(mode=cfg.mode))
+    INCUMBENT.offer(start.nodes, start.value)
     deadline = None if cfg.time_limit is None else t0 + cfg.time_limit
     nodes = polisher.refine(polisher(start.nodes), deadline=deadline, iterations=cfg.iterations, seed=cfg.seed,
                             windows=cfg.windows)

@@ -9,7 +9,7 @@ from eosp.envs.sources import prepare_instance
 from eosp.instances.instance import Instance
 from eosp.search.mcts import solve as mcts_solve
 from eosp.config import ranged
-from eosp.solvers.base import SearchConfig, Solution
+from eosp.solvers.base import INCUMBENT, SearchConfig, Solution
 from eosp.solvers.policy import (evaluate_batch, finish, make_env_for, polisher_for, resolve_agent,
                                  search_time, value_weights)
 
@@ -42,6 +42,8 @@ def solve(inst: Instance, cfg: MctsConfig | None = None, *, agent: tuple | None 
     env = make_env_for(prepared, env_cfg)
     vw = value_weights(model, prepared)  # lexicographic heads: per-class values weighed by class utilities
     polisher = polisher_for(prepared, cfg)  # set-up (kernels compiled), before the clock starts
+    if polisher is not None:  # every polished schedule is the incumbent (Ctrl-C writes it)
+        polisher.on_improve = INCUMBENT.offer
     t0 = time.perf_counter()
     if budget is None:  # with a time limit, bounded by it only
         budget = 1_000_000 if time_limit is not None else 100

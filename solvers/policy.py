@@ -16,7 +16,7 @@ from eosp.config import CLASS_UTILITIES, EnvConfig
 from eosp.instances.instance import Instance
 from eosp.envs.observation import PLAN
 from eosp.models.agent import MASKED, EOSPAgent, batch_from_padded
-from eosp.solvers.base import LearnedConfig, SearchConfig, Solution, objective_weights
+from eosp.solvers.base import INCUMBENT, LearnedConfig, SearchConfig, Solution, objective_weights
 
 
 def to_batch(obs: dict[str, np.ndarray]) -> dict[str, torch.Tensor]:
@@ -210,6 +210,8 @@ def run_search(name: str, inst: Instance, cfg: SearchConfig, agent: tuple | None
     prepared = prepare_instance(inst, env_cfg.prune)
     env = make_env_for(prepared, env_cfg)
     polisher = polisher_for(prepared, cfg)  # set-up (kernels compiled), before the clock starts
+    if polisher is not None:  # every polished schedule the search meets is its incumbent (Ctrl-C writes it)
+        polisher.on_improve = INCUMBENT.offer
     t0 = time.perf_counter()
     best = search(env, lambda obss: evaluate_batch(model, obss, guard=cfg.guard),
                   None if polisher is None else polisher.actions,

@@ -23,6 +23,18 @@ def closed_port() -> int:
     return port
 
 
+@pytest.fixture(scope="module")
+def shards(tmp_path_factory) -> Path:
+    """A data set directory of one small shard, outside the tests' own folders (they must stay empty)."""
+    sys.path.insert(0, str(ROOT))
+    from eosp.shards.io import write_shard
+    from tests.conftest import generated
+
+    d = tmp_path_factory.mktemp("data")
+    write_shard(d / "shard-0.parquet", [generated("uniform", 12, s) for s in range(2)])
+    return d
+
+
 def job(script, *args, kill_after=0, timeout=600):
     """Run a job in its own session; with `kill_after` it SIGKILLs itself after that many results."""
     env = {**os.environ, "EOSP_FAULT_KILL_AFTER": str(kill_after)}
@@ -85,11 +97,14 @@ def test_absolute_output_accepted_in_uploaded_working_dir(tmp_path, monkeypatch)
 
 @pytest.mark.parametrize("module,argv", [
     ("evaluate", ["--data", "DATA", "--out", "OUT", "--mlflow-uri", "URI"]),
-    ("train", ["--train.train-data", "DATA", "--train.run-dir", "OUT", "--train.mlflow-uri", "URI"]),
-    ("pretrain", ["--imitation.run-dir", "OUT", "--imitation.mlflow-uri", "URI"]),
-    ("tune", ["--train.run-dir", "OUT", "--train.mlflow-uri", "URI"]),
+    ("train", ["--train.train-data", "DATA", "--train.val-data", "DATA", "--train.run-dir", "OUT",
+               "--train.mlflow-uri", "URI"]),
+    ("pretrain", ["--imitation.train-data", "DATA", "--imitation.val-data", "DATA", "--imitation.run-dir", "OUT",
+                  "--imitation.mlflow-uri", "URI"]),
+    ("tune", ["--train.train-data", "DATA", "--train.val-data", "DATA", "--train.run-dir", "OUT",
+              "--train.mlflow-uri", "URI"]),
 ])
-def test_mlflow_unreachable_is_one_line_before_work(tmp_path, module, argv):
+def test_mlflow_unreachable_is_one_line_before_work(tmp_path, shards, module, argv):
     import importlib
 
     import ray
@@ -97,7 +112,7 @@ def test_mlflow_unreachable_is_one_line_before_work(tmp_path, module, argv):
     if ray.is_initialized():  # left by an earlier test: the check below is about this job only
         ray.shutdown()
     uri = f"http://127.0.0.1:{closed_port()}"
-    argv = [{"DATA": str(tmp_path / "data"), "OUT": str(tmp_path / "out"), "URI": uri}.get(a, a) for a in argv]
+    argv = [{"DATA": str(shards), "OUT": str(tmp_path / "out"), "URI": uri}.get(a, a) for a in argv]
     with pytest.raises(SystemExit) as exc:
         importlib.import_module(f"eosp.jobs.{module}").main(argv)
     msg = exc.value.message
@@ -194,17 +209,17 @@ def test_new_train_flags_reach_rllib():
 
 @pytest.mark.parametrize("args,line", [
     (["--train.num-env-runners", 5],
-     "error: --train.num-env-runners 5: each env runner takes 1 CPU and this Ray cluster has 2 (resources: 2 CPU on "
+     "train.py: error: --train.num-env-runners 5: each env runner takes 1 CPU and this Ray cluster has 2 (resources: 2 CPU on "
      "1 node); pass --train.num-env-runners 2 or fewer, or add nodes"),
     (["--train.preset", "reference", "--train.num-gpus-per-learner", 1],
-     "error: --train.num-gpus-per-learner 1: this Ray cluster has no GPU (resources: 2 CPU on 1 node)"),
+     "train.py: error: --train.num-gpus-per-learner 1: this Ray cluster has no GPU (resources: 2 CPU on 1 node)"),
 ])
-def test_train_job_refuses_what_the_local_ray_cannot_run(tmp_path, args, line):
+def test_train_job_refuses_what_the_local_ray_cannot_run(tmp_path, shards, args, line):
     """`python jobs/train.py` on a local Ray of 2 CPUs and no GPU: one line, before anything is written."""
     import time
 
     t0 = time.monotonic()
-    rc, so, se = job("train.py", "--train.train-data", tmp_path / "train", "--train.val-data", tmp_path / "val",
+    rc, so, se = job("train.py", "--train.train-data", shards, "--train.val-data", shards,
                      "--train.run-dir", tmp_path / "runs", "--train.mlflow-uri", f"sqlite:///{tmp_path / 'm.db'}",
                      "--ray.num-cpus", 2, *args, timeout=180)
     assert rc == 2, (rc, so, se[-3000:])
@@ -214,7 +229,7 @@ def test_train_job_refuses_what_the_local_ray_cannot_run(tmp_path, args, line):
     assert time.monotonic() - t0 < 120
 
 
-def test_tune_refuses_a_gpu_learner_without_a_gpu(tmp_path):
+def test_tune_refuses_a_gpu_learner_without_a_gpu(tmp_path, shards):
     import ray
 
     from eosp.jobs.tune import main
@@ -223,7 +238,8 @@ def test_tune_refuses_a_gpu_learner_without_a_gpu(tmp_path):
         ray.shutdown()
     try:
         with pytest.raises(SystemExit) as exc:
-            main(["--train.run-dir", str(tmp_path / "runs"), "--train.mlflow-uri", f"sqlite:///{tmp_path / 'm.db'}",
+            main(["--train.train-data", str(shards), "--train.val-data", str(shards),
+                  "--train.run-dir", str(tmp_path / "runs"), "--train.mlflow-uri", f"sqlite:///{tmp_path / 'm.db'}",
                   "--train.num-gpus-per-learner", "1", "--ray.num-cpus", "1"])
     finally:
         ray.shutdown()

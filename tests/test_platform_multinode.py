@@ -123,7 +123,7 @@ def test_more_env_runners_than_the_resource_holds_is_refused(cluster, data):
     status = wait(p, job, timeout=120)
     logs = p.jobs().get_job_logs(job)
     assert status == "FAILED", logs[-3000:]
-    line = (f"error: --train.env-runner-resource {RESOURCE} --train.num-env-runners 2: each env runner takes 1 "
+    line = (f"train.py: error: --train.env-runner-resource {RESOURCE} --train.num-env-runners 2: each env runner takes 1 "
             f"{RESOURCE} and 1 CPU of the same node, and the nodes that offer {RESOURCE} have room for 1 "
             f"(resources: 2 CPU, 1 {RESOURCE} on 2 nodes); pass --train.num-env-runners 1 or fewer, or add nodes")
     assert line in logs.splitlines() and "Traceback" not in logs, logs[-3000:]
