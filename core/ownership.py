@@ -62,7 +62,7 @@ def what(kind: str) -> str:
 
 
 def _a(noun: str) -> str:
-    return ("an " if noun[:1].lower() in "aeiou" else "a ") + noun
+    return ("an " if noun[:1].lower() in "aeiou" or noun.startswith(("HTML", "SVG", "MP")) else "a ") + noun
 
 
 # --------------------------------------------------------------------------- marks, one per format
@@ -179,6 +179,8 @@ def _text_kind(data: bytes, suffix: str) -> str | None:
         opening, closing = f"# {KEY}: ", "\n"
         text = text.partition("\n")[0] + "\n"
     at = text.find(opening)
+    if suffix not in (".html", ".htm") and at != 0:  # the comment opens its line: a mark, not a mention
+        return None
     if at >= 0:
         end = text.find(closing, at + len(opening))
         if end > at:

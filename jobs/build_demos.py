@@ -14,13 +14,12 @@ written (resumable).
 
 from __future__ import annotations
 
-import argparse
 import json
 import sys
 import time
 from pathlib import Path
 
-from eosp.args import add_config_args, config_from_args, prefixed_config
+from eosp.args import Parser, add_config_args, config_from_args, prefixed_config, run_job
 from eosp.config import DemoConfig, RayConfig, to_dict
 from eosp.errors import InputError
 
@@ -75,20 +74,22 @@ def run(cfg: DemoConfig, ray_cfg: RayConfig) -> dict:
 
 
 def main(argv: list[str] | None = None) -> int:
-    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    """The job; user errors are one line ``build_demos.py: error: ...`` and exit 2 before Ray starts."""
+    return run_job(_main, argv, "build_demos.py")
+
+
+def _main(argv: list[str] | None) -> int:
+    p = Parser(prog="build_demos.py", description=__doc__.splitlines()[0])
     add_config_args(p, DemoConfig)
     add_config_args(p, RayConfig, prefix="ray.")
     ns = p.parse_args(argv)
     cfg = config_from_args(DemoConfig, ns)
-    from eosp.jobs.preflight import require_findable
+    from eosp.jobs.preflight import require_data, require_findable
 
     for data in cfg.data:  # the demos are written under <data>/demos/
         require_findable(data, "--data")
-    try:
-        out = run(cfg, prefixed_config(RayConfig, ns, "ray."))
-    except InputError as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
+    require_data(cfg.data, "--data")
+    out = run(cfg, prefixed_config(RayConfig, ns, "ray."))
     steps = sum(t["steps"] for t in out["tasks"])
     n = sum(t["instances"] for t in out["tasks"])
     opt = sum(t["optimal"] for t in out["tasks"])

@@ -22,7 +22,6 @@ variable ``EOSP_FAULT_KILL_AFTER=N``.)
 
 from __future__ import annotations
 
-import argparse
 import hashlib
 import json
 import os

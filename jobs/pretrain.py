@@ -35,7 +35,7 @@ def parse(argv: list[str] | None) -> PretrainConfig:
     ns = p.parse_args(argv)
     preset = vars(ns).get("imitation.preset", "cpu")
     if preset not in MODEL_PRESETS:
-        p.error(f"unknown preset {preset!r}; one of {', '.join(MODEL_PRESETS)}")
+        p.error(f"--imitation.preset: unknown preset {preset!r}; one of {', '.join(MODEL_PRESETS)}")
     cfg = config_from_args(PretrainConfig, ns, base=PretrainConfig(model=from_dict(ModelConfig, MODEL_PRESETS[preset])))
     if cfg.env.reward == "lexicographic":
         cfg.model.n_values = max(cfg.model.n_values, 7)

@@ -76,7 +76,7 @@ def parse(argv: list[str] | None) -> tuple[RunConfig, argparse.Namespace]:
                 setattr(ns, k, v)
     preset = vars(ns).get("train.preset", "cpu")
     if preset not in MODEL_PRESETS:
-        p.error(f"unknown preset {preset!r}; one of {', '.join(MODEL_PRESETS)}")
+        p.error(f"--train.preset: unknown preset {preset!r}; one of {', '.join(MODEL_PRESETS)}")
     if ns.config:
         base = read_config_file(ns.config, RunConfig)
         base.train.resume, base.train.run_name, base.train.overwrite = False, "", False

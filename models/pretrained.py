@@ -45,7 +45,7 @@ def pretrained_dir(mode: str) -> Path:
     mode = ALIASES.get(mode, mode)
     if mode not in MODES + VARIANTS:
         names = ", ".join(MODES + VARIANTS + tuple(ALIASES))
-        raise InputError(f"--checkpoint {PREFIX}{mode}", f"no shipped model {mode!r}; shipped: {names}")
+        raise InputError(f"--checkpoint {PREFIX}{mode}", f"no pretrained model {mode!r}; shipped: {names}")
     d = ROOT / mode
     if not (d / "agent.pt").is_file() or not (d / "agent.json").is_file():
         raise InputError(d, "the shipped pretrained model is missing (agent.pt and agent.json expected): reinstall "

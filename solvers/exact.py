@@ -79,8 +79,9 @@ def solve(inst: Instance, cfg: ExactConfig | None = None) -> Solution:
     def left() -> float | None:
         return None if time_limit is None else max(0.0, time_limit - (time.perf_counter() - t0))
 
-    starts = [greedy(inst, GreedyConfig(mode=mode)),
-              ramp(inst, RampConfig(mode=mode, time_limit=None if time_limit is None else 0.2 * time_limit))]
+    starts = [greedy(inst, GreedyConfig(mode=mode))]
+    INCUMBENT.offer(starts[0].nodes, starts[0].value)  # what Ctrl-C writes while RAMP runs
+    starts.append(ramp(inst, RampConfig(mode=mode, time_limit=None if time_limit is None else 0.2 * time_limit)))
     best = max(starts, key=lambda s: s.value)
     nodes, value = best.nodes, best.value
     INCUMBENT.offer(nodes, value)  # what Ctrl-C writes while the bound and the sweep run

@@ -156,8 +156,40 @@ def run_cli(argv: list[str]) -> Outcome:
     return Outcome(rc, out.getvalue(), err.getvalue())
 
 
-def listing(root: Path) -> dict[str, tuple[int, int]]:
-    return {str(p.relative_to(root)): (p.stat().st_size, p.stat().st_mtime_ns) for p in root.rglob("*")}
+def run_job(module: str, argv: list) -> Outcome:
+    """A job's main (``eosp.jobs.MODULE``) in-process, like :func:`run_cli`; Ray must not have started."""
+    import importlib
+
+    import ray
+
+    if ray.is_initialized():
+        ray.shutdown()
+    main = importlib.import_module(f"eosp.jobs.{module}").main
+    out, err = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+        try:
+            rc = main([str(a) for a in argv])
+        except SystemExit as exc:
+            rc = exc.code if isinstance(exc.code, int) else 2
+        except Exception as exc:  # noqa: BLE001 - a traceback is exactly what we look for
+            import traceback
+
+            traceback.print_exc(file=err)
+            rc = f"exception {type(exc).__name__}"
+    if ray.is_initialized():
+        ray.shutdown()
+        rc = f"{rc} (Ray started)"
+    return Outcome(rc, out.getvalue(), err.getvalue())
+
+
+def listing(root: Path) -> dict[str, tuple]:
+    """Every path under `root` with its size, modification time and (files) a hash of its bytes."""
+    import hashlib
+
+    def digest(p: Path) -> str:
+        return hashlib.sha1(p.read_bytes()).hexdigest() if p.is_file() and p.stat().st_size < 1 << 24 else ""
+
+    return {str(p.relative_to(root)): (p.stat().st_size, p.stat().st_mtime_ns, digest(p)) for p in root.rglob("*")}
 
 
 @dataclass
@@ -167,13 +199,15 @@ class Case:
     names: tuple[str, ...] = ()  # what the one line must name (file, column, row)
     rc: int = 2
     tags: list = field(default_factory=list)
+    job: str = ""  # run eosp.jobs.JOB's main instead of the CLI
+    prog: str = ""  # what the one line must start with ("eosp solve: error: ", "train.py: error: ")
 
 
 def clean_error(case: Case, root: Path) -> tuple[bool, str]:
     """Run `case` on a fresh copy of the inputs in `root`; (clean, why not)."""
     argv = case.setup(root)
     before = listing(root)
-    res = run_cli(argv)
+    res = run_job(case.job, argv) if case.job else run_cli(argv)
     after = listing(root)
     lines = [x for x in res.err.strip().splitlines() if x.strip()]
     errors = [x for x in lines if "error" in x]
@@ -183,12 +217,14 @@ def clean_error(case: Case, root: Path) -> tuple[bool, str]:
     if "Traceback" in res.err:
         problems.append("traceback")
     if case.rc == 2:
-        # one line; argparse adds its usage line above its one error line
-        if len(errors) != 1 or (len(lines) > 1 and not lines[0].startswith("usage:")):
+        # exactly one line, argparse's usage block included (it appears only for --help)
+        if len(errors) != 1 or len(lines) != 1:
             problems.append(f"not one error line: {lines!r}")
         for s in case.names:
             if s not in res.err:
                 problems.append(f"does not name {s!r}: {res.err.strip()!r}")
+        if case.prog and not res.err.startswith(f"{case.prog}: error: "):
+            problems.append(f"does not start with {case.prog!r}: {res.err.strip()!r}")
     new = set(after) - set(before)
     changed = {k for k in before if k in after and after[k] != before[k]}
     if case.rc == 2 and (new or changed or set(before) - set(after)):
@@ -271,7 +307,7 @@ def path_cases() -> list[Case]:
     I, S = "inst", "sched.parquet"  # noqa: N806
     c = [
         Case("export-overwrite-user-dir", lambda r: ["export", r / "shard.parquet", "--out", _user_dir(r),
-                                                     "--overwrite"], ("mine", "not a instance directory")),
+                                                     "--overwrite"], ("mine", "not an instance directory")),
         Case("export-overwrite-file", lambda r: (r / "f.txt").write_text("x") and
              ["export", r / "shard.parquet", "--out", r / "f.txt", "--overwrite"], ("f.txt", "not a directory")),
         Case("export-exists", lambda r: ["export", r / "shard.parquet", "--out", r / I], ("inst", "already exists")),
@@ -340,7 +376,233 @@ def path_cases() -> list[Case]:
     return c
 
 
-CASES = file_cases() + path_cases()
+# --------------------------------------------------------------------------- issue 35: ownership, one error path, guards
+
+USER_BYTES = b"precious: a file of the user's, not eosp's\n"
+
+
+def _user_file(root: Path, name: str, data: bytes = USER_BYTES) -> Path:
+    """A sentinel file of the user's (clean_error checks it is byte-identical afterwards)."""
+    (root / name).parent.mkdir(parents=True, exist_ok=True)
+    (root / name).write_bytes(data)
+    return root / name
+
+
+def _user_parquet_schedule(root: Path) -> Path:
+    """A genuine Parquet schedule written by the user's own tools (same columns, no eosp mark)."""
+    t = pq.read_table(root / "sched.parquet")
+    pq.write_table(t.replace_schema_metadata(None), root / "theirs.parquet")
+    return root / "theirs.parquet"
+
+
+def _user_instance_dir(root: Path) -> Path:
+    """An interchange directory of the user's: the same four files, without eosp's mark in meta.json."""
+    shutil.copytree(root / "inst", root / "theirs")
+    meta = json.loads((root / "theirs" / "meta.json").read_text())
+    meta.pop("eosp", None)
+    (root / "theirs" / "meta.json").write_text(json.dumps(meta))
+    return root / "theirs"
+
+
+def _checkpoint(root: Path, fault: str) -> Path:
+    """A copy of the shipped utility model under root/ck, made wrong in one way."""
+    import torch
+
+    from eosp.models.pretrained import pretrained_dir
+
+    ck = root / "ck"
+    shutil.copytree(pretrained_dir("utility"), ck)
+    meta = json.loads((ck / "agent.json").read_text())
+    if fault == "json-list":
+        (ck / "agent.json").write_text("[1, 2]")
+    elif fault == "no-model":
+        meta.pop("model")
+        (ck / "agent.json").write_text(json.dumps(meta))
+    elif fault == "wrong-arch":
+        meta["model"]["hidden_dim"] = 8
+        (ck / "agent.json").write_text(json.dumps(meta))
+    elif fault == "tensor":
+        torch.save(torch.zeros(3), ck / "agent.pt")
+    elif fault == "random":
+        (ck / "agent.pt").write_bytes(np.random.default_rng(0).bytes(4096))
+    elif fault == "truncated":
+        (ck / "agent.pt").write_bytes((ck / "agent.pt").read_bytes()[:3000])
+    return ck
+
+
+def _data_dir(root: Path) -> Path:
+    """A data set directory holding the base's shard (for the jobs)."""
+    (root / "data").mkdir()
+    shutil.copy(root / "shard.parquet", root / "data" / "shard-00000.parquet")
+    return root / "data"
+
+
+def _config_file(root: Path, text: str) -> Path:
+    (root / "cfg.json").write_text(text)
+    return root / "cfg.json"
+
+
+def _solve(r, *extra):
+    return ["solve", r / "inst", "--solver", "greedy", "--out", r / "o.parquet", *extra]
+
+
+def ownership_cases() -> list[Case]:
+    """Outputs that exist and are not eosp's (or are, without --overwrite): never replaced, nothing written."""
+    B = "eosp build-shards"  # noqa: N806
+    return [
+        Case("own-solve-user-parquet", lambda r: ["solve", r / "inst", "--solver", "greedy", "--out",
+                                                  _user_file(r, "x.parquet")], ("x.parquet", "not a schedule file")),
+        Case("own-solve-user-parquet-overwrite", lambda r: ["solve", r / "inst", "--solver", "greedy", "--out",
+                                                            _user_file(r, "x.parquet"), "--overwrite"],
+             ("x.parquet", "written by eosp")),
+        Case("own-solve-user-real-schedule", lambda r: ["solve", r / "inst", "--solver", "greedy", "--out",
+                                                        _user_parquet_schedule(r), "--overwrite"],
+             ("theirs.parquet", "not a schedule file written by eosp")),
+        Case("own-solve-user-jsonl", lambda r: ["solve", r / "inst", "--solver", "greedy", "--out",
+                                                _user_file(r, "notes.jsonl", b'{"acq": 1}\n'), "--overwrite"],
+             ("notes.jsonl", "written by eosp")),
+        Case("own-solve-eosp-no-overwrite", lambda r: ["solve", r / "inst", "--solver", "greedy", "--out",
+                                                       r / "sched.parquet"], ("sched.parquet", "--overwrite")),
+        Case("own-report-user-html", lambda r: ["report", r / "inst", r / "sched.parquet", "--out",
+                                                _user_file(r, "page.html", b"<html><head></head></html>"),
+                                                "--overwrite"], ("page.html", "not an HTML report")),
+        Case("own-plot-user-png", lambda r: ["plot", r / "inst", r / "sched.parquet", "--out",
+                                             _user_file(r, "mine.png").with_suffix(""), "--overwrite"],
+             ("mine.png", "not a plot")),
+        Case("own-plot-user-svg", lambda r: ["plot", r / "inst", r / "sched.parquet", "--out",
+                                             _user_file(r, "mine.svg").with_suffix("")], ("mine.svg", "not a plot")),
+        Case("own-import-user-parquet", lambda r: ["import", r / "inst", "--out", _user_file(r, "u.parquet"),
+                                                   "--overwrite"], ("u.parquet", "not a shard")),
+        Case("own-import-eosp-no-overwrite", lambda r: ["import", r / "inst", "--out", r / "shard.parquet"],
+             ("shard.parquet", "--overwrite")),
+        Case("own-generate-user-instance-dir", lambda r: ["generate", _user_instance_dir(r), "--overwrite",
+                                                          "--n-acquisitions", "5"],
+             ("theirs", "not an instance directory written by eosp")),
+        Case("own-export-user-instance-dir", lambda r: ["export", r / "shard.parquet", "--out", _user_instance_dir(r),
+                                                        "--overwrite"], ("theirs", "not an instance directory")),
+        Case("own-build-shards-user-dir", lambda r: ["build-shards", "--out", _user_dir(r), "--n-instances", "1"],
+             ("--out", "mine", "not a data set directory written by eosp"), prog=B),
+        Case("own-build-shards-user-shard-name", lambda r: _user_file(r, "mine/shard-00000.parquet") and
+             ["build-shards", "--out", r / "mine", "--n-instances", "1"], ("mine", "not a data set directory"),
+             prog=B),
+        Case("own-build-shards-out-file", lambda r: ["build-shards", "--out", _user_file(r, "f.txt")],
+             ("f.txt", "not a directory"), prog=B),
+        Case("own-evaluate-user-dir", lambda r: ["--data", _data_dir(r), "--out", _user_dir(r)],
+             ("--out", "mine", "not an evaluation directory"), job="evaluate", prog="evaluate.py"),
+        Case("own-train-user-run-dir", lambda r: ["--train.train-data", _data_dir(r), "--train.val-data", "",
+                                                  "--train.run-dir", r, "--train.run-name", _user_dir(r).name],
+             ("--train.run-dir", "mine", "not a run directory written by eosp"), job="train", prog="train.py"),
+        Case("own-pretrain-user-run-dir", lambda r: ["--imitation.train-data", _data_dir(r), "--imitation.val-data",
+                                                     "", "--imitation.run-dir", r, "--imitation.run-name",
+                                                     _user_dir(r).name],
+             ("--imitation.run-dir", "mine", "not a run directory"), job="pretrain", prog="pretrain.py"),
+        Case("own-tune-user-sweep-dir", lambda r: _user_file(r, "runs/tune/arch/notes.txt") and
+             ["--train.train-data", _data_dir(r), "--train.val-data", "", "--train.run-dir", r / "runs",
+              "--tune.name", "arch"], ("--tune.name", "not a sweep directory"), job="tune", prog="tune.py"),
+    ]
+
+
+def error_path_cases() -> list[Case]:
+    """User mistakes through every command and job: one line ``PROG: error: <file or option>: <reason>``, exit 2,
+    before any service starts or any directory is created (the runs and outputs below would land under root)."""
+    S = "eosp solve"  # noqa: N806
+    T = dict(job="train", prog="train.py")  # noqa: N806
+    runs = lambda r: ["--train.run-dir", r / "runs"]  # noqa: E731
+    return [
+        Case("err-time-limit-neg", lambda r: ["solve", r / "inst", "--solver", "lns", "--time-limit", "-1", "--out",
+                                              r / "o.parquet"],
+             ("--time-limit",), prog=S),
+        Case("err-samples-0", lambda r: ["solve", r / "inst", "--solver", "sample", "--samples", "0", "--out",
+                                         r / "o.parquet"], ("--samples",), prog=S),
+        Case("err-beam-width-neg", lambda r: ["solve", r / "inst", "--solver", "beam", "--beam-width", "-3", "--out",
+                                              r / "o.parquet"], ("--beam-width",), prog=S),
+        Case("err-mode-nonsense", lambda r: _solve(r, "--mode", "nonsense"), ("--mode", "nonsense"), prog=S),
+        Case("err-generate-n0", lambda r: ["generate", r / "g", "--n-acquisitions", "0"], ("--n-acquisitions",),
+             prog="eosp generate"),
+        Case("err-build-shards-n0", lambda r: ["build-shards", "--out", r / "ds", "--n-acquisitions", "0"],
+             ("--n-acquisitions",), prog="eosp build-shards"),
+        Case("err-build-shards-bogus", lambda r: ["build-shards", "--out", r / "ds", "--bogus-flag"],
+             ("--bogus-flag",), prog="eosp build-shards"),
+        Case("err-unknown-command-option", lambda r: ["info", r / "inst", "--bogus"], ("--bogus",), prog="eosp"),
+        Case("err-sched-not-utf8", lambda r: _user_file(r, "sched.jsonl", b'{"acq": 1, "node": 2, "start": \xff}\n')
+             and ["validate", r / "inst", r / "sched.jsonl"], ("sched.jsonl", "UTF-8")),
+        Case("err-ck-json-list", lambda r: _solve(r, "--solver", "policy", "--checkpoint", _checkpoint(r, "json-list")),
+             ("agent.json", "JSON object")),
+        Case("err-ck-no-model", lambda r: _solve(r, "--solver", "policy", "--checkpoint", _checkpoint(r, "no-model")),
+             ("agent.json", "'model'")),
+        Case("err-ck-tensor", lambda r: _solve(r, "--solver", "policy", "--checkpoint", _checkpoint(r, "tensor")),
+             ("agent.pt", "state dict")),
+        Case("err-ck-random", lambda r: _solve(r, "--solver", "policy", "--checkpoint", _checkpoint(r, "random")),
+             ("agent.pt", "not a torch weights file")),
+        Case("err-ck-truncated", lambda r: _solve(r, "--solver", "policy", "--checkpoint",
+                                                  _checkpoint(r, "truncated")), ("agent.pt", "truncated")),
+        Case("err-ck-wrong-arch", lambda r: _solve(r, "--solver", "policy", "--checkpoint",
+                                                   _checkpoint(r, "wrong-arch")), ("agent.pt", "shape", "(8")),
+        Case("err-ck-pretrained-bogus", lambda r: _solve(r, "--solver", "policy", "--checkpoint", "pretrained:bogus"),
+             ("--checkpoint pretrained:bogus", "no pretrained model")),
+        Case("job-train-config-missing", lambda r: ["--config", r / "missing.json", *runs(r)],
+             ("--config", "missing.json", "not found"), **T),
+        Case("job-train-config-invalid", lambda r: ["--config", _config_file(r, "{oops"), *runs(r)],
+             ("cfg.json", "not valid JSON"), **T),
+        Case("job-train-config-value", lambda r: ["--config", _config_file(r, '{"train": {"lr": "fast"}}'), *runs(r)],
+             ("cfg.json", "lr"), **T),
+        Case("job-train-config-list", lambda r: ["--config", _config_file(r, "[1]"), *runs(r)],
+             ("cfg.json", "JSON object"), **T),
+        Case("job-train-data-missing", lambda r: ["--train.train-data", r / "missing", *runs(r)],
+             ("--train.train-data", "missing", "not found"), **T),
+        Case("job-train-data-instance-dir", lambda r: ["--train.train-data", r / "inst", *runs(r)],
+             ("--train.train-data", "instance directory"), **T),
+        Case("job-train-bogus-flag", lambda r: ["--bogus-flag", *runs(r)], ("--bogus-flag",), **T),
+        Case("job-train-preset", lambda r: ["--train.preset", "huge", *runs(r)], ("--train.preset", "huge"), **T),
+        Case("job-train-init-checkpoint", lambda r: ["--train.train-data", _data_dir(r), "--train.val-data", "",
+                                                     "--train.init-checkpoint", r / "nock", *runs(r)],
+             ("--train.init-checkpoint", "not found"), **T),
+        Case("job-pretrain-data-missing", lambda r: ["--imitation.train-data", r / "missing",
+                                                     "--imitation.run-dir", r / "runs"],
+             ("--imitation.train-data", "not found"), job="pretrain", prog="pretrain.py"),
+        Case("job-tune-data-missing", lambda r: ["--train.train-data", r / "missing", *runs(r)],
+             ("--train.train-data", "not found"), job="tune", prog="tune.py"),
+        Case("job-evaluate-data-missing", lambda r: ["--data", r / "missing", "--out", r / "ev"],
+             ("--data", "not found"), job="evaluate", prog="evaluate.py"),
+        Case("job-evaluate-data-instance-dir", lambda r: ["--data", r / "inst", "--out", r / "ev"],
+             ("--data", "instance directory"), job="evaluate", prog="evaluate.py"),
+        Case("job-evaluate-data-foreign-parquet", lambda r: ["--data", r / "sched.parquet", "--out", r / "ev"],
+             ("sched.parquet", "not a shard"), job="evaluate", prog="evaluate.py"),
+        Case("job-evaluate-bad-checkpoint", lambda r: ["--data", _data_dir(r), "--solvers", "policy", "--checkpoint",
+                                                       _checkpoint(r, "tensor"), "--out", r / "ev"],
+             ("agent.pt", "state dict"), job="evaluate", prog="evaluate.py"),
+        Case("job-evaluate-solver", lambda r: ["--data", _data_dir(r), "--solvers", "nope", "--out", r / "ev"],
+             ("--solvers", "nope"), job="evaluate", prog="evaluate.py"),
+        Case("job-build-shards-out-file", lambda r: ["--out", _user_file(r, "f.txt")], ("f.txt", "not a directory"),
+             job="build_shards", prog="build_shards.py"),
+        Case("job-build-demos-data-missing", lambda r: ["--data", r / "missing"], ("--data", "not found"),
+             job="build_demos", prog="build_demos.py"),
+    ]
+
+
+def guard_cases() -> list[Case]:
+    """Sizes that cannot fit and time limits beyond a week: refused from the request, in one line, at once."""
+    huge = "1000000000"
+    return [
+        Case("guard-generate-huge", lambda r: ["generate", r / "g", "--n-acquisitions", huge],
+             ("--n-acquisitions", "too large", "arcs")),
+        Case("guard-build-shards-huge", lambda r: ["build-shards", "--out", r / "ds", "--n-acquisitions", huge],
+             ("--n-acquisitions", "too large"), prog="eosp build-shards"),
+        Case("guard-generate-max-memory", lambda r: ["generate", r / "g", "--n-acquisitions", "300",
+                                                     "--max-memory-gb", "0.05"], ("--max-memory-gb 0.05", "GiB")),
+        Case("guard-import-max-memory", lambda r: ["import", r / "inst", "--out", r / "o.parquet", "--max-memory-gb",
+                                                   "0.00001"], ("arcs.parquet", "--max-memory-gb")),
+        Case("guard-solve-max-memory", lambda r: _solve(r, "--max-memory-gb", "0.00001"), ("--max-memory-gb",)),
+        Case("guard-max-memory-zero", lambda r: _solve(r, "--max-memory-gb", "0"), ("--max-memory-gb", "> 0")),
+        Case("guard-time-limit-week", lambda r: ["solve", r / "inst", "--solver", "ramp", "--time-limit", "1e12",
+                                                 "--out", r / "o.parquet"], ("--time-limit", "604800")),
+        Case("guard-evaluate-time-limit-week", lambda r: ["--data", _data_dir(r), "--time-limit", "1e12", "--out",
+                                                          r / "ev"], ("--time-limit", "604800"), job="evaluate",
+             prog="evaluate.py"),
+    ]
+
+
+CASES = file_cases() + path_cases() + ownership_cases() + error_path_cases() + guard_cases()
 
 
 @pytest.fixture(scope="module")
@@ -366,7 +628,8 @@ def test_good_inputs_still_work(base, tmp_path):
     assert run_cli(["validate", r / "inst", r / "sched.parquet"]).rc == 0
     assert run_cli(["validate", r / "inst", r / "sched.jsonl"]).rc == 0
     assert run_cli(["export", r / "shard.parquet", "--out", r / "inst", "--overwrite"]).rc == 0
-    assert run_cli(["import", r / "inst", "--out", r / "shard.parquet"]).rc == 0  # replaces our own shard
+    assert run_cli(["import", r / "inst", "--out", r / "shard.parquet"]).rc == 2  # ours, but no --overwrite
+    assert run_cli(["import", r / "inst", "--out", r / "shard.parquet", "--overwrite"]).rc == 0  # replaces ours
     res = run_cli(["solve", f"{r / 'shard.parquet'}#0", "--solver", "ramp", "--time-limit", "5", "--out",
                    r / "o.jsonl"])
     assert res.rc == 0, res.err
@@ -454,6 +717,175 @@ def test_hypothesis_schedule_corruption(base, tmp_path_factory, ext, kind, col, 
         return
     ok, why = clean_error(res_case, root)
     assert ok, why
+
+
+# --------------------------------------------------------------------------- issue 35: what is written, Ctrl-C
+
+def test_overwrite_replaces_only_what_eosp_wrote(base, tmp_path):
+    """Each writer's output carries eosp's mark; a second run is refused without --overwrite and replaces it with."""
+    from eosp.ownership import kind_of
+
+    r = fresh(base, tmp_path)
+    runs = {"o.parquet": ["solve", r / "inst", "--solver", "greedy", "--out", r / "o.parquet"],
+            "o.jsonl": ["solve", r / "inst", "--solver", "greedy", "--out", r / "o.jsonl"],
+            "p.html": ["report", r / "inst", r / "sched.parquet", "--out", r / "p.html"],
+            "t.png": ["plot", r / "inst", r / "sched.parquet", "--out", r / "t"],
+            "s.parquet": ["import", r / "inst", "--out", r / "s.parquet"],
+            "e": ["export", r / "shard.parquet", "--out", r / "e"]}
+    kinds = {"o.parquet": "schedule", "o.jsonl": "schedule", "p.html": "report", "t.png": "plot",
+             "s.parquet": "eosp-instance-shard", "e": "instance"}
+    for name, argv in runs.items():
+        assert run_cli(argv).rc == 0, name
+        assert kind_of(r / name) == kinds[name], name
+        again = run_cli(argv)
+        assert again.rc == 2 and "--overwrite" in again.err and len(again.err.strip().splitlines()) == 1, again.err
+        assert run_cli(argv + ["--overwrite"]).rc == 0, name
+    assert kind_of(r / "t.svg") == "plot"
+    assert run_cli(["validate", r / "inst", r / "o.jsonl"]).rc == 0  # the mark is no column
+    shutil.copy(r / "o.parquet", r / "copy.parquet")  # the mark travels with the file
+    assert kind_of(r / "copy.parquet") == "schedule"
+
+
+def test_user_files_of_the_same_format_bear_no_mark(base, tmp_path):
+    """A user's files shaped like eosp's outputs are never taken for eosp's."""
+    from eosp.ownership import kind_of
+
+    r = fresh(base, tmp_path)
+    assert kind_of(_user_parquet_schedule(r)) is None
+    assert kind_of(_user_instance_dir(r)) is None
+    assert kind_of(_user_file(r, "a.jsonl", b'{"acq": 0, "node": 1, "start": 2.0}\n')) is None
+    assert kind_of(_user_file(r, "a.html", b"<html><head><meta name='x' content='report'></head></html>")) is None
+    assert kind_of(_user_file(r, "a.png", b"\x89PNG\r\n\x1a\n" + b"\0" * 32)) is None
+    assert kind_of(_user_file(r, "a.svg", b"<?xml version='1.0'?>\n<svg><!-- eosp: plot --></svg>")) is None
+    assert kind_of(_user_dir(r)) is None
+
+
+def test_build_shards_never_advises_removing_a_users_file(base, tmp_path):
+    r = fresh(base, tmp_path)
+    _user_file(r, "mine/shard-00000.parquet")
+    res = run_cli(["build-shards", "--out", r / "mine", "--n-instances", "1"])
+    assert res.rc == 2 and "remove" not in res.err and "delete" not in res.err, res.err
+    assert (r / "mine" / "shard-00000.parquet").read_bytes() == USER_BYTES
+    assert sorted(p.name for p in (r / "mine").iterdir()) == ["shard-00000.parquet"]
+
+
+def test_no_arguments_shows_the_usage_and_only_then(capsys):
+    from eosp.cli import main
+
+    assert main([]) == 2
+    assert "usage: eosp" in capsys.readouterr().err
+    with pytest.raises(SystemExit) as exc:
+        main(["solve", "x", "--solver", "lns", "--time-limit", "-1", "--out", "o.parquet"])
+    assert exc.value.code == 2
+    assert "usage" not in capsys.readouterr().err
+
+
+def test_plot_of_an_empty_schedule_is_quiet(base, tmp_path):
+    import warnings
+
+    from eosp.instances.schedule import Schedule, write_schedule
+
+    r = fresh(base, tmp_path)
+    write_schedule(Schedule(np.zeros(0, np.int32), np.zeros(0, np.int32), np.zeros(0)), r / "empty.jsonl")
+    with warnings.catch_warnings(record=True) as seen:
+        warnings.simplefilter("always")
+        res = run_cli(["plot", r / "inst", r / "empty.jsonl", "--out", r / "p"])
+    assert res.rc == 0 and res.err == "", res.err
+    assert not [w for w in seen if "legend" in str(w.message).lower() or "artist" in str(w.message).lower()]
+    assert run_cli(["validate", r / "inst", r / "empty.jsonl"]).rc == 0  # the empty schedule's mark line is read
+
+
+def test_generation_estimate_is_of_the_right_size():
+    """The size guard refuses by estimate (never by running the huge request): the estimate must be close to what
+    generating really gives, within a factor of 2 on small instances."""
+    from eosp.config import family_config
+    from eosp.instances.generator import estimate_size, generate
+
+    for n, step in ((40, 2.0), (60, 1.0)):
+        cfg = family_config("uniform", n, 3, graph={"step_s": step})
+        nodes, arcs, need = estimate_size(cfg)
+        inst = generate(cfg)
+        assert 0.5 < nodes / inst.n_nodes < 2.0 and 0.5 < arcs / inst.unpruned().n_arcs < 2.0, (n, nodes, arcs)
+    assert estimate_size(family_config("uniform", 10**9, 0))[2] > 10**15
+
+
+def _interrupting(monkeypatch, offer: bool):
+    """run_solver replaced by one that (maybe) reports Greedy's schedule as its incumbent, then gets Ctrl-C."""
+    import eosp.solvers.base as base_mod
+
+    real = base_mod.run_solver
+
+    def interrupted(name, inst, **options):
+        if offer:
+            sol = real("greedy", inst)
+            base_mod.INCUMBENT.clear(inst)
+            base_mod.INCUMBENT.offer(sol.nodes, sol.value)
+        else:
+            base_mod.INCUMBENT.clear(inst)
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(base_mod, "run_solver", interrupted)
+
+
+def test_ctrl_c_with_an_incumbent_writes_it(base, tmp_path, monkeypatch):
+    r = fresh(base, tmp_path)
+    _interrupting(monkeypatch, offer=True)
+    res = run_cli(["solve", r / "inst", "--solver", "lns", "--time-limit", "60", "--out", r / "o.parquet"])
+    assert res.rc == 130 and len(res.err.strip().splitlines()) == 1 and "wrote" in res.err, res.err
+    monkeypatch.undo()
+    assert run_cli(["validate", r / "inst", r / "o.parquet"]).rc == 0
+
+
+def test_ctrl_c_without_an_incumbent_writes_nothing(base, tmp_path, monkeypatch):
+    r = fresh(base, tmp_path)
+    _interrupting(monkeypatch, offer=False)
+    res = run_cli(["solve", r / "inst", "--solver", "greedy", "--out", r / "o.parquet"])
+    assert res.rc == 130 and len(res.err.strip().splitlines()) == 1 and "nothing written" in res.err, res.err
+    assert not (r / "o.parquet").exists() and not list(r.glob(".o.parquet*"))
+
+
+@pytest.mark.parametrize("solver", ["exact", "lns", "sample", "beam", "mcts"])
+def test_every_search_reports_its_incumbent(solver):
+    """What Ctrl-C writes: each search with an incumbent reports its feasible schedules as it goes, the last one
+    at least as good as the start, checked here by the independent checker."""
+    from eosp.instances.schedule import check, from_internal_nodes
+    from eosp.solvers.base import INCUMBENT, run_solver
+
+    inst = generated("conflict", 30, 1, 2.0)
+    sol = run_solver(solver, inst, time_limit=1.0)
+    nodes = INCUMBENT.take(inst)
+    assert nodes is not None and check(inst, from_internal_nodes(inst, nodes)).feasible
+    assert INCUMBENT.value <= sol.value + 1e-9 * abs(sol.value)
+    assert INCUMBENT.take(generated("uniform", 12, 0, 2.0)) is None  # another instance's: never written for this one
+
+
+@pytest.mark.parametrize("solver", ["lns"])
+def test_ctrl_c_of_a_real_search_writes_its_best_schedule(base, tmp_path, solver):
+    """SIGINT to `eosp solve --solver lns --time-limit 60` once it searches: one line, exit 130, a valid schedule."""
+    import signal
+    import subprocess
+    import time
+
+    from eosp.config import family_config
+    from eosp.instances.generator import generate
+    from eosp.instances.interchange import write_instance
+
+    r = fresh(base, tmp_path)
+    write_instance(generate(family_config("conflict", 60, 5)), r / "big")
+    p = subprocess.Popen([sys.executable, "-m", "eosp.cli", "solve", str(r / "big"), "--solver", solver,
+                          "--time-limit", "60", "--out", str(r / "o.jsonl")], stdout=subprocess.PIPE,
+                         stderr=subprocess.PIPE, text=True,
+                         # a test run in the background inherits an ignored SIGINT: the solve must not
+                         preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+    t0 = time.monotonic()
+    time.sleep(8.0)
+    p.send_signal(signal.SIGINT)
+    out, err = p.communicate(timeout=60)
+    if p.returncode == 0:  # finished (proved optimal) before the signal: nothing to test on this machine
+        pytest.skip(f"{solver} finished in {time.monotonic() - t0:.0f} s")
+    assert p.returncode == 130 and len(err.strip().splitlines()) == 1 and "Traceback" not in err, err
+    assert "wrote the best feasible schedule so far" in err, err
+    assert run_cli(["validate", r / "big", r / "o.jsonl"]).rc == 0
 
 
 def count() -> tuple[int, int, list[str]]:

@@ -272,7 +272,7 @@ def test_missing_or_corrupt_shipped_model_is_one_line(tmp_path, monkeypatch, cap
     assert main(["solve", str(tmp_path / "inst"), "--solver", "policy", "--mode", "unitary",
                  "--out", str(tmp_path / "s.parquet")]) == 2
     err = capsys.readouterr().err.strip()
-    assert err.count("\n") == 0 and "cannot read the weights" in err
+    assert err.count("\n") == 0 and "agent.pt: not a torch weights file" in err
     assert not (tmp_path / "s.parquet").exists()
 
 
