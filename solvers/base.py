@@ -13,6 +13,7 @@ one pass and refuse a limit (``ONE_SHOT``), so a caller never believes it bounde
 
 from __future__ import annotations
 
+import functools
 import importlib
 import numbers
 import typing
@@ -72,7 +73,7 @@ class SolverConfig:
         """Every field of the right type and within its limits (:func:`eosp.config.check_value`); a
         one-shot solver given a time limit is refused.  A one-line ValueError otherwise."""
         cls = type(self)
-        hints = typing.get_type_hints(cls)
+        hints = _type_hints(cls)
         for f in fields(self):
             value = getattr(self, f.name)
             _check_type(cls.__name__, f.name, hints[f.name], value)
@@ -119,6 +120,13 @@ class SearchConfig(LearnedConfig):
     unpruned from 100 to 1500 acquisitions, so many more windows per second where schedules are long) or the
     unpruned graph's (every arc; windows there mostly exceed their work bound from ~500 acquisitions on).  The
     schedule itself may keep using every arc."""
+
+
+@functools.lru_cache(maxsize=None)
+def _type_hints(cls: type) -> dict[str, Any]:
+    """A config class's resolved annotations, once per class: resolving them is most of a small solve's cost
+    (the fleet solver solves hundreds of small passes a round)."""
+    return typing.get_type_hints(cls)
 
 
 def _check_type(owner: str, name: str, hint: Any, value: Any) -> None:

@@ -1,0 +1,189 @@
+"""Each pass of a fleet as a single-pass problem that the project's solvers take.
+
+A pass (:mod:`eosp.fleet.opportunities`) is a run of one satellite's opportunities that no
+other pass of that satellite can conflict with.  Its problem is the paper's: acquisitions (the
+pass's tasks) with candidate starts on the action grid, and transitions whose duration depends
+on when they start.  It becomes a :class:`~eosp.graphs.discrete.DiscreteGraph` in the project's
+canonical order: node 0 the source, then each task's opportunities by increasing start; from a
+node, one arc to the EARLIEST opportunity of each other task that can follow it, i.e. that starts
+at least the slew plus settling time after the node ends, the slew angle being the angle between
+the inertial lines of sight at the end of one and the start of the other (the checker's rule,
+with :data:`~eosp.fleet.slew.MARGIN_S` to spare).  Following arcs therefore always gives a
+schedule the checker accepts.  The source's arcs apply the checker's rule for a satellite's first
+action (a slew from geocentric nadir, the gap counted from the horizon start); any later pass
+starts after a full 180-degree slew of time, so the rule never binds there.
+
+Transitions are not FIFO (starting later can need a longer slew), so "earliest" can miss a
+better later start; the checker re-derives every slew from geometry, never from an arc.
+
+A priced problem keeps the pass's graph and changes the utilities: :func:`priced_instance`
+drops tasks whose priced value is not positive (their nodes and arcs) and returns an
+:class:`~eosp.instances.instance.Instance` for any single-pass solver.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numba
+import numpy as np
+
+from eosp.fleet.geometry import NUMERICAL_EPS
+from eosp.fleet.model import Fleet
+from eosp.fleet.opportunities import Opportunities
+from eosp.fleet.slew import MARGIN_S, LineOfSight
+from eosp.graphs.discrete import DiscreteGraph
+from eosp.instances.instance import Acquisitions, Instance
+
+
+@dataclass(frozen=True, eq=False)
+class PassGraph:
+    """One pass as a discrete graph over its opportunities.
+
+    ``rows[i]`` is the opportunity (row of :class:`Opportunities`) of node i + 1; ``tasks[a]`` the
+    fleet task of local acquisition a; ``graph`` holds every task of the pass (unpruned arcs)."""
+
+    pass_id: int
+    satellite: int
+    tasks: np.ndarray  # int32 [k]
+    rows: np.ndarray  # int64 [N - 1]
+    duration: np.ndarray  # float64 [k]
+    graph: DiscreteGraph
+
+    @property
+    def n_tasks(self) -> int:
+        return len(self.tasks)
+
+
+@numba.njit(cache=True, inline="always")
+def _need(u, v, rate, acc, settle):
+    """Slew (bang-coast-bang) plus settling time between two pointing vectors."""
+    nu = np.sqrt(u[0] * u[0] + u[1] * u[1] + u[2] * u[2])
+    nv = np.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2])
+    if nu <= 1e-9 or nv <= 1e-9:
+        return settle
+    c = (u[0] * v[0] + u[1] * v[1] + u[2] * v[2]) / (nu * nv)
+    c = min(1.0, max(-1.0, c))
+    angle = np.degrees(np.arccos(c))
+    if angle <= 1e-9:
+        return settle
+    if angle <= rate * rate / acc:
+        return 2.0 * np.sqrt(angle / acc) + settle
+    return 2.0 * rate / acc + (angle - rate * rate / acc) / rate + settle
+
+
+@numba.njit(cache=True)
+def _arcs(acq_ptr, node_time, node_end, los_start, los_end, nadir, slew, margin):
+    """CSR arcs: from each node, to the earliest node of every other acquisition that can follow it.
+    `slew` = (max rate, max acceleration, settling); rows come out sorted by destination."""
+    rate, acc, settle = slew[0], slew[1], slew[2]
+    n = node_time.shape[0]
+    k = acq_ptr.shape[0] - 1
+    indptr = np.zeros(n + 1, dtype=np.int64)
+    dst = np.empty(max(1, n * k), dtype=np.int32)
+    cnt = 0
+    for b in range(k):  # the source: a first action slews from nadir, its gap counted from the horizon start
+        for v in range(acq_ptr[b], acq_ptr[b + 1]):
+            if node_time[v] >= _need(nadir[v], los_start[v], rate, acc, settle) + margin:
+                dst[cnt] = v
+                cnt += 1
+                break
+    indptr[1] = cnt
+    acq = 0
+    for u in range(1, n):
+        while u >= acq_ptr[acq + 1]:
+            acq += 1
+        for b in range(k):
+            if b == acq:
+                continue
+            lo, hi = acq_ptr[b], acq_ptr[b + 1]
+            while lo < hi:  # first node of b starting after u ends
+                mid = (lo + hi) >> 1
+                if node_time[mid] < node_end[u]:
+                    lo = mid + 1
+                else:
+                    hi = mid
+            for v in range(lo, acq_ptr[b + 1]):
+                if node_time[v] - node_end[u] >= _need(los_end[u], los_start[v], rate, acc, settle) + margin:
+                    dst[cnt] = v
+                    cnt += 1
+                    break
+        indptr[u + 1] = cnt
+    return indptr, dst[:cnt].copy()
+
+
+def build_pass(fleet: Fleet, opps: Opportunities, los: LineOfSight, p: int, offsets: np.ndarray) -> PassGraph:
+    """The discrete graph of pass `p` (``offsets``: :meth:`Opportunities.pass_offsets`)."""
+    rows = np.arange(offsets[p], offsets[p + 1])
+    sat = int(opps.satellite[rows[0]])
+    tasks, local = np.unique(opps.task[rows], return_inverse=True)
+    start = opps.start[rows].astype(np.float64) * fleet.horizon.action_step_s
+    order = np.lexsort((start, local))  # canonical: by acquisition, then start
+    rows, local, start = rows[order], local[order], start[order]
+    task = opps.task[rows]
+    duration = fleet.tasks.duration_s[tasks].astype(np.float64)
+    end = start + duration[local]
+    acq_ptr = np.r_[0, np.cumsum(np.bincount(local, minlength=len(tasks)))].astype(np.int64) + 1
+    # node 0 is the source: its slots in the per-node arrays are never read as a destination
+    node_time = np.r_[0.0, start]
+    node_end = np.r_[0.0, end]
+    los_start = np.vstack([np.zeros((1, 3)), los.los(sat, task, start)])
+    los_end = np.vstack([np.zeros((1, 3)), los.los(sat, task, end)])
+    nadir = np.vstack([np.zeros((1, 3)), los.nadir(sat, start)])
+    att = fleet.satellites.attitude
+    slew = np.array([att.max_rate_deg_s[sat], att.max_acc_deg_s2[sat], att.settling_s[sat]], dtype=np.float64)
+    indptr, dst = _arcs(acq_ptr, node_time, node_end, los_start, los_end, nadir, slew, MARGIN_S + NUMERICAL_EPS)
+    node_acq = np.r_[-1, local].astype(np.int32)
+    graph = DiscreteGraph(node_acq, node_time, indptr, dst, acq_ptr)
+    return PassGraph(p, sat, tasks.astype(np.int32), rows.astype(np.int64), duration, graph)
+
+
+def build_passes(fleet: Fleet, opps: Opportunities, los: LineOfSight) -> list[PassGraph]:
+    """Every pass of the fleet, in pass order."""
+    off = opps.pass_offsets()
+    return [build_pass(fleet, opps, los, p, off) for p in range(opps.n_passes)]
+
+
+def _subgraph(graph: DiscreteGraph, keep_acq: np.ndarray) -> tuple[DiscreteGraph, np.ndarray]:
+    """The graph restricted to the acquisitions in `keep_acq` (bool [k]); (graph, kept old node ids)."""
+    keep_node = np.r_[True, keep_acq[graph.node_acq[1:]]]
+    new_id = np.cumsum(keep_node) - 1
+    src = graph.src()
+    arc_ok = keep_node[src] & keep_node[graph.dst]
+    counts = np.bincount(new_id[src[arc_ok]], minlength=int(keep_node.sum()))
+    indptr = np.r_[0, np.cumsum(counts)].astype(np.int64)
+    dst = new_id[graph.dst[arc_ok]].astype(np.int32)
+    acq_new = np.cumsum(keep_acq) - 1
+    node_acq = np.r_[-1, acq_new[graph.node_acq[1:][keep_node[1:]]]].astype(np.int32)
+    per_acq = np.bincount(node_acq[1:], minlength=int(keep_acq.sum()))
+    acq_ptr = np.r_[1, 1 + np.cumsum(per_acq)].astype(np.int64)
+    return DiscreteGraph(node_acq, graph.node_time[keep_node], indptr, dst, acq_ptr), np.flatnonzero(keep_node)
+
+
+@dataclass(frozen=True, eq=False)
+class PricedPass:
+    """A pass's problem under prices: the instance a single-pass solver takes, and how to map back
+    (``nodes[i]`` = node of the pass graph of the instance's node i; ``acqs`` = kept local acquisitions)."""
+
+    pass_graph: PassGraph
+    instance: Instance
+    nodes: np.ndarray
+    acqs: np.ndarray
+
+
+def priced_instance(pg: PassGraph, value: np.ndarray) -> PricedPass | None:
+    """The pass's problem with utility `value[a]` per local acquisition; tasks whose value is not
+    positive are left out.  None when no task is left."""
+    keep = value > 0
+    if not keep.any():
+        return None
+    graph, nodes = (pg.graph, np.arange(pg.graph.n_nodes)) if keep.all() else _subgraph(pg.graph, keep)
+    acqs = np.flatnonzero(keep)
+    t = graph.node_time
+    first = t[graph.acq_ptr[:-1]]
+    last = t[graph.acq_ptr[1:] - 1] + pg.duration[acqs]
+    inst = Instance(f"pass-{pg.pass_id}", Acquisitions(pg.duration[acqs].copy(), first, last,
+                                                     value[acqs].astype(np.float64)),
+                    graph, np.arange(graph.n_nodes, dtype=np.int64), meta={"horizon_s": float(last.max())})
+    inst.pruned_graph = None
+    return PricedPass(pg, inst, nodes, acqs)

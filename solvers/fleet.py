@@ -1,0 +1,391 @@
+"""The fleet solver: a constellation's passes solved by the project's single-pass solvers, coordinated by
+task prices, with an upper bound.
+
+A constellation-day is hundreds of passes (:mod:`eosp.fleet.passgraph`) coupled by one constraint: a task is
+served at most once (and each satellite's battery runs from one pass to the next).  Relaxing "at most once"
+with a price ``lam[i] >= 0`` per task separates the passes: each pass is solved on its own with utilities
+``w[i] - lam[i]`` (tasks whose priced utility is not positive are left out), and
+
+    L(lam) = sum over passes of (the pass optimum under lam) + sum of lam
+
+bounds the weight any schedule can serve (energy relaxed).  When every pass term is an optimum the exact solver
+proved, or a bound it proved, L is proven; the prices move by subgradient steps (Polyak's rule towards the
+best schedule known) and the best L is kept.
+
+Schedules come from the same pass solver with true weights:
+
+* construction: passes in time order, each solved with the tasks not yet served;
+* coordinate descent: a pass is solved again with every task not served by another pass; its new schedule is
+  never worse, and the tasks it frees make the passes that hold them worth solving again (a queue);
+* large neighbourhoods: the tasks of the passes meeting a random time span are freed, those passes are solved
+  again in an order and with utilities perturbed by the prices (a contested task is left to the others when
+  its price is high), coordinate descent follows, and the result is kept when it serves at least as much.
+
+Each schedule is checked against the battery with the checker's model; a satellite that runs dry loses its
+least valuable observations before the failure (and those tasks are barred from that satellite's passes in
+later rounds).  The final schedule is checked by the checker before it is returned.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from eosp.config import choice, ranged
+from eosp.fleet.geometry import Geometry
+from eosp.fleet.greedy import Timeline, repair_battery, to_schedule
+from eosp.fleet.model import Fleet, Schedule
+from eosp.fleet.opportunities import Opportunities
+from eosp.fleet.passgraph import PassGraph, build_passes, priced_instance
+from eosp.fleet.slew import LineOfSight
+
+PASS_SOLVERS = ("greedy", "ramp", "exact")
+
+
+@dataclass
+class FleetConfig:
+    """Options of the fleet solver (``eosp solve FLEET_DIR --solver fleet``)."""
+
+    pass_solver: str = choice("exact", *PASS_SOLVERS)
+    """Single-pass solver of every pass: exact (optima, hence a proven bound), ramp or greedy (no bound)."""
+    time_limit: float | None = ranged(60.0, 0)
+    """Seconds for the whole solve after the passes are built; unset with --rounds: no limit."""
+    rounds: int = ranged(0, 0)
+    """Price rounds, each followed by a large-neighbourhood move; 0: as many as the time limit allows.  With
+    a number of rounds and no time limit a run is deterministic for a seed."""
+    seed: int = ranged(0, 0)
+    """Seed of the large-neighbourhood moves."""
+    pass_time_limit: float = ranged(5.0, 0)
+    """Seconds the exact solver may spend on one pass (its bound is used when it stops early)."""
+    span_s: float = ranged(3600.0, 1)
+    """Length of the time span freed by one large-neighbourhood move."""
+
+
+@dataclass
+class PassResult:
+    nodes: np.ndarray  # pass-graph node ids, in order
+    value: float  # under the utilities it was solved with
+    bound: float | None  # a proven upper bound of that value, None when the solver gives none
+
+
+@dataclass
+class Problem:
+    """A fleet, its opportunities and its pass graphs, built once."""
+
+    fleet: Fleet
+    opps: Opportunities
+    geo: Geometry
+    los: LineOfSight
+    passes: list[PassGraph]
+    weight: np.ndarray  # float64 [tasks]
+    task_passes: list[np.ndarray]  # passes holding each task
+    pass_time: np.ndarray  # (first start, last end) of each pass, seconds
+    build_s: float = 0.0
+
+    @classmethod
+    def build(cls, fleet: Fleet, opps: Opportunities, geo: Geometry | None = None) -> Problem:
+        t0 = time.perf_counter()
+        geo = geo or Geometry(fleet)
+        los = LineOfSight(fleet, geo)
+        passes = build_passes(fleet, opps, los)
+        n = len(fleet.tasks)
+        holders: list[list[int]] = [[] for _ in range(n)]
+        for pg in passes:
+            for t in pg.tasks.tolist():
+                holders[t].append(pg.pass_id)
+        span = np.array([[pg.graph.node_time[1:].min(),
+                          (pg.graph.node_time[1:] + pg.duration[pg.graph.node_acq[1:]]).max()] for pg in passes])
+        span = span.reshape(-1, 2)
+        return cls(fleet, opps, geo, los, passes, fleet.tasks.weight.astype(np.float64),
+                   [np.asarray(h, dtype=np.int64) for h in holders], span, time.perf_counter() - t0)
+
+    @property
+    def total_weight(self) -> float:
+        return float(self.weight.sum())
+
+
+def solve_pass(prob: Problem, p: int, value: np.ndarray, cfg: FleetConfig) -> PassResult:
+    """Pass `p` with utility `value[a]` per local task (non-positive ones left out)."""
+    from eosp.solvers.base import run_solver
+
+    pp = priced_instance(prob.passes[p], value)
+    if pp is None:
+        return PassResult(np.zeros(0, np.int64), 0.0, 0.0)
+    opts = {"time_limit": cfg.pass_time_limit} if cfg.pass_solver in ("exact", "ramp") else {}
+    sol = run_solver(cfg.pass_solver, pp.instance, mode="utility", **opts)
+    bound = None
+    if cfg.pass_solver == "exact":
+        bound = sol.value if sol.info.get("status") == "optimal" else float(sol.info.get("bound", math.inf))
+    return PassResult(pp.nodes[np.asarray(sol.nodes, dtype=np.int64)], float(sol.value), bound)
+
+
+def rewalk(pg: PassGraph, path: np.ndarray) -> np.ndarray:
+    """The acquisitions of `path` (pass-graph nodes, in order) followed along the graph's arcs from the source:
+    each at its earliest node after the previous one; one that cannot follow is skipped."""
+    g = pg.graph
+    out, node = [], 0
+    for acq in g.node_acq[path].tolist():
+        nxt = g.successor(node, acq)
+        if nxt >= 0:
+            out.append(nxt)
+            node = nxt
+    return np.asarray(out, dtype=np.int64)
+
+
+@dataclass
+class Primal:
+    """A schedule as pass paths; ``served[i]`` = pass serving task i, or -1."""
+
+    paths: list[np.ndarray]
+    served: np.ndarray
+    value: float = 0.0
+
+    def copy(self) -> Primal:
+        return Primal(list(self.paths), self.served.copy(), self.value)
+
+
+def path_tasks(prob: Problem, p: int, path: np.ndarray) -> np.ndarray:
+    pg = prob.passes[p]
+    return pg.tasks[pg.graph.node_acq[path]]
+
+
+@dataclass
+class Coordinator:
+    """Prices, the best schedule and the best bound of one solve (see the module docstring)."""
+
+    prob: Problem
+    cfg: FleetConfig
+    lam: np.ndarray = field(init=False)
+    best: Primal = field(init=False)
+    best_bound: float = math.inf
+    bound_proven: bool = True
+    barred: np.ndarray = field(init=False)  # (pass, task) pairs the battery repair took out: bool per pass node
+    history: list[tuple[float, float, float]] = field(default_factory=list)  # (seconds, value, bound)
+    t0: float = field(default_factory=time.perf_counter)
+    pass_solves: int = 0
+    step: float = 1.0  # Polyak step factor, halved when the bound stalls
+    rounds_done: int = 0
+
+    def __post_init__(self) -> None:
+        n = len(self.prob.fleet.tasks)
+        self.lam = np.zeros(n)
+        self.round_paths = [np.zeros(0, np.int64)] * len(self.prob.passes)
+        self.best = Primal([np.zeros(0, np.int64)] * len(self.prob.passes), np.full(n, -1, np.int64))
+        self.barred = np.zeros(n, dtype=bool)  # tasks barred everywhere by the battery repair (rare)
+
+    # ------------------------------------------------------------------ pass solves
+    def _solve(self, p: int, util: np.ndarray) -> PassResult:
+        self.pass_solves += 1
+        return solve_pass(self.prob, p, util, self.cfg)
+
+    def _available(self, primal: Primal, p: int) -> np.ndarray:
+        tasks = self.prob.passes[p].tasks
+        s = primal.served[tasks]
+        return ((s < 0) | (s == p)) & ~self.barred[tasks]
+
+    def _assign(self, primal: Primal, p: int, path: np.ndarray) -> list[int]:
+        """Give pass p the schedule `path`; returns the tasks it freed."""
+        old = path_tasks(self.prob, p, primal.paths[p])
+        new = path_tasks(self.prob, p, path)
+        freed = np.setdiff1d(old, new)
+        primal.served[freed] = -1
+        primal.served[new] = p
+        primal.paths[p] = path
+        primal.value += float(self.prob.weight[new].sum() - self.prob.weight[old].sum())
+        return freed.tolist()
+
+    def descend(self, primal: Primal, queue: list[int], deadline: float | None) -> None:
+        """Coordinate descent: solve the queued passes again with every task no other pass serves."""
+        w = self.prob.weight
+        queued = np.zeros(len(self.prob.passes), dtype=bool)
+        queued[queue] = True
+        while queue:
+            if deadline is not None and time.perf_counter() > deadline:
+                return
+            p = queue.pop(0)
+            queued[p] = False
+            tasks = self.prob.passes[p].tasks
+            res = self._solve(p, np.where(self._available(primal, p), w[tasks], 0.0))
+            if res.value > float(w[path_tasks(self.prob, p, primal.paths[p])].sum()) + 1e-9:
+                for t in self._assign(primal, p, res.nodes):
+                    for q in self.prob.task_passes[t].tolist():
+                        if q != p and not queued[q]:
+                            queued[q] = True
+                            queue.append(q)
+
+    def construct(self, order: np.ndarray, util_shift: np.ndarray | None = None,
+                  primal: Primal | None = None, deadline: float | None = None) -> Primal:
+        """Passes in `order`, each solved with the tasks still free (utility ``w - util_shift``, kept positive)."""
+        w = self.prob.weight
+        primal = primal or Primal([np.zeros(0, np.int64)] * len(self.prob.passes),
+                                  np.full(len(w), -1, np.int64))
+        for p in order.tolist():
+            if deadline is not None and time.perf_counter() > deadline:
+                break
+            tasks = self.prob.passes[p].tasks
+            u = w[tasks] if util_shift is None else np.maximum(w[tasks] - util_shift[tasks], 1e-3 * w[tasks])
+            res = self._solve(p, np.where(self._available(primal, p), u, 0.0))
+            self._assign(primal, p, res.nodes)
+        return primal
+
+    # ------------------------------------------------------------------ prices and bound
+    def price_round(self, deadline: float | None) -> float | None:
+        """Every pass under the current prices; returns L(lam) (None when cut by the deadline), moves prices."""
+        w = self.prob.weight
+        count = np.zeros(len(w))
+        total = float(self.lam.sum())
+        proven = True
+        for p, pg in enumerate(self.prob.passes):
+            if deadline is not None and time.perf_counter() > deadline:
+                return None
+            res = self._solve(p, w[pg.tasks] - self.lam[pg.tasks])
+            self.round_paths[p] = res.nodes
+            if res.bound is None:
+                proven = False
+                total += res.value
+            else:
+                total += res.bound
+            count[path_tasks(self.prob, p, res.nodes)] += 1
+        self.bound_proven &= proven
+        if total < self.best_bound:
+            self.best_bound = total
+        g = 1.0 - count
+        g[(self.lam <= 0) & (g > 0)] = 0.0  # a free task at price 0 cannot go lower
+        norm2 = float(g @ g)
+        if norm2 > 0:
+            step = self.step * max(total - self.best.value, 1e-6 * total) / norm2
+            self.lam = np.maximum(0.0, self.lam - step * g)
+        return total
+
+    step: float = 1.0
+
+    def recover(self, rng: np.random.Generator, deadline: float | None) -> Primal:
+        """A schedule from the last price round's pass schedules: passes in random order keep the tasks no
+        earlier pass took (the rest of their path re-walked along the graph's arcs), then coordinate descent."""
+        n_pass = len(self.prob.passes)
+        primal = Primal([np.zeros(0, np.int64)] * n_pass, np.full(len(self.prob.weight), -1, np.int64))
+        for p in rng.permutation(n_pass).tolist():
+            path = self.round_paths[p]
+            if len(path) == 0:
+                continue
+            free = self._available(primal, p)[self.prob.passes[p].graph.node_acq[path]]
+            self._assign(primal, p, rewalk(self.prob.passes[p], path[free]))
+        self.descend(primal, list(range(n_pass)), deadline)
+        return primal
+
+    # ------------------------------------------------------------------ battery
+    def battery_repair(self, primal: Primal) -> int:
+        """Drop observations until every battery holds (checker's model); returns the number dropped."""
+        tls = self.timelines(primal)
+        dropped = repair_battery(self.prob.fleet, self.prob.los, tls)
+        if dropped:
+            keep = {(k, t) for k, tl in enumerate(tls) for t in tl.task}
+            for p, pg in enumerate(self.prob.passes):
+                path = primal.paths[p]
+                tasks = path_tasks(self.prob, p, path)
+                ok = np.array([(pg.satellite, t) in keep for t in tasks.tolist()], dtype=bool)
+                if not ok.all():
+                    self.barred[tasks[~ok]] = True
+                    primal.served[tasks[~ok]] = -1
+                    primal.paths[p] = path[ok]
+                    primal.value -= float(self.prob.weight[tasks[~ok]].sum())
+        return dropped
+
+    def timelines(self, primal: Primal) -> list[Timeline]:
+        prob = self.prob
+        step = prob.fleet.horizon.action_step_s
+        tls = [Timeline() for _ in range(len(prob.fleet.satellites))]
+        for p, pg in enumerate(prob.passes):
+            path = primal.paths[p]
+            if len(path) == 0:
+                continue
+            rows = pg.rows[path - 1]
+            task = prob.opps.task[rows]
+            st = prob.opps.start[rows].astype(np.float64) * step
+            en = st + prob.fleet.tasks.duration_s[task]
+            l0, l1 = prob.los.los(pg.satellite, task, st), prob.los.los(pg.satellite, task, en)
+            tl = tls[pg.satellite]
+            for k in range(len(rows)):
+                tl.insert(len(tl.start), (float(st[k]), float(en[k]), int(task[k]), l0[k], l1[k]))
+        for tl in tls:  # passes of a satellite are in time order already; keep it explicit
+            order = np.argsort(np.asarray(tl.start), kind="stable")
+            for col in (tl.start, tl.end, tl.task, tl.los0, tl.los1):
+                col[:] = [col[i] for i in order]
+        return tls
+
+    def schedule(self, primal: Primal) -> Schedule:
+        return to_schedule(self.prob.fleet, self.timelines(primal))
+
+    # ------------------------------------------------------------------ the loop
+    def record(self) -> None:
+        self.history.append((time.perf_counter() - self.t0, self.best.value, self.best_bound))
+
+    def offer(self, primal: Primal) -> bool:
+        """Keep `primal` (after battery repair) when it serves more than the best."""
+        self.battery_repair(primal)
+        if primal.value > self.best.value + 1e-9:
+            self.best = primal
+            self.record()
+            return True
+        return False
+
+    def neighbourhood(self, rng: np.random.Generator, deadline: float | None) -> None:
+        """Free the passes meeting a random time span, rebuild them in a price-perturbed order, descend."""
+        prob = self.prob
+        horizon = prob.fleet.horizon.seconds
+        a = rng.uniform(-self.cfg.span_s, horizon)
+        hit = np.flatnonzero((prob.pass_time[:, 1] >= a) & (prob.pass_time[:, 0] <= a + self.cfg.span_s))
+        if len(hit) == 0:
+            return
+        trial = self.best.copy()
+        for p in hit.tolist():
+            self._assign(trial, p, np.zeros(0, np.int64))
+        order = hit[rng.permutation(len(hit))]
+        shift = self.lam * rng.uniform(0.0, 1.0)
+        self.construct(order, shift, trial, deadline)
+        touched = sorted({q for p in hit.tolist() for t in prob.passes[p].tasks.tolist()
+                          for q in prob.task_passes[t].tolist()})
+        self.descend(trial, touched, deadline)
+        if trial.value >= self.best.value - 1e-9:
+            self.battery_repair(trial)
+            if trial.value >= self.best.value - 1e-9:
+                improved = trial.value > self.best.value + 1e-9
+                self.best = trial
+                if improved:
+                    self.record()
+
+    def run(self) -> Primal:
+        cfg, prob = self.cfg, self.prob
+        deadline = None if cfg.time_limit is None else self.t0 + cfg.time_limit
+        rng = np.random.default_rng(cfg.seed)
+        order = np.argsort(prob.pass_time[:, 0], kind="stable")
+        first = self.construct(order)
+        self.descend(first, list(range(len(prob.passes))), deadline)
+        self.offer(first)
+        rounds, stall = 0, 0
+        while cfg.rounds == 0 or rounds < cfg.rounds:
+            if deadline is not None and time.perf_counter() > deadline:
+                break
+            if cfg.pass_solver == "exact" or rounds == 0:
+                before = self.best_bound
+                if self.price_round(deadline) is None:
+                    break
+                stall = 0 if self.best_bound < before - 1e-9 else stall + 1
+                if stall >= 3:
+                    self.step, stall = self.step / 2, 0
+                self.record()
+                if not self.offer(self.recover(rng, deadline)):
+                    self.neighbourhood(rng, deadline)
+            else:
+                self.neighbourhood(rng, deadline)
+            rounds += 1
+        self.rounds_done = rounds
+        return self.best
+
+    @property
+    def bound(self) -> float | None:
+        """The best proven bound (None when a pass solver gave none)."""
+        return self.best_bound if self.bound_proven and math.isfinite(self.best_bound) else None
