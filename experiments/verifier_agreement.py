@@ -13,7 +13,9 @@ SOURCE is a checkout of astro-reason, or a bare mirror of it (its HEAD is unpack
 * for the evaluation splits, ``--broken`` deliberately broken schedules per case, derived from
   the greedy one: overlaps, short slews, off-grid and wrong-duration actions, wrong sensors,
   actions outside their window, off-nadir starts, unknown ids, and battery drains (the case
-  copied with one satellite's initial charge and sunlit charging lowered).
+  copied with one satellite's initial charge and sunlit charging lowered);
+* two random sub-schedules of the greedy one per evaluation case (50 % and 90 % of its actions),
+  usually valid, so that the metrics are compared on more than the greedy schedules.
 
 For each schedule it compares the verdict, the metrics (WCR, CR, TAT, PC, to 1e-9) and the
 first violation (stage, action, time), prints one line per schedule and a summary table, and
@@ -176,6 +178,8 @@ def broken_schedules(fleet, opps, sched: Schedule, rng) -> list[tuple[str, Sched
                                        sched.start_us, sched.end_us)))
     i = pick()
     out.append(("unknown_id", edited(sched, i, sat="no_such_satellite")))
+    for frac in (0.5, 0.9):  # not broken: random sub-schedules (usually valid) compare the metrics
+        out.append(("subset", subset(sched, np.sort(rng.choice(n, int(frac * n), replace=False)))))
     return out
 
 
@@ -274,7 +278,7 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("source", type=Path, help="astro-reason checkout or bare mirror")
     ap.add_argument("--splits", default="test,test_easy,test_horizon_2022,test_hard,train")
-    ap.add_argument("--broken", type=int, default=20, help="broken schedules per evaluation case")
+    ap.add_argument("--broken", type=int, default=22, help="variants per evaluation case (20 broken, 2 sub-schedules)")
     ap.add_argument("--no-fixtures", action="store_true")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--log", type=Path, default=None, help="append one JSON line per schedule")

@@ -13,8 +13,6 @@ from __future__ import annotations
 from typing import NamedTuple
 
 import numpy as np
-from numba import njit
-
 from eosp.fleet.geometry import Geometry, epochs, sunlit
 from eosp.fleet.model import Fleet
 
@@ -63,28 +61,25 @@ def active(intervals: Intervals, t: np.ndarray) -> np.ndarray:
 
 
 class SunCache:
-    """Sunlight of each satellite at arbitrary instants: ITRF positions rotated to GCRF with one
-    rotation per instant (shared by all satellites); instants within a metre of the shadow
-    boundary are recomputed with brahe's own GCRF state, the benchmark's path."""
+    """Sunlight of each satellite at arbitrary instants: ITRF positions rotated to GCRF
+    (:meth:`Geometry.rotation_at`, shared by all satellites); instants within a metre of the
+    shadow boundary are recomputed with brahe's own GCRF state, the benchmark's path, so the
+    verdict is the benchmark's."""
 
     def __init__(self, geo: Geometry):
         self.geo = geo
-        self._rot: dict[int, np.ndarray] = {}
         self._sun: dict[int, np.ndarray] = {}
 
     def _frames(self, t_us: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        missing = [t for t in np.unique(t_us).tolist() if t not in self._rot]
+        missing = [t for t in np.unique(t_us).tolist() if t not in self._sun]
         if missing:
             from eosp.fleet.geometry import brahe_module
 
             bh = brahe_module()
-            eps = epochs(self.geo.fleet.horizon.start, missing)
-            for t, e in zip(missing, eps):
-                self._rot[t] = np.asarray(bh.rotation_ecef_to_eci(e), dtype=float).reshape(3, 3)
+            for t, e in zip(missing, epochs(self.geo.fleet.horizon.start, missing)):
                 self._sun[t] = np.asarray(bh.sun_position(e), dtype=float)
-        keys = t_us.tolist()
-        return (np.asarray([self._rot[k] for k in keys]).reshape(-1, 3, 3),
-                np.asarray([self._sun[k] for k in keys]).reshape(-1, 3))
+        return (self.geo.rotation_at(t_us),
+                np.asarray([self._sun[k] for k in t_us.tolist()]).reshape(-1, 3))
 
     def positions_ecef(self, sat: int, t_us: np.ndarray) -> np.ndarray:
         geo = self.geo
@@ -113,14 +108,15 @@ class SunCache:
         return lit
 
 
-@njit(cache=True)
-def _run(load, charge, dur, initial, capacity):
+def _run(load: list, charge: list, dur: list, initial: float, capacity: float) -> tuple[int, float, float]:
+    """The charge recurrence, segment by segment (sequential by nature, and cheap: plain floats,
+    the benchmark's operations in its order)."""
     battery = initial
     gross = 0.0
     low = initial
-    for k in range(len(load)):
-        gross += (load[k] * dur[k]) / 3600.0
-        battery += ((charge[k] - load[k]) * dur[k]) / 3600.0
+    for k, (ld, ch, dt) in enumerate(zip(load, charge, dur)):
+        gross += (ld * dt) / 3600.0
+        battery += ((ch - ld) * dt) / 3600.0
         if battery < -1.0e-9:
             return k, gross, low
         battery = min(capacity, battery)
@@ -142,7 +138,8 @@ def simulate(fleet: Fleet, sun: SunCache, sat: int, obs: Intervals, man: Interva
     load = load + np.where(a_man >= 0, b.slew_w[sat], 0.0)
     charge = np.where(sun.sunlit(sat, mid), b.sunlit_w[sat], 0.0)
     dur = d.astype(np.float64) / 1e6
-    k, gross, low = _run(load, charge, dur, float(b.initial_wh[sat]), float(b.capacity_wh[sat]))
+    k, gross, low = _run(load.tolist(), charge.tolist(), dur.tolist(), float(b.initial_wh[sat]),
+                         float(b.capacity_wh[sat]))
     if k < 0:
         return BatteryRun(True, float(gross), -1, -1, float(low))
     return BatteryRun(False, float(gross), int(mid[k]), int(a_obs[k]), float(low))
