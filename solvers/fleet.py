@@ -39,7 +39,7 @@ from eosp.fleet.geometry import Geometry
 from eosp.fleet.greedy import Timeline, repair_battery, to_schedule
 from eosp.fleet.model import Fleet, Schedule
 from eosp.fleet.opportunities import Opportunities
-from eosp.fleet.passgraph import PassGraph, build_passes, priced_instance
+from eosp.fleet.passgraph import PassGraph, build_passes, fifo_violations, priced_instance
 from eosp.fleet.slew import LineOfSight
 
 PASS_SOLVERS = ("greedy", "ramp", "exact")
@@ -83,6 +83,7 @@ class Problem:
     weight: np.ndarray  # float64 [tasks]
     task_passes: list[np.ndarray]  # passes holding each task
     pass_time: np.ndarray  # (first start, last end) of each pass, seconds
+    fifo_violations: int = 0  # see eosp.fleet.passgraph.fifo_violations: 0 makes the pass optima the passes'
     build_s: float = 0.0
 
     @classmethod
@@ -99,8 +100,9 @@ class Problem:
         span = np.array([[pg.graph.node_time[1:].min(),
                           (pg.graph.node_time[1:] + pg.duration[pg.graph.node_acq[1:]]).max()] for pg in passes])
         span = span.reshape(-1, 2)
+        fifo = sum(fifo_violations(pg.graph) for pg in passes)
         return cls(fleet, opps, geo, los, passes, fleet.tasks.weight.astype(np.float64),
-                   [np.asarray(h, dtype=np.int64) for h in holders], span, time.perf_counter() - t0)
+                   [np.asarray(h, dtype=np.int64) for h in holders], span, fifo, time.perf_counter() - t0)
 
     @property
     def total_weight(self) -> float:
@@ -387,5 +389,54 @@ class Coordinator:
 
     @property
     def bound(self) -> float | None:
-        """The best proven bound (None when a pass solver gave none)."""
-        return self.best_bound if self.bound_proven and math.isfinite(self.best_bound) else None
+        """The best proven bound (None when a pass solver gave none, or when some pass graph is not FIFO, so that
+        its optimum might miss a schedule that waits: see :func:`eosp.fleet.passgraph.fifo_violations`)."""
+        ok = self.bound_proven and self.prob.fifo_violations == 0 and math.isfinite(self.best_bound)
+        return self.best_bound if ok else None
+
+
+@dataclass
+class FleetSolution:
+    """The best schedule, the value and bound as fractions of the total weight (WCR), and the run's record."""
+
+    schedule: Schedule
+    value: float
+    bound: float | None
+    history: list[tuple[float, float, float]]
+    info: dict
+
+    @property
+    def gap(self) -> float | None:
+        return None if self.bound is None or self.bound <= 0 else (self.bound - self.value) / self.bound
+
+
+def solve(fleet: Fleet, opps: Opportunities, cfg: FleetConfig | None = None,
+          problem: Problem | None = None) -> FleetSolution:
+    """Schedule a fleet (see the module docstring); the schedule is checked by the checker before it is returned,
+    and an action it rejects is dropped (never expected: the pass graphs and the battery repair use its rules)."""
+    from eosp.fleet.check import validate
+
+    cfg = cfg or FleetConfig()
+    prob = problem or Problem.build(fleet, opps)
+    coord = Coordinator(prob, cfg)
+    best = coord.run()
+    sched = coord.schedule(best)
+    res = validate(fleet, sched, prob.geo)
+    dropped = 0
+    while not res.valid and len(sched):
+        bad = sorted({v.action for v in res.violations if v.action >= 0}) or [0]
+        keep = np.setdiff1d(np.arange(len(sched)), bad)
+        sched = Schedule(sched.satellite[keep], sched.task[keep], sched.start_us[keep], sched.end_us[keep])
+        dropped += len(bad)
+        res = validate(fleet, sched, prob.geo)
+    W = prob.total_weight
+    bound = coord.bound
+    info = {"pass_solver": cfg.pass_solver, "rounds": coord.rounds_done, "pass_solves": coord.pass_solves,
+            "passes": len(prob.passes), "build_s": round(prob.build_s, 3), "checker_drops": dropped,
+            "battery_barred": int(coord.barred.sum()), "metrics": res.metrics,
+            "no_bound_because": None if bound is not None else (
+                f"pass solver {cfg.pass_solver} proves no pass bound" if cfg.pass_solver != "exact"
+                else "a pass graph is not FIFO" if prob.fifo_violations else "no price round finished")}
+    hist = [(t, v / W, b / W) for t, v, b in coord.history]
+    return FleetSolution(sched, float(res.metrics.get("WCR", 0.0)), None if bound is None else min(1.0, bound / W),
+                         hist, info)

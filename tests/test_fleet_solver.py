@@ -1,0 +1,109 @@
+"""The fleet solver: valid schedules, each task once, a bound that holds, agreement with brute force per pass."""
+
+import numpy as np
+import pytest
+
+from eosp.fleet.check import validate
+from eosp.fleet.geometry import NUMERICAL_EPS, Geometry
+from eosp.fleet.opportunities import compute
+from eosp.fleet.slew import LineOfSight
+from tests.test_fleet import synthetic_fleet
+
+
+def build(n_tasks: int, seed: int):
+    from eosp.solvers.fleet import Problem
+
+    fleet = synthetic_fleet(n_tasks=n_tasks, seed=seed)
+    return Problem.build(fleet, compute(fleet, Geometry(fleet)))
+
+
+@pytest.fixture(scope="module")
+def problem():
+    return build(16, 5)
+
+
+def brute_force_pass(prob, p: int) -> float:
+    """The best weight one pass can serve, by dynamic programming over (tasks used, last opportunity) with
+    every start of every task and the checker's slew rule evaluated pair by pair: independent of the pass
+    graph and of its earliest-start arcs."""
+    pg = prob.passes[p]
+    fleet, los, sat = prob.fleet, LineOfSight(prob.fleet, prob.geo), pg.satellite
+    rows = pg.rows
+    task = prob.opps.task[rows]
+    local = np.searchsorted(pg.tasks, task)
+    st = prob.opps.start[rows].astype(float) * fleet.horizon.action_step_s
+    en = st + fleet.tasks.duration_s[task]
+    n, k = len(rows), len(pg.tasks)
+    l0, l1 = los.los(sat, task, st), los.los(sat, task, en)
+    need = np.array([[los.need_s(sat, l1[u], l0[v]) for v in range(n)] for u in range(n)])
+    ok = (st[None, :] - en[:, None]) + NUMERICAL_EPS >= need
+    first = st + NUMERICAL_EPS >= los.need_s(sat, los.nadir(sat, st), l0)
+    w = fleet.tasks.weight[pg.tasks]
+    best = {}  # (mask, last node) -> reachable
+    frontier = {(1 << local[v], v) for v in range(n) if first[v]}
+    seen = set(frontier)
+    while frontier:
+        nxt = set()
+        for mask, u in frontier:
+            for v in np.flatnonzero(ok[u]).tolist():
+                if mask >> local[v] & 1:
+                    continue
+                s = (mask | 1 << local[v], v)
+                if s not in seen:
+                    seen.add(s)
+                    nxt.add(s)
+        frontier = nxt
+    for mask, _ in seen:
+        best[mask] = sum(w[a] for a in range(k) if mask >> a & 1)
+    return max(best.values(), default=0.0)
+
+
+@pytest.mark.parametrize("seed", [5, 6, 7])
+def test_exact_pass_optimum_equals_brute_force_over_every_start(seed):
+    from eosp.solvers.fleet import FleetConfig, solve_pass
+
+    problem = build(6, seed)
+    small = [p for p, pg in enumerate(problem.passes) if 2 <= pg.n_tasks <= 7]
+    assert len(small) >= 1
+    for p in small:
+        pg = problem.passes[p]
+        res = solve_pass(problem, p, problem.weight[pg.tasks], FleetConfig())
+        assert res.value == pytest.approx(brute_force_pass(problem, p)), p
+        assert res.bound == pytest.approx(res.value)
+
+
+def test_fleet_schedule_is_valid_each_task_once_and_under_its_bound(problem):
+    from eosp.fleet.greedy import solve as greedy
+    from eosp.solvers.fleet import FleetConfig, solve
+
+    fleet = problem.fleet
+    sol = solve(fleet, problem.opps, FleetConfig(time_limit=None, rounds=4), problem=problem)
+    res = validate(fleet, sol.schedule, problem.geo)
+    assert res.valid and len(set(sol.schedule.task.tolist())) == len(sol.schedule)
+    assert sol.value == pytest.approx(res.metrics["WCR"])
+    base = validate(fleet, greedy(fleet, problem.opps, problem.geo), problem.geo).metrics["WCR"]
+    assert sol.value >= base - 1e-12
+    assert problem.fifo_violations == 0 and sol.bound is not None
+    assert sol.value <= sol.bound + 1e-9 and 0 <= sol.gap <= 1
+    # the bound can only fall, the value only rise, along the run
+    values = [v for _, v, _ in sol.history]
+    bounds = [b for _, _, b in sol.history if b < 1e9]
+    assert values == sorted(values) and bounds == sorted(bounds, reverse=True)
+
+
+def test_a_run_with_rounds_is_deterministic_for_a_seed(problem):
+    from eosp.solvers.fleet import FleetConfig, solve
+
+    a, b = (solve(problem.fleet, problem.opps, FleetConfig(time_limit=None, rounds=3, seed=7), problem=problem)
+            for _ in range(2))
+    assert a.schedule.task.tolist() == b.schedule.task.tolist()
+    assert np.array_equal(a.schedule.start_us, b.schedule.start_us) and a.bound == b.bound
+
+
+def test_ramp_passes_give_a_schedule_and_no_bound(problem):
+    from eosp.solvers.fleet import FleetConfig, solve
+
+    sol = solve(problem.fleet, problem.opps, FleetConfig(pass_solver="ramp", time_limit=None, rounds=2),
+                problem=problem)
+    assert validate(problem.fleet, sol.schedule, problem.geo).valid
+    assert sol.bound is None and "ramp" in sol.info["no_bound_because"]
