@@ -171,12 +171,17 @@ class Coordinator:
     step: float = 1.0  # Polyak step factor, halved when the bound stalls
     rounds_done: int = 0
 
+    initial: Primal | None = None  # a schedule to start from (--init)
+    frozen: np.ndarray | None = None  # bool per pass: kept as in `initial`, never solved again (--freeze-until)
+
     def __post_init__(self) -> None:
         n = len(self.prob.fleet.tasks)
         self.lam = np.zeros(n)
         self.round_paths = [np.zeros(0, np.int64)] * len(self.prob.passes)
         self.best = Primal([np.zeros(0, np.int64)] * len(self.prob.passes), np.full(n, -1, np.int64))
         self.barred = np.zeros(n, dtype=bool)  # tasks barred everywhere by the battery repair (rare)
+        if self.frozen is None:
+            self.frozen = np.zeros(len(self.prob.passes), dtype=bool)
 
     # ------------------------------------------------------------------ pass solves
     def _solve(self, p: int, util: np.ndarray) -> PassResult:
@@ -209,6 +214,8 @@ class Coordinator:
                 return
             p = queue.pop(0)
             queued[p] = False
+            if self.frozen[p]:
+                continue
             tasks = self.prob.passes[p].tasks
             res = self._solve(p, np.where(self._available(primal, p), w[tasks], 0.0))
             if res.value > float(w[path_tasks(self.prob, p, primal.paths[p])].sum()) + 1e-9:
@@ -227,6 +234,8 @@ class Coordinator:
         for p in order.tolist():
             if deadline is not None and time.perf_counter() > deadline:
                 break
+            if self.frozen[p]:
+                continue
             tasks = self.prob.passes[p].tasks
             u = w[tasks] if util_shift is None else np.maximum(w[tasks] - util_shift[tasks], 1e-3 * w[tasks])
             res = self._solve(p, np.where(self._available(primal, p), u, 0.0))
@@ -243,7 +252,12 @@ class Coordinator:
         for p, pg in enumerate(self.prob.passes):
             if deadline is not None and time.perf_counter() > deadline:
                 return None
-            res = self._solve(p, w[pg.tasks] - self.lam[pg.tasks])
+            if self.frozen[p]:  # a fixed term: its schedule under the prices
+                kept = path_tasks(self.prob, p, self.initial.paths[p])
+                res = PassResult(self.initial.paths[p], float((w[kept] - self.lam[kept]).sum()), None)
+                res.bound = res.value
+            else:
+                res = self._solve(p, w[pg.tasks] - self.lam[pg.tasks])
             self.round_paths[p] = res.nodes
             if res.bound is None:
                 proven = False
@@ -262,14 +276,22 @@ class Coordinator:
             self.lam = np.maximum(0.0, self.lam - step * g)
         return total
 
-    step: float = 1.0
+    def empty(self) -> Primal:
+        """No observation, except those of the frozen passes."""
+        n_pass = len(self.prob.passes)
+        primal = Primal([np.zeros(0, np.int64)] * n_pass, np.full(len(self.prob.weight), -1, np.int64))
+        for p in np.flatnonzero(self.frozen).tolist():
+            self._assign(primal, p, self.initial.paths[p])
+        return primal
 
     def recover(self, rng: np.random.Generator, deadline: float | None) -> Primal:
         """A schedule from the last price round's pass schedules: passes in random order keep the tasks no
         earlier pass took (the rest of their path re-walked along the graph's arcs), then coordinate descent."""
         n_pass = len(self.prob.passes)
-        primal = Primal([np.zeros(0, np.int64)] * n_pass, np.full(len(self.prob.weight), -1, np.int64))
+        primal = self.empty()
         for p in rng.permutation(n_pass).tolist():
+            if self.frozen[p]:
+                continue
             path = self.round_paths[p]
             if len(path) == 0:
                 continue
@@ -339,7 +361,8 @@ class Coordinator:
         prob = self.prob
         horizon = prob.fleet.horizon.seconds
         a = rng.uniform(-self.cfg.span_s, horizon)
-        hit = np.flatnonzero((prob.pass_time[:, 1] >= a) & (prob.pass_time[:, 0] <= a + self.cfg.span_s))
+        hit = np.flatnonzero((prob.pass_time[:, 1] >= a) & (prob.pass_time[:, 0] <= a + self.cfg.span_s)
+                             & ~self.frozen)
         if len(hit) == 0:
             return
         trial = self.best.copy()
@@ -364,7 +387,14 @@ class Coordinator:
         deadline = None if cfg.time_limit is None else self.t0 + cfg.time_limit
         rng = np.random.default_rng(cfg.seed)
         order = np.argsort(prob.pass_time[:, 0], kind="stable")
-        first = self.construct(order)
+        if self.initial is not None:  # start from the given schedule (its paths re-walked unless frozen)
+            first = self.empty()
+            for p in np.flatnonzero(~self.frozen).tolist():
+                path = self.initial.paths[p]
+                free = self._available(first, p)[prob.passes[p].graph.node_acq[path]] if len(path) else path
+                self._assign(first, p, rewalk(prob.passes[p], path[free]) if len(path) else path)
+        else:
+            first = self.construct(order, primal=self.empty())
         self.descend(first, list(range(len(prob.passes))), deadline)
         self.offer(first)
         rounds, stall = 0, 0
@@ -410,15 +440,51 @@ class FleetSolution:
         return None if self.bound is None or self.bound <= 0 else (self.bound - self.value) / self.bound
 
 
-def solve(fleet: Fleet, opps: Opportunities, cfg: FleetConfig | None = None,
-          problem: Problem | None = None) -> FleetSolution:
+def primal_of(prob: Problem, sched: Schedule) -> Primal:
+    """A schedule as pass paths: each action at its opportunity's node (an action that is no opportunity, or a
+    task's second observation, is left out)."""
+    f, o = prob.fleet, prob.opps
+    step_us = f.horizon.action_step_s * 1_000_000
+    row_of = {key: r for r, key in enumerate(zip(o.task.tolist(), o.satellite.tolist(), o.start.tolist()))}
+    node_of = np.zeros(len(o), dtype=np.int64)
+    for pg in prob.passes:
+        node_of[pg.rows] = np.arange(1, len(pg.rows) + 1)
+    ti, si = f.task_index(), f.satellite_index()
+    per_pass: dict[int, list[tuple[int, int]]] = {}
+    seen = set()
+    for sat, task, st in zip(sched.satellite.tolist(), sched.task.tolist(), sched.start_us.tolist()):
+        r = row_of.get((ti.get(task, -1), si.get(sat, -1), int(st // step_us)))
+        if r is None or task in seen or st % step_us:
+            continue
+        seen.add(task)
+        per_pass.setdefault(int(o.pass_id[r]), []).append((int(st), int(node_of[r])))
+    primal = Primal([np.zeros(0, np.int64)] * len(prob.passes), np.full(len(f.tasks), -1, np.int64))
+    for p, acts in per_pass.items():
+        path = np.asarray([n for _, n in sorted(acts)], dtype=np.int64)
+        tasks = path_tasks(prob, p, path)
+        primal.paths[p] = path
+        primal.served[tasks] = p
+        primal.value += float(prob.weight[tasks].sum())
+    return primal
+
+
+def solve(fleet: Fleet, opps: Opportunities, cfg: FleetConfig | None = None, problem: Problem | None = None,
+          initial: Schedule | None = None, freeze_until_s: float | None = None) -> FleetSolution:
     """Schedule a fleet (see the module docstring); the schedule is checked by the checker before it is returned,
-    and an action it rejects is dropped (never expected: the pass graphs and the battery repair use its rules)."""
+    and an action it rejects is dropped (never expected: the pass graphs and the battery repair use its rules).
+
+    `initial`: a schedule to start from; `freeze_until_s`: the passes starting before this time (seconds from
+    the horizon start) keep the initial schedule's actions as they are (so every action before it is kept)."""
     from eosp.fleet.check import validate
 
     cfg = cfg or FleetConfig()
     prob = problem or Problem.build(fleet, opps)
-    coord = Coordinator(prob, cfg)
+    start = None if initial is None else primal_of(prob, initial)
+    frozen = None
+    if freeze_until_s is not None:
+        frozen = prob.pass_time[:, 0] < freeze_until_s
+        start = start or Primal([np.zeros(0, np.int64)] * len(prob.passes), np.full(len(fleet.tasks), -1, np.int64))
+    coord = Coordinator(prob, cfg, initial=start, frozen=frozen)
     best = coord.run()
     sched = coord.schedule(best)
     res = validate(fleet, sched, prob.geo)

@@ -107,3 +107,19 @@ def test_ramp_passes_give_a_schedule_and_no_bound(problem):
                 problem=problem)
     assert validate(problem.fleet, sol.schedule, problem.geo).valid
     assert sol.bound is None and "ramp" in sol.info["no_bound_because"]
+
+
+def test_replanning_keeps_the_frozen_actions_and_never_loses_the_initial_value(problem):
+    from eosp.solvers.fleet import FleetConfig, solve
+
+    fleet = problem.fleet
+    first = solve(fleet, problem.opps, FleetConfig(time_limit=None, rounds=1, seed=1), problem=problem)
+    cut = float(np.median(problem.pass_time[:, 0])) + 1.0
+    again = solve(fleet, problem.opps, FleetConfig(time_limit=None, rounds=2, seed=2), problem=problem,
+                  initial=first.schedule, freeze_until_s=cut)
+    assert validate(fleet, again.schedule, problem.geo).valid
+    assert again.value >= first.value - 1e-12
+    before = {(s, t, a) for s, t, a in zip(first.schedule.satellite, first.schedule.task, first.schedule.start_us)
+              if a < cut * 1e6}
+    after = set(zip(again.schedule.satellite, again.schedule.task, again.schedule.start_us))
+    assert before and before <= after
