@@ -20,7 +20,7 @@ demo: install
 	$(PY) jobs/train.py --demo
 
 test: install
-	$(PY) -m pytest -q
+	$(PY) -m pytest -q -n 2 --dist loadgroup --durations=15
 
 test-all: install
 	$(PY) -m pytest -q -m ""

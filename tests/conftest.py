@@ -31,3 +31,17 @@ def generated(family: str = "uniform", n: int = 12, seed: int = 0, step: float =
 @pytest.fixture
 def tiny():
     return generated("uniform", 12, 0, 2.0)
+
+
+# Tests that start Ray (or Ray-based jobs and services) run one after another on one pytest-xdist worker
+# (``-n 2 --dist loadgroup``, as `make test` runs): two Ray clusters on two cores would starve each other, while
+# the other worker takes the rest of the suite.
+RAY_MODULES = {"test_platform", "test_platform_multinode", "test_train", "test_tune", "test_jobs_faults",
+               "test_jobs_smoke", "test_overlap", "test_expert", "test_readme"}
+RAY_TESTS = {"test_shard_source_splits_shards_between_workers"}
+
+
+def pytest_collection_modifyitems(config, items):
+    for item in items:
+        if item.module.__name__.rpartition(".")[2] in RAY_MODULES or item.originalname in RAY_TESTS:
+            item.add_marker(pytest.mark.xdist_group("ray"))
