@@ -283,15 +283,18 @@ def build_parser(solver: str | None = None) -> argparse.ArgumentParser:
     e.add_argument("--index", type=int, default=0)
     e.add_argument("--out", required=True)
     e.add_argument("--overwrite", action="store_true", help=OVERWRITE_HELP)
+    add_memory_arg(e)
     e.set_defaults(func=cmd_export)
 
     n = sub.add_parser("info", help="sizes of an instance (directory, or SHARD#INDEX)")
     n.add_argument("instance")
+    add_memory_arg(n)
     n.set_defaults(func=cmd_info)
 
     v = sub.add_parser("validate", help="check a schedule against an instance; exit 0 when feasible")
     v.add_argument("instance_dir")
     v.add_argument("schedule")
+    add_memory_arg(v)
     v.set_defaults(func=cmd_validate)
 
     s = sub.add_parser("solve", help="solve an instance and write a schedule file",
@@ -316,6 +319,7 @@ def build_parser(solver: str | None = None) -> argparse.ArgumentParser:
     pl.add_argument("schedules", nargs="+")
     pl.add_argument("--out", required=True, help="output path without extension (PNG and SVG are written)")
     pl.add_argument("--overwrite", action="store_true", help=OVERWRITE_HELP)
+    add_memory_arg(pl)
     pl.set_defaults(func=cmd_plot)
 
     r = sub.add_parser("report", help="one self-contained HTML page: map, timeline, roll/pitch and a summary "
@@ -325,6 +329,7 @@ def build_parser(solver: str | None = None) -> argparse.ArgumentParser:
     r.add_argument("--out", required=True, help="HTML file to write")
     r.add_argument("--title", default="", help="page title (default: the instance name)")
     r.add_argument("--overwrite", action="store_true", help=OVERWRITE_HELP)
+    add_memory_arg(r)
     r.set_defaults(func=cmd_report)
     return p
 

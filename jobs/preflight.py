@@ -15,6 +15,7 @@
 
 from __future__ import annotations
 
+import json
 import os
 import urllib.error
 import urllib.request
@@ -172,21 +173,45 @@ def require_data(paths, flag: str) -> None:
             raise InputError(foreign, f"not a shard written by eosp (given as {flag})")
 
 
+def is_run_dir(path: Path, kind: str = "run") -> bool:
+    """Whether `path` is a run directory eosp wrote: its mark (eosp.ownership), or, for runs written before the
+    marks, the state file only eosp writes there (train's run.json, pretrain's history.json)."""
+    from eosp.ownership import kind_of
+
+    if kind_of(path) == kind:
+        return True
+    if kind != "run":
+        return False
+    for name, keys in (("run.json", {"config", "mlflow_run_id", "iteration"}), ("history.json", {"config", "history"})):
+        try:
+            state = json.loads((path / name).read_text())
+        except (OSError, ValueError):
+            continue
+        if isinstance(state, dict) and keys <= set(state):
+            return True
+    return False
+
+
 def require_run_dir(path: str | Path, kind: str, prefix: str, resume: bool = False, overwrite: bool = False) -> Path:
     """Refuse, before any service starts or any directory is created, a run directory that eosp must not write:
     an existing one eosp did not write (never written into), or one it did unless the job resumes it (`resume`)
     or replaces it (`overwrite`).  `prefix`: the flags' ('--train': --train.run-dir, --train.overwrite,
-    --train.resume).  :func:`eosp.ownership.check_output`; a one-line InputError naming the flag."""
+    --train.resume).  A one-line InputError naming the flag."""
     from eosp.errors import InputError
-    from eosp.ownership import check_output, kind_of
+    from eosp.ownership import check_output
 
     p = Path(path)
     where = f"{prefix}.run-dir {p.parent} {prefix}.run-name {p.name}" if kind == "run" else f"{prefix}.run-dir {p}"
-    if p.is_dir() and kind_of(p) == kind and not (resume or overwrite):
-        raise InputError(where, f"{p} already exists: pass {prefix}.resume true to continue it, "
-                                f"{prefix}.overwrite true to replace it, or another run name")
+    if p.is_dir() and any(p.iterdir()):
+        if not is_run_dir(p, kind):
+            raise InputError(where, f"{p} exists and is not a run directory written by eosp: refusing to write into "
+                                    "it (choose another run name)")
+        if not (resume or overwrite):
+            raise InputError(where, f"{p} already exists: pass {prefix}.resume true to continue it, "
+                                    f"{prefix}.overwrite true to replace it, or another run name")
+        return p
     try:
-        return check_output(p, kind, overwrite, directory=True, reuse=resume or overwrite)
+        return check_output(p, kind, directory=True, reuse=True)  # not there, or empty: its parent is checked
     except InputError as exc:
         raise InputError(where, f"{p} {exc.message}") from None
 
@@ -198,7 +223,7 @@ def make_run_dir(run_dir: Path, replace: bool, kind: str = "run") -> None:
 
     from eosp.ownership import kind_of, mark_dir
 
-    if replace and run_dir.is_dir() and kind_of(run_dir) == kind:
+    if replace and run_dir.is_dir() and is_run_dir(run_dir, kind):
         shutil.rmtree(run_dir)
     run_dir.mkdir(parents=True, exist_ok=True)
     if kind_of(run_dir) != kind:

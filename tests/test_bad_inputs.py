@@ -809,6 +809,54 @@ def test_generation_estimate_is_of_the_right_size():
     assert estimate_size(family_config("uniform", 10**9, 0))[2] > 10**15
 
 
+def test_huge_requests_are_refused_before_any_work(base, tmp_path, monkeypatch):
+    """The guards refuse by estimate: with generation and Ray made to fail at once, a huge request still gets its
+    one line (without the guard these calls would fail here, instead of running for minutes)."""
+    import eosp.instances.generator as generator
+    import eosp.jobs.ray_init as ray_init
+
+    def started(*args, **kwargs):
+        raise AssertionError("the work started: the size guard did not refuse it first")
+
+    monkeypatch.setattr(generator, "generate", started)
+    monkeypatch.setattr(ray_init, "init_ray", started)
+    r = fresh(base, tmp_path)
+    for argv in (["generate", r / "g", "--n-acquisitions", "1000000000"],
+                 ["build-shards", "--out", r / "ds", "--n-acquisitions", "1000000000"],
+                 ["generate", r / "g", "--n-acquisitions", "2000", "--max-memory-gb", "1"],
+                 ["build-shards", "--out", r / "ds", "--n-acquisitions", "2000", "--max-memory-gb", "1"]):
+        res = run_cli(argv)
+        assert res.rc == 2 and "too large" in res.err and len(res.err.strip().splitlines()) == 1, (argv, res.err)
+    assert not (r / "g").exists() and not (r / "ds").exists()
+
+
+def test_run_directories_follow_the_rule(tmp_path):
+    """A run of eosp's is continued (resume) or replaced (overwrite), never silently reused; a user's directory is
+    never written into, even with overwrite; a run written before the marks is still recognised by its state."""
+    from eosp.errors import InputError
+    from eosp.jobs.preflight import make_run_dir, require_run_dir
+
+    ours, user, legacy = tmp_path / "ours", tmp_path / "user", tmp_path / "legacy"
+    make_run_dir(ours, replace=False)
+    (ours / "x").write_text("checkpoint")
+    _user_dir(tmp_path).rename(user)
+    legacy.mkdir()
+    (legacy / "run.json").write_text(json.dumps({"config": {}, "mlflow_run_id": "r", "iteration": 2}))
+    require_run_dir(tmp_path / "new", "run", "--train")  # not there: fine, and nothing created
+    assert not (tmp_path / "new").exists()
+    for path in (ours, legacy):
+        with pytest.raises(InputError, match="already exists: pass --train.resume true"):
+            require_run_dir(path, "run", "--train")
+        require_run_dir(path, "run", "--train", resume=True)
+        require_run_dir(path, "run", "--train", overwrite=True)
+    for flags in ({}, {"resume": True}, {"overwrite": True}):
+        with pytest.raises(InputError, match="not a run directory written by eosp"):
+            require_run_dir(user, "run", "--train", **flags)
+    make_run_dir(ours, replace=True)  # --train.overwrite: the old run is gone, the new one marked
+    assert sorted(p.name for p in ours.iterdir()) == [".eosp.json"]
+    assert (user / "thesis.tex").read_text() == "precious"
+
+
 def _interrupting(monkeypatch, offer: bool):
     """run_solver replaced by one that (maybe) reports Greedy's schedule as its incumbent, then gets Ctrl-C."""
     import eosp.solvers.base as base_mod

@@ -263,11 +263,16 @@ def test_build_shards_killed_and_rerun_resumes(tmp_path):
     assert 1 <= len(first) < 3
     rc, so, se = job("build_shards.py", *args)
     assert rc == 0, se[-3000:]
-    assert f"resuming: {len(first)} of 3 shards already complete" in so
+    # the killed driver's running task may still finish its shard (its worker belongs to the local Ray, not to the
+    # driver's process group) between the listing above and the rerun: at least those listed are kept
+    import re
+
+    kept = re.search(r"resuming: (\d) of 3 shards already complete", so)
+    assert kept and len(first) <= int(kept.group(1)) < 3, so
     for name, mtime in first.items():  # complete shards are kept, not rebuilt
         assert (out / name).stat().st_mtime_ns == mtime
-    assert sorted(p.name for p in out.iterdir()) == ["manifest.json", "shard-00000.parquet", "shard-00001.parquet",
-                                                     "shard-00002.parquet"]  # no temporaries left
+    assert sorted(p.name for p in out.iterdir()) == [".eosp.json", "manifest.json", "shard-00000.parquet",
+                                                     "shard-00001.parquet", "shard-00002.parquet"]  # no temporaries
     manifest = json.loads((out / "manifest.json").read_text())
     assert [len(s["instances"]) for s in manifest["shards"]] == [1, 1, 1]
     assert [i.meta["seed"] for i in read_instances(sorted(out.glob("shard-*.parquet")))] == [5, 6, 7]
