@@ -322,6 +322,13 @@ def build_parser(solver: str | None = None) -> argparse.ArgumentParser:
     add_memory_arg(pl)
     pl.set_defaults(func=cmd_plot)
 
+    x = sub.add_parser("export-schedule", help="write a fleet schedule as an aeossp solution.json or a CSV "
+                                               "(fleets: import, info, solve, validate take a fleet directory too)")
+    x.add_argument("fleet_dir")
+    x.add_argument("schedule")
+    x.add_argument("--format", choices=("aeossp", "csv"), required=True)
+    x.add_argument("--out", required=True)
+
     r = sub.add_parser("report", help="one self-contained HTML page: map, timeline, roll/pitch and a summary "
                                       "table of schedules of one instance")
     r.add_argument("instance_dir", help="instance directory (or SHARD#INDEX)")
@@ -336,6 +343,10 @@ def build_parser(solver: str | None = None) -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else argv
+    from eosp.cli.fleet_main import is_fleet_command, route
+
+    if is_fleet_command(argv):  # a fleet (aeossp case, fleet directory) where a single pass would be
+        return route(argv)
     solver = solver_of(argv)
     parser = build_parser(solver)
     if not argv:  # the usage only here and for --help; every other error is one line

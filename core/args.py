@@ -11,11 +11,13 @@ from __future__ import annotations
 
 import argparse
 import ast
+import functools
 import inspect
 import re
 import sys
 import typing
 from dataclasses import MISSING, fields, is_dataclass
+from pathlib import Path
 from typing import Any
 
 
@@ -82,12 +84,23 @@ def _field_docs(cls: type) -> dict[str, str]:
     return docs
 
 
+@functools.lru_cache(maxsize=None)
+def _class_defs(path: str) -> dict[str, ast.ClassDef]:
+    """The top-level classes of a source file, parsed once (``inspect.getsource`` parses the whole module
+    again for every class it is asked for: most of ``eosp --help``)."""
+    try:
+        tree = ast.parse(Path(path).read_text(encoding="utf-8"))
+    except (OSError, SyntaxError, ValueError):
+        return {}
+    return {node.name: node for node in tree.body if isinstance(node, ast.ClassDef)}
+
+
 def _own_field_docs(cls: type) -> dict[str, str]:
     try:
-        tree = ast.parse(inspect.getsource(cls))
-    except (OSError, TypeError):
-        return {}
-    body = tree.body[0].body if tree.body and isinstance(tree.body[0], ast.ClassDef) else []
+        node = _class_defs(inspect.getsourcefile(cls)).get(cls.__qualname__)
+    except TypeError:
+        node = None
+    body = node.body if node is not None else []
     docs: dict[str, str] = {}
     for prev, node in zip(body, body[1:]):
         if (isinstance(prev, ast.AnnAssign) and isinstance(prev.target, ast.Name) and isinstance(node, ast.Expr)

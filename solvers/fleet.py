@@ -34,7 +34,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from eosp.config import choice, ranged
+from eosp.config import WEEK_S, choice, ranged
 from eosp.fleet.geometry import Geometry
 from eosp.fleet.greedy import Timeline, repair_battery, to_schedule
 from eosp.fleet.model import Fleet, Schedule
@@ -51,11 +51,11 @@ class FleetConfig:
 
     pass_solver: str = choice("exact", *PASS_SOLVERS)
     """Single-pass solver of every pass: exact (optima, hence a proven bound), ramp or greedy (no bound)."""
-    time_limit: float | None = ranged(60.0, 0)
-    """Seconds for the whole solve after the passes are built; unset with --rounds: no limit."""
-    rounds: int = ranged(0, 0)
-    """Price rounds, each followed by a large-neighbourhood move; 0: as many as the time limit allows.  With
-    a number of rounds and no time limit a run is deterministic for a seed."""
+    time_limit: float = ranged(60.0, 0, WEEK_S, lo_open=True)
+    """Seconds of search after the pass graphs are built (not applied with --rounds)."""
+    rounds: int | None = ranged(None, 1)
+    """Price rounds, each followed by a large-neighbourhood move; unset: as many as the time limit allows.  A run
+    with a number of rounds ignores the time limit and is deterministic for a seed."""
     seed: int = ranged(0, 0)
     """Seed of the large-neighbourhood moves."""
     pass_time_limit: float = ranged(5.0, 0)
@@ -170,6 +170,7 @@ class Coordinator:
     pass_solves: int = 0
     step: float = 1.0  # Polyak step factor, halved when the bound stalls
     rounds_done: int = 0
+    interrupted: bool = False
 
     initial: Primal | None = None  # a schedule to start from (--init)
     frozen: np.ndarray | None = None  # bool per pass: kept as in `initial`, never solved again (--freeze-until)
@@ -384,7 +385,7 @@ class Coordinator:
 
     def run(self) -> Primal:
         cfg, prob = self.cfg, self.prob
-        deadline = None if cfg.time_limit is None else self.t0 + cfg.time_limit
+        deadline = None if cfg.rounds is not None else self.t0 + cfg.time_limit
         rng = np.random.default_rng(cfg.seed)
         order = np.argsort(prob.pass_time[:, 0], kind="stable")
         if self.initial is not None:  # start from the given schedule (its paths re-walked unless frozen)
@@ -397,10 +398,20 @@ class Coordinator:
             first = self.construct(order, primal=self.empty())
         self.descend(first, list(range(len(prob.passes))), deadline)
         self.offer(first)
+        try:
+            self._rounds(deadline, rng)
+        except KeyboardInterrupt:  # Ctrl-C: the best schedule so far is the answer
+            self.interrupted = True
+        return self.best
+
+    def _rounds(self, deadline: float | None, rng: np.random.Generator) -> None:
+        cfg = self.cfg
         rounds, stall = 0, 0
-        while cfg.rounds == 0 or rounds < cfg.rounds:
+        while cfg.rounds is None or rounds < cfg.rounds:
             if deadline is not None and time.perf_counter() > deadline:
                 break
+            if self.bound_proven and self.best_bound <= self.best.value + 1e-9:
+                break  # proven optimal (energy relaxed in the bound, kept in the schedule)
             if cfg.pass_solver == "exact" or rounds == 0:
                 before = self.best_bound
                 if self.price_round(deadline) is None:
@@ -414,8 +425,7 @@ class Coordinator:
             else:
                 self.neighbourhood(rng, deadline)
             rounds += 1
-        self.rounds_done = rounds
-        return self.best
+            self.rounds_done = rounds
 
     @property
     def bound(self) -> float | None:
@@ -499,7 +509,7 @@ def solve(fleet: Fleet, opps: Opportunities, cfg: FleetConfig | None = None, pro
     bound = coord.bound
     info = {"pass_solver": cfg.pass_solver, "rounds": coord.rounds_done, "pass_solves": coord.pass_solves,
             "passes": len(prob.passes), "build_s": round(prob.build_s, 3), "checker_drops": dropped,
-            "battery_barred": int(coord.barred.sum()), "metrics": res.metrics,
+            "battery_barred": int(coord.barred.sum()), "metrics": res.metrics, "interrupted": coord.interrupted,
             "no_bound_because": None if bound is not None else (
                 f"pass solver {cfg.pass_solver} proves no pass bound" if cfg.pass_solver != "exact"
                 else "a pass graph is not FIFO" if prob.fifo_violations else "no price round finished")}

@@ -77,7 +77,7 @@ def test_fleet_schedule_is_valid_each_task_once_and_under_its_bound(problem):
     from eosp.solvers.fleet import FleetConfig, solve
 
     fleet = problem.fleet
-    sol = solve(fleet, problem.opps, FleetConfig(time_limit=None, rounds=4), problem=problem)
+    sol = solve(fleet, problem.opps, FleetConfig(rounds=4), problem=problem)
     res = validate(fleet, sol.schedule, problem.geo)
     assert res.valid and len(set(sol.schedule.task.tolist())) == len(sol.schedule)
     assert sol.value == pytest.approx(res.metrics["WCR"])
@@ -94,7 +94,7 @@ def test_fleet_schedule_is_valid_each_task_once_and_under_its_bound(problem):
 def test_a_run_with_rounds_is_deterministic_for_a_seed(problem):
     from eosp.solvers.fleet import FleetConfig, solve
 
-    a, b = (solve(problem.fleet, problem.opps, FleetConfig(time_limit=None, rounds=3, seed=7), problem=problem)
+    a, b = (solve(problem.fleet, problem.opps, FleetConfig(rounds=3, seed=7), problem=problem)
             for _ in range(2))
     assert a.schedule.task.tolist() == b.schedule.task.tolist()
     assert np.array_equal(a.schedule.start_us, b.schedule.start_us) and a.bound == b.bound
@@ -103,7 +103,7 @@ def test_a_run_with_rounds_is_deterministic_for_a_seed(problem):
 def test_ramp_passes_give_a_schedule_and_no_bound(problem):
     from eosp.solvers.fleet import FleetConfig, solve
 
-    sol = solve(problem.fleet, problem.opps, FleetConfig(pass_solver="ramp", time_limit=None, rounds=2),
+    sol = solve(problem.fleet, problem.opps, FleetConfig(pass_solver="ramp", rounds=2),
                 problem=problem)
     assert validate(problem.fleet, sol.schedule, problem.geo).valid
     assert sol.bound is None and "ramp" in sol.info["no_bound_because"]
@@ -113,9 +113,9 @@ def test_replanning_keeps_the_frozen_actions_and_never_loses_the_initial_value(p
     from eosp.solvers.fleet import FleetConfig, solve
 
     fleet = problem.fleet
-    first = solve(fleet, problem.opps, FleetConfig(time_limit=None, rounds=1, seed=1), problem=problem)
+    first = solve(fleet, problem.opps, FleetConfig(rounds=1, seed=1), problem=problem)
     cut = float(np.median(problem.pass_time[:, 0])) + 1.0
-    again = solve(fleet, problem.opps, FleetConfig(time_limit=None, rounds=2, seed=2), problem=problem,
+    again = solve(fleet, problem.opps, FleetConfig(rounds=2, seed=2), problem=problem,
                   initial=first.schedule, freeze_until_s=cut)
     assert validate(fleet, again.schedule, problem.geo).valid
     assert again.value >= first.value - 1e-12
