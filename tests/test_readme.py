@@ -52,3 +52,17 @@ def test_the_readme_command_line_block_runs(tmp_path):
         r = subprocess.run(argv, cwd=tmp_path, capture_output=True, text=True, timeout=300)
         assert r.returncode == 0, f"{line}\n{r.stdout}\n{r.stderr}"
     assert (tmp_path / "report.html").stat().st_size > 0 and (tmp_path / "again" / "meta.json").exists()
+
+
+def test_the_readme_fleet_block_runs(tmp_path):
+    """The fleet commands, on a verifier fixture (the case directory) with 2 s of search."""
+    lines = readme_block("## Fleets")
+    assert len(lines) >= 5 and all(line.startswith("eosp ") for line in lines)
+    case = ROOT / "tests" / "fixtures" / "aeossp" / "duplicate_observation_no_bonus_valid"
+    for line in lines:
+        line = small(line).replace("CASE_DIR", str(case))
+        line = re.sub(r"--freeze-until \S+", "--freeze-until 2025-07-17T04:15:00Z", line)
+        r = subprocess.run([sys.executable, "-m", "eosp.cli", *line.split()[1:]], cwd=tmp_path, capture_output=True,
+                           text=True, timeout=300)
+        assert r.returncode == 0, f"{line}\n{r.stdout}\n{r.stderr}"
+    assert (tmp_path / "solution.json").exists() and (tmp_path / "again.parquet").exists()
