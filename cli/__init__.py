@@ -240,7 +240,8 @@ def cmd_report(ns: argparse.Namespace) -> int:
             label += "'"
         schedules[label] = read_schedule(path)
     try:
-        out = write_report(inst, schedules, ns.out, title=ns.title or None, overwrite=ns.overwrite)
+        out = write_report(inst, schedules, ns.out, title=ns.title or None, overwrite=ns.overwrite,
+                           reference=ns.reference or None)
     except InputError as exc:  # the label is the file's stem: name the file the user gave
         path = next((p for p, lab in zip(ns.schedules, schedules) if lab == exc.file), exc.file)
         raise InputError(path, exc.message) from None
@@ -335,6 +336,9 @@ def build_parser(solver: str | None = None) -> argparse.ArgumentParser:
     r.add_argument("schedules", nargs="+", help="schedule files (.parquet or .jsonl); infeasible ones are drawn too")
     r.add_argument("--out", required=True, help="HTML file to write")
     r.add_argument("--title", default="", help="page title (default: the instance name)")
+    r.add_argument("--reference", default="", help="the schedule (its label: the file name without suffix) the "
+                                                   "others are compared with and whose missed acquisitions are "
+                                                   "explained (default: the best feasible one)")
     r.add_argument("--overwrite", action="store_true", help=OVERWRITE_HELP)
     add_memory_arg(r)
     r.set_defaults(func=cmd_report)

@@ -25,8 +25,10 @@ from __future__ import annotations
 
 import functools
 import html
+import itertools
 import math
 from dataclasses import dataclass
+from datetime import datetime, timedelta, timezone
 from pathlib import Path
 
 import numpy as np
@@ -85,6 +87,128 @@ def foreign_reason(inst: Instance, sched: Schedule) -> str | None:
     if len(sched) and off * 2 > len(sched):
         return f"{off} of {len(sched)} starts differ from the times of their nodes in {inst.name}"
     return None
+
+
+def exact(v: float) -> str:
+    """A value printed exactly (the shortest decimal that reads back to the same float, thousands separated):
+    schedules 221 apart out of 2e8 must not print the same, as they did at 6 significant figures."""
+    if not math.isfinite(v):
+        return str(v)
+    if float(v).is_integer() and abs(v) < 2 ** 53:
+        return f"{int(v):,}"
+    return f"{float(v):,}"
+
+
+def signed(v: float) -> str:
+    """A difference printed exactly, with its sign (0 for none)."""
+    return "0" if v == 0 else ("+" if v > 0 else "-") + exact(abs(v))
+
+
+EPOCH_KEY = "epoch_utc"  # meta.json: the UTC time of t = 0 (ISO 8601), when the instance knows it
+
+
+def epoch_of(inst: Instance) -> datetime | None:
+    """The UTC time of t = 0 from ``meta.json`` (key ``epoch_utc``, ISO 8601; a time without zone is taken as
+    UTC), or None when the instance has none or it does not parse (times are then seconds from t = 0)."""
+    raw = inst.meta.get(EPOCH_KEY)
+    if not isinstance(raw, str) or not raw.strip():
+        return None
+    try:
+        t = datetime.fromisoformat(raw.strip().replace("Z", "+00:00"))
+    except ValueError:
+        return None
+    return t.replace(tzinfo=timezone.utc) if t.tzinfo is None else t.astimezone(timezone.utc)
+
+
+def clock(epoch: datetime | None, t: float) -> str:
+    """Time `t` (s from t = 0) as a UTC time of day (date too, ISO 8601) when the epoch is known, else ''."""
+    if epoch is None or not math.isfinite(t):
+        return ""
+    return (epoch + timedelta(seconds=float(t))).strftime("%Y-%m-%d %H:%M:%S.%f")[:-5] + " UTC"
+
+
+def _when(epoch: datetime | None, t: float) -> str:
+    """`t` in seconds, with its UTC time in parentheses when known (hover texts and tables)."""
+    u = clock(epoch, t)
+    return f"{t:.1f} s" + (f" ({u})" if u else "")
+
+
+# --------------------------------------------------------------------------- missed acquisitions
+
+@dataclass
+class Missed:
+    """Why one acquisition is not in a schedule: `kind` is 'no node', 'insertable' or 'blocked'."""
+    acq: int
+    kind: str
+    text: str
+    blockers: tuple[int, ...] = ()
+
+
+MAX_EXPLAINED = 200  # reasons are worked out for this many missed acquisitions, highest class first
+MAX_NEARBY = 12  # members of the schedule tried as blockers (those nearest in time to the missed window)
+
+
+def missed_reasons(inst: Instance, sched: Schedule) -> list[Missed] | str:
+    """A reason for each acquisition `sched` misses (highest class first, at most MAX_EXPLAINED), or why none
+    can be given.
+
+    For each missed acquisition the first that applies: it has no node (no start in its window that the
+    satellite can take, or none reachable from the start of the horizon); it can be inserted into the schedule
+    as it is (some position takes it, the members after moved as needed: value left on the table); or it is
+    blocked, and the schedule's members whose removal frees it are named (any one of up to three; else the
+    smallest set of two or three among the MAX_NEARBY members nearest in time).  Insertion is the Greedy
+    kernel's test on the discrete graph (eosp.graphs.insertion), on the schedule's acquisitions in order, each
+    at its earliest node.
+    """
+    from eosp.graphs.insertion import earliest_path, first_insertion
+
+    g = inst.unpruned_graph if inst.unpruned_graph is not None else inst.pruned()
+    args = (g.indptr, g.dst, g.acq_ptr)
+    seq = np.asarray(sched.acq, dtype=np.int64)
+    nodes = earliest_path(*args, seq, 0)
+    if len(seq) and nodes[-1] < 0:
+        k = int(np.argmax(nodes < 0))
+        return (f"its acquisition {int(seq[k])} (row {k}) cannot follow the one before it in the graph, so no "
+                "insertion can be tried")
+    a_ = inst.acqs
+    prio = inst.priorities()
+    missed = np.setdiff1d(np.arange(inst.n_acq), seq)
+    missed = missed[np.lexsort((missed, prio[missed]))][:MAX_EXPLAINED]
+    end = sched.start + a_.duration[seq] if len(seq) else np.zeros(0)
+    out = []
+
+    def fits(a: int, drop: tuple[int, ...] = ()) -> bool:
+        rest = np.delete(seq, list(drop)) if drop else seq
+        rest_nodes = earliest_path(*args, rest, 0)  # a sub-sequence of a path is a path (earliest starts)
+        if len(rest) and rest_nodes[-1] < 0:
+            return False
+        return first_insertion(*args, g.node_time, rest, rest_nodes, 0, a) >= 0
+
+    empty = np.zeros(0, dtype=np.int64)
+    for a in map(int, missed):
+        if g.acq_ptr[a + 1] <= g.acq_ptr[a] or first_insertion(*args, g.node_time, empty, empty, 0, a) < 0:
+            out.append(Missed(a, "no node", "no node: no start in its window can be taken (attitude limits, "
+                                            "or no time to slew there from the start of the horizon)"))
+            continue
+        if fits(a):
+            out.append(Missed(a, "insertable", f"insertable as the schedule is: value left on the table "
+                                               f"({exact(float(a_.utility[a]))})"))
+            continue
+        gap = np.maximum(a_.vtw_start[a] - end, sched.start - a_.vtw_end[a]) if len(seq) else np.zeros(0)
+        near = [int(k) for k in np.argsort(gap, kind="stable")[:MAX_NEARBY]]
+        singles = [k for k in near if fits(a, (k,))]
+        found: tuple[int, ...] = tuple(singles[:3])
+        if singles:
+            names = ", ".join(str(int(seq[k])) for k in found)
+            text = f"blocked; removing {'any one of ' if len(found) > 1 else ''}acquisition{'s' * (len(found) > 1)} " \
+                   f"{names} would free it"
+        else:
+            found = next((c for r in (2, 3) for c in itertools.combinations(sorted(near), r) if fits(a, c)), ())
+            text = ("blocked; removing acquisitions " + " and ".join(str(int(seq[k])) for k in found) +
+                    " together would free it") if found else \
+                "blocked; no removal of up to three nearby acquisitions frees it"
+        out.append(Missed(a, "blocked", text, tuple(int(seq[k]) for k in found)))
+    return out
 
 
 # --------------------------------------------------------------------------- geography
@@ -183,6 +307,7 @@ def _class_name(c: int) -> str:
 def _map_figure(inst: Instance, views: list[ScheduleView], track) -> tuple[object, dict]:
     import plotly.graph_objects as go
 
+    epoch = epoch_of(inst)
     a = inst.acqs
     prio = inst.priorities()
     fig = go.Figure()
@@ -198,9 +323,10 @@ def _map_figure(inst: Instance, views: list[ScheduleView], track) -> tuple[objec
         fig.add_trace(go.Scatter(
             x=a.lon[sel], y=a.lat[sel], mode="markers", name=_class_name(c),
             marker={"color": CLASS_COLORS[c], "size": 6, "line": {"width": 0}},
-            customdata=np.stack([sel, a.vtw_start[sel], a.vtw_end[sel], a.utility[sel]], axis=1),
-            hovertemplate="acquisition %{customdata[0]}<br>window %{customdata[1]:.0f}-%{customdata[2]:.0f} s"
-                          f"<br>utility %{{customdata[3]:.6g}}<extra>{_class_name(c)}</extra>"))
+            customdata=[[int(i), _when(epoch, a.vtw_start[i]), _when(epoch, a.vtw_end[i]), exact(a.utility[i])]
+                        for i in sel],
+            hovertemplate="acquisition %{customdata[0]}<br>window %{customdata[1]} to %{customdata[2]}"
+                          f"<br>utility %{{customdata[3]}}<extra>{_class_name(c)}</extra>"))
     if not isinstance(track, str):
         t, tlat, tlon = track
         a_lo, a_hi = float(a.vtw_start.min()), float(a.vtw_end.max())
@@ -230,27 +356,41 @@ def _map_figure(inst: Instance, views: list[ScheduleView], track) -> tuple[objec
             x=a.lon[s.acq], y=a.lat[s.acq], mode="markers", name=f"{v.label} ({k} taken)", legendgroup=v.label,
             marker={"color": v.color, "size": 11 + 2 * v.index, "line": {"width": 2},
                     "symbol": SCHEDULE_SYMBOLS[v.index % len(SCHEDULE_SYMBOLS)]},
-            customdata=np.stack([np.arange(1, k + 1), s.acq, s.start], axis=1) if k else None,
+            customdata=[[r + 1, int(s.acq[r]), _when(epoch, s.start[r])] for r in range(k)] or None,
             hovertemplate=f"{html.escape(v.label)} #%{{customdata[0]}}: acquisition %{{customdata[1]}}"
-                          "<br>start %{customdata[2]:.1f} s<extra></extra>"))
-    lo = np.r_[a.lon]
-    la = np.r_[a.lat]
-    pad = 8.0
+                          "<br>start %{customdata[2]}<extra></extra>"))
+    (x0, x1), (y0, y1) = map_extent(a.lon, a.lat)
     fig.update_layout(
         title="Map: candidates by priority class, taken targets and slews in order",
-        xaxis={"title": "longitude (deg)", "range": [max(-180, lo.min() - pad), min(180, lo.max() + pad)],
-               "showgrid": True, "zeroline": False},
-        yaxis={"title": "latitude (deg)", "range": [max(-90, la.min() - pad), min(90, la.max() + pad)],
-               "scaleanchor": "x", "scaleratio": 1, "zeroline": False},
+        xaxis={"title": "longitude (deg)", "range": [x0, x1], "showgrid": True, "zeroline": False,
+               "constrain": "domain"},
+        yaxis={"title": "latitude (deg)", "range": [y0, y1], "scaleanchor": "x", "scaleratio": 1,
+               "zeroline": False, "constrain": "domain"},
         height=620, margin={"l": 60, "r": 20, "t": 50, "b": 50}, legend={"itemsizing": "constant"},
         plot_bgcolor="#f4f8fb")
     return fig, counts
+
+
+def map_extent(lon: np.ndarray, lat: np.ndarray, pad: float = 1.5,
+               min_span: float = 4.0) -> tuple[tuple[float, float], tuple[float, float]]:
+    """The longitude and latitude ranges of the map: the candidates' bounding box, a little padding, at least
+    `min_span` degrees each way.  The axes hold these ranges (``constrain: domain``): before, the equal-aspect
+    constraint widened the longitude range to the page's width, so one pass was drawn on a world map."""
+    def span(v, lo_lim, hi_lim):
+        lo, hi = float(np.min(v)) - pad, float(np.max(v)) + pad
+        if hi - lo < min_span:
+            mid = (lo + hi) / 2
+            lo, hi = mid - min_span / 2, mid + min_span / 2
+        return max(lo_lim, lo), min(hi_lim, hi)
+
+    return span(lon, -180.0, 180.0), span(lat, -90.0, 90.0)
 
 
 def _timeline_figure(inst: Instance, views: list[ScheduleView]) -> tuple[object, dict]:
     import plotly.graph_objects as go
 
     a = inst.acqs
+    epoch = epoch_of(inst)
     prio = inst.priorities()
     order = np.lexsort((np.arange(inst.n_acq), a.vtw_start))  # rows sorted by window start
     row = np.empty(inst.n_acq, dtype=np.int64)
@@ -260,10 +400,12 @@ def _timeline_figure(inst: Instance, views: list[ScheduleView]) -> tuple[object,
         y=row[order], x=(a.vtw_end - a.vtw_start)[order], base=a.vtw_start[order], orientation="h",
         width=0.85, name="visibility windows", marker={"color": [CLASS_COLORS[int(c)] for c in prio[order]],
                                                        "opacity": 0.35, "line": {"width": 0}},
-        customdata=np.stack([order, prio[order], a.duration[order], a.utility[order]], axis=1),
-        hovertemplate="acquisition %{customdata[0]} (class %{customdata[1]})<br>window %{base:.1f} s, "
-                      "length %{x:.1f} s<br>duration %{customdata[2]:.1f} s, utility %{customdata[3]:.6g}"
-                      "<extra></extra>"))
+        customdata=[[int(i), int(prio[i]), _when(epoch, a.vtw_start[i]), _when(epoch, a.vtw_end[i]),
+                     f"{a.vtw_end[i] - a.vtw_start[i]:.1f}", f"{a.duration[i]:.1f}", exact(a.utility[i])]
+                    for i in order],
+        hovertemplate="acquisition %{customdata[0]} (class %{customdata[1]})<br>window %{customdata[2]} to "
+                      "%{customdata[3]}, length %{customdata[4]} s<br>duration %{customdata[5]} s, utility "
+                      "%{customdata[6]}<extra></extra>"))
     n_views = max(1, len(views))
     w = 0.7 / n_views
     counts = {"windows": inst.n_acq, "taken": 0}
@@ -273,18 +415,26 @@ def _timeline_figure(inst: Instance, views: list[ScheduleView]) -> tuple[object,
         fig.add_trace(go.Bar(
             y=row[s.acq], x=a.duration[s.acq], base=s.start, orientation="h", width=w,
             offset=-0.35 + v.index * w, name=f"{v.label} ({len(s)} taken)", marker={"color": v.color},
-            customdata=np.stack([s.acq, np.arange(1, len(s) + 1)], axis=1) if len(s) else None,
+            customdata=[[int(s.acq[r]), r + 1, _when(epoch, s.start[r]),
+                         _when(epoch, s.start[r] + a.duration[s.acq[r]]), f"{a.duration[s.acq[r]]:.1f}"]
+                        for r in range(len(s))] or None,
             hovertemplate=f"{html.escape(v.label)} #%{{customdata[1]}}: acquisition %{{customdata[0]}}"
-                          "<br>start %{base:.1f} s, duration %{x:.1f} s<extra></extra>"))
+                          "<br>start %{customdata[2]}, end %{customdata[3]}<br>duration %{customdata[4]} s"
+                          "<extra></extra>"))
     ticks = row[order] if inst.n_acq <= 60 else row[order][:: max(1, inst.n_acq // 40)]
     fig.update_layout(
         title="Timeline: visibility windows (rows sorted by window start) and the chosen start and duration",
         barmode="overlay", height=int(np.clip(160 + 11 * inst.n_acq, 420, 4000)),
-        title_y=0.995, title_yanchor="top", xaxis={"title": {"text": "time (s)", "standoff": 4}, "side": "top"},
+        title_y=0.995, title_yanchor="top", xaxis={"title": {"text": _time_title(epoch), "standoff": 4}, "side": "top"},
         yaxis={"title": "acquisition", "autorange": "reversed", "tickmode": "array", "tickvals": ticks,
                "ticktext": [str(int(order[r])) for r in ticks]},
         margin={"l": 70, "r": 20, "t": 110, "b": 40}, legend={"orientation": "h", "y": -0.02, "yanchor": "top"})
     return fig, counts
+
+
+def _time_title(epoch: datetime | None) -> str:
+    """The title of a time axis: seconds from t = 0, and t = 0 in UTC when the instance has an epoch."""
+    return "time (s)" if epoch is None else f"time (s after {clock(epoch, 0.0)})"
 
 
 def _attitude_figure(inst: Instance, views: list[ScheduleView]) -> tuple[object, dict] | None:
@@ -337,7 +487,7 @@ def _attitude_figure(inst: Instance, views: list[ScheduleView]) -> tuple[object,
             fig.add_trace(go.Scatter(x=t_slew, y=y_slew, mode="lines",
                                      line={"color": v.color, "width": 1, "dash": "dot"}, name=f"{v.label}: slews",
                                      legendgroup=v.label, showlegend=False, hoverinfo="skip"), row=c + 1, col=1)
-    fig.update_xaxes(title_text="time (s)", row=2, col=1)
+    fig.update_xaxes(title_text=_time_title(epoch_of(inst)), row=2, col=1)
     title = "Roll and pitch against time" + ("" if att is not None else
                                              " (mean attitude of each window: node attitudes unknown)")
     fig.update_layout(title=title, height=640, margin={"l": 60, "r": 20, "t": 70, "b": 50})
@@ -358,10 +508,23 @@ def _views(inst: Instance, schedules: dict[str, Schedule]) -> list[ScheduleView]
     return views
 
 
-def _summary_table(inst: Instance, views: list[ScheduleView]) -> str:
-    # the best feasible schedule is the reference (the best of all when none is feasible)
+def reference_view(views: list[ScheduleView], reference: str | None) -> ScheduleView | None:
+    """The schedule the others are compared with: the one labelled `reference`, else the best feasible one (the
+    best of all when none is feasible); None when there is no schedule.  An unknown label is an InputError."""
+    if reference:
+        for v in views:
+            if v.label == reference:
+                return v
+        raise InputError(reference, f"no schedule of that name to compare with ({', '.join(v.label for v in views)})")
     pool = [v for v in views if v.verdict.feasible] or views
-    best = max((v.verdict.value for v in pool if math.isfinite(v.verdict.value)), default=float("nan"))
+    finite = [v for v in pool if math.isfinite(v.verdict.value)]
+    return max(finite, key=lambda v: v.verdict.value, default=None)
+
+
+def _summary_table(inst: Instance, views: list[ScheduleView], ref: ScheduleView | None) -> str:
+    """One row per schedule: its exact value, the exact difference and the ratio to the reference schedule, its
+    acquisitions per priority class and the checker's verdict."""
+    best = ref.verdict.value if ref is not None else float("nan")
     prio = inst.priorities()
     available = np.bincount(prio.astype(np.int64), minlength=len(CLASS_UTILITIES))
     head = "".join(f"<th title='utility {CLASS_UTILITIES[c]:g}'>class {c}<br><small>of {available[c]}</small></th>"
@@ -369,15 +532,48 @@ def _summary_table(inst: Instance, views: list[ScheduleView]) -> str:
     rows = []
     for v in views:
         ratio = v.verdict.value / best if best > 0 else float("nan")
+        diff = v.verdict.value - best
         verdict = ("<span class='ok'>feasible</span>" if v.verdict.feasible else
                    f"<span class='bad'>infeasible: {html.escape(v.verdict.reason)}</span>")
         cells = "".join(f"<td>{n}</td>" for n in v.class_counts)
+        mark = " <small>(reference)</small>" if v is ref else ""
         rows.append(f"<tr data-schedule='{html.escape(v.label, quote=True)}' data-feasible="
-                    f"'{str(v.verdict.feasible).lower()}'><td><span class='swatch' style='background:{v.color}'>"
-                    f"</span>{html.escape(v.label)}</td><td>{v.verdict.value:,.6g}</td><td>{len(v.schedule)}</td>"
-                    f"<td>{'-' if ratio != ratio else f'{ratio:.4f}'}</td>{cells}<td>{verdict}</td></tr>")
-    return ("<table class='summary'><thead><tr><th>schedule</th><th>value</th><th>acquisitions</th>"
-            f"<th title='value / value of the best feasible schedule given'>/ best</th>{head}<th>checker</th></tr></thead><tbody>{''.join(rows)}</tbody></table>")
+                    f"'{str(v.verdict.feasible).lower()}' data-value='{v.verdict.value!r}'><td><span class='swatch' "
+                    f"style='background:{v.color}'></span>{html.escape(v.label)}{mark}</td>"
+                    f"<td class='value'>{exact(v.verdict.value)}</td>"
+                    f"<td class='diff'>{'-' if diff != diff else signed(diff)}</td><td>{len(v.schedule)}</td>"
+                    f"<td>{'-' if ratio != ratio else f'{ratio:.6f}'}</td>{cells}<td>{verdict}</td></tr>")
+    ref_name = html.escape(ref.label) if ref is not None else "-"
+    return ("<table class='summary'><thead><tr><th>schedule</th><th>value</th>"
+            f"<th title='value minus the value of {ref_name}'>- {ref_name}</th><th>acquisitions</th>"
+            f"<th title='value / value of {ref_name}'>/ {ref_name}</th>{head}<th>checker</th></tr></thead>"
+            f"<tbody>{''.join(rows)}</tbody></table>")
+
+
+def _missed_section(inst: Instance, ref: ScheduleView) -> str:
+    """The acquisitions the reference schedule misses, highest class first, each with its reason
+    (:func:`missed_reasons`); the section's ``data-*`` attributes count them by kind."""
+    reasons = missed_reasons(inst, ref.schedule)
+    head = f"<h2>Why {html.escape(ref.label)} misses what it misses</h2>"
+    if isinstance(reasons, str):
+        return (f"<section id='missed-section' data-missed='0'>{head}<p class='note'>No reasons: "
+                f"{html.escape(ref.label)} is not a sequence of the graph: {html.escape(reasons)}.</p></section>")
+    a, prio, epoch = inst.acqs, inst.priorities(), epoch_of(inst)
+    n_missed = inst.n_acq - len(np.unique(ref.schedule.acq))
+    kinds = {k: sum(m.kind == k for m in reasons) for k in ("no node", "insertable", "blocked")}
+    rows = "".join(
+        f"<tr data-acq='{m.acq}' data-kind='{m.kind}'><td>{m.acq}</td><td>{int(prio[m.acq])}</td>"
+        f"<td>{exact(float(a.utility[m.acq]))}</td><td>{html.escape(_when(epoch, a.vtw_start[m.acq]))} to "
+        f"{html.escape(_when(epoch, a.vtw_end[m.acq]))}</td><td>{html.escape(m.text)}</td></tr>" for m in reasons)
+    more = (f"<p class='meta'>The first {len(reasons)} of {n_missed} by class are explained.</p>"
+            if len(reasons) < n_missed else "")
+    attrs = " ".join(f"data-{k.replace(' ', '-')}='{n}'" for k, n in kinds.items())
+    summary = (f"{n_missed} missed: {kinds['insertable']} insertable as the schedule is, {kinds['blocked']} "
+               f"blocked, {kinds['no node']} with no node")
+    return (f"<section id='missed-section' data-missed='{n_missed}' {attrs}>{head}<details{' open' * (n_missed <= 40)}>"
+            f"<summary>{summary}</summary>{more}<table class='missed'><thead><tr><th>acquisition</th>"
+            "<th>class</th><th>utility</th><th>window</th><th>reason (insertion at every position of the schedule)"
+            f"</th></tr></thead><tbody>{rows}</tbody></table></details></section>")
 
 
 def _figure_div(fig, div_id: str, counts: dict, first: bool) -> str:
@@ -392,22 +588,27 @@ body { font-family: system-ui, -apple-system, 'Segoe UI', sans-serif; margin: 24
 h1 { font-size: 1.4em; margin-bottom: 0.2em; }
 p.meta { color: #555; margin-top: 0; }
 p.note { background: #fff7e0; border-left: 4px solid #e6a700; padding: 6px 10px; }
-table.summary { border-collapse: collapse; margin: 12px 0 24px; font-size: 0.92em; }
-table.summary th, table.summary td { border: 1px solid #ccc; padding: 4px 8px; text-align: right; }
+table.summary, table.missed { border-collapse: collapse; margin: 12px 0 24px; font-size: 0.92em; }
+table.summary th, table.summary td, table.missed th, table.missed td { border: 1px solid #ccc; padding: 4px 8px;
+  text-align: right; }
 table.summary td:first-child, table.summary td:last-child { text-align: left; }
-table.summary th { background: #f0f0f0; }
+table.summary th, table.missed th { background: #f0f0f0; }
 .ok { color: #1a7f37; font-weight: 600; } .bad { color: #c62828; font-weight: 600; }
 .swatch { display: inline-block; width: 10px; height: 10px; margin-right: 6px; border-radius: 2px; }
 section.figure { margin-bottom: 28px; }
+h2 { font-size: 1.1em; } table.missed td:last-child { text-align: left; }
 """
 
 
-def build_report(inst: Instance, schedules: dict[str, Schedule], title: str | None = None) -> str:
-    """The report as one HTML string (self-contained).
+def build_report(inst: Instance, schedules: dict[str, Schedule], title: str | None = None,
+                 reference: str | None = None) -> str:
+    """The report as one HTML string (self-contained).  Values are compared with the schedule labelled
+    `reference` (default: the best feasible one), and its missed acquisitions are explained.
 
-    Raises :class:`InputError` when a schedule does not belong to `inst`.
+    Raises :class:`InputError` when a schedule does not belong to `inst` or `reference` names none.
     """
     views = _views(inst, schedules)
+    ref = reference_view(views, reference)
     notes = []
     sections = []
     track = None
@@ -432,14 +633,18 @@ def build_report(inst: Instance, schedules: dict[str, Schedule], title: str | No
     family = inst.meta.get("family")
     meta = (f"{inst.n_acq} candidate acquisitions, horizon {inst.horizon:.0f} s"
             + (f", family {html.escape(str(family))}" if family else "")
-            + f"; {len(views)} schedule(s); values are sums of utilities, checked by the independent checker")
+            + f"; {len(views)} schedule(s); values are sums of utilities, checked by the independent checker"
+            + (f", compared with {html.escape(ref.label)}" if ref is not None else "")
+            + (f"; t = 0 s is {clock(epoch_of(inst), 0.0)}" if epoch_of(inst) is not None else
+               "; times are seconds from the start of the horizon (the instance has no UTC epoch)"))
     title = title or f"{inst.name}: schedules"
     note_html = "".join(f"<p class='note'>{html.escape(n)}</p>" for n in notes)
     return ("<!DOCTYPE html>\n<html lang='en'><head><meta charset='utf-8'>" + html_mark(REPORT_KIND) +
             f"<title>{html.escape(title)}</title><style>{_STYLE}</style></head>\n"
             f"<body data-instance='{html.escape(inst.name, quote=True)}' data-acquisitions='{inst.n_acq}' "
             f"data-schedules='{len(views)}'>\n<h1>{html.escape(title)}</h1><p class='meta'>{meta}</p>{note_html}\n"
-            f"{_summary_table(inst, views)}\n" + "\n".join(sections) + "\n</body></html>\n")
+            f"{_summary_table(inst, views, ref)}\n" + (_missed_section(inst, ref) if ref is not None else "") +
+            "\n".join(sections) + "\n</body></html>\n")
 
 
 REPORT_KIND = "report"  # the mark (eosp.ownership): a meta tag in the page's head
@@ -451,11 +656,11 @@ def check_report_out(out: str | Path, overwrite: bool = False) -> Path:
 
 
 def write_report(inst: Instance, schedules: dict[str, Schedule], out: str | Path, title: str | None = None,
-                 overwrite: bool = False) -> Path:
+                 overwrite: bool = False, reference: str | None = None) -> Path:
     """Build the report and write it atomically (nothing is written when a schedule is refused); an existing page
     is replaced only when eosp wrote it and `overwrite` is given."""
     out = check_report_out(out, overwrite)
-    text = build_report(inst, schedules, title)
+    text = build_report(inst, schedules, title, reference)
     with atomic_path(out, suffix=".html") as tmp:
         tmp.write_text(text, encoding="utf-8")  # atomic_path gives it the usual permissions (umask)
     return out

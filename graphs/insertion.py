@@ -124,3 +124,32 @@ def insertion_order(node_time: np.ndarray, acq_ptr: np.ndarray, weights: np.ndar
     else:
         raise ValueError(f"unknown greedy order {order!r} ({', '.join(ORDERS)})")
     return np.lexsort(keys).astype(np.int32)
+
+
+@numba.njit(cache=True)
+def earliest_path(indptr, dst, acq_ptr, seq_acq, start):
+    """The nodes of the acquisitions `seq_acq` taken in order from node `start`, each at the node its
+    predecessor's node has an arc to (as early as possible); -1 from the first that cannot follow.
+    This is the sequence form :func:`_insertion_cost` expects (its nodes are the ones an insertion recomputes)."""
+    m = seq_acq.shape[0]
+    out = np.full(m, -1, dtype=np.int64)
+    cur = start
+    for k in range(m):
+        cur = arc_to_acq(indptr, dst, acq_ptr, cur, seq_acq[k])
+        if cur < 0:
+            break
+        out[k] = cur
+    return out
+
+
+@numba.njit(cache=True)
+def first_insertion(indptr, dst, acq_ptr, node_time, seq_acq, seq_node, start, a):
+    """The first position of the sequence (`seq_acq`, its :func:`earliest_path` nodes `seq_node`) where
+    acquisition `a` can be inserted, the members after it moved as needed (the Greedy kernel's test); -1 if
+    none.  Used by the HTML report to say why an acquisition was missed."""
+    m = seq_acq.shape[0]
+    for p in range(m + 1):
+        _, first = _insertion_cost(indptr, dst, acq_ptr, node_time, seq_acq, seq_node, m, p, a, start)
+        if first >= 0:
+            return p
+    return -1
