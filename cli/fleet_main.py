@@ -140,12 +140,11 @@ def solve_fleet(ns) -> int:
         freeze_s = (at - h.start) / timedelta(seconds=1)
     sol = solve(fleet, opps, cfg, initial=initial, freeze_until_s=freeze_s)
     elapsed = time.perf_counter() - t0
-    info = {"value": sol.value, "solver": "fleet", "pass_solver": cfg.pass_solver, "seconds": round(elapsed, 3)}
-    if sol.bound is not None:
-        info.update(bound=sol.bound, gap=sol.gap)
+    info = {"value": sol.value, "solver": "fleet", "pass_solver": cfg.pass_solver, "seconds": round(elapsed, 3),
+            "bound": sol.bound, "gap": sol.gap, "bound_source": sol.info["bound_source"]}
     write_schedule(sol.schedule, fleet, out, overwrite=ns.overwrite, info=info)
-    bound = (f", bound {sol.bound:.6f}, gap {sol.gap:.4%}" if sol.bound is not None
-             else f", no bound ({sol.info['no_bound_because']})")
+    why = sol.info["no_lagrangian_bound_because"]
+    bound = f", bound {sol.bound:.6f} ({sol.info['bound_source']}{'' if why is None else ': ' + why}), gap {sol.gap:.4%}"
     stop = " (interrupted: the best schedule so far)" if sol.info.get("interrupted") else ""
     print(f"{Path(out)}: {len(sol.schedule)} observations, WCR {sol.value:.6f}{bound}; {sol.info['rounds']} rounds, "
           f"{sol.info['pass_solves']} pass solves ({elapsed:.1f} s){stop}")

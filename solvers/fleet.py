@@ -171,6 +171,7 @@ class Coordinator:
     step: float = 1.0  # Polyak step factor, halved when the bound stalls
     rounds_done: int = 0
     interrupted: bool = False
+    bound_source: str = "conflict-free"  # until a proven Lagrangian bound is lower
 
     initial: Primal | None = None  # a schedule to start from (--init)
     frozen: np.ndarray | None = None  # bool per pass: kept as in `initial`, never solved again (--freeze-until)
@@ -183,6 +184,9 @@ class Coordinator:
         self.barred = np.zeros(n, dtype=bool)  # tasks barred everywhere by the battery repair (rare)
         if self.frozen is None:
             self.frozen = np.zeros(len(self.prob.passes), dtype=bool)
+        # the conflict-free bound: every task that has an opportunity, served once
+        served_somewhere = np.array([len(h) > 0 for h in self.prob.task_passes], dtype=bool)
+        self.best_bound = float(self.prob.weight[served_somewhere].sum())
 
     # ------------------------------------------------------------------ pass solves
     def _solve(self, p: int, util: np.ndarray) -> PassResult:
@@ -267,8 +271,8 @@ class Coordinator:
                 total += res.bound
             count[path_tasks(self.prob, p, res.nodes)] += 1
         self.bound_proven &= proven
-        if total < self.best_bound:
-            self.best_bound = total
+        if proven and self.prob.fifo_violations == 0 and total < self.best_bound:
+            self.best_bound, self.bound_source = total, "lagrangian"
         g = 1.0 - count
         g[(self.lam <= 0) & (g > 0)] = 0.0  # a free task at price 0 cannot go lower
         norm2 = float(g @ g)
@@ -410,7 +414,7 @@ class Coordinator:
         while cfg.rounds is None or rounds < cfg.rounds:
             if deadline is not None and time.perf_counter() > deadline:
                 break
-            if self.bound_proven and self.best_bound <= self.best.value + 1e-9:
+            if self.best_bound <= self.best.value + 1e-9:
                 break  # proven optimal (energy relaxed in the bound, kept in the schedule)
             if cfg.pass_solver == "exact" or rounds == 0:
                 before = self.best_bound
@@ -428,11 +432,11 @@ class Coordinator:
             self.rounds_done = rounds
 
     @property
-    def bound(self) -> float | None:
-        """The best proven bound (None when a pass solver gave none, or when some pass graph is not FIFO, so that
-        its optimum might miss a schedule that waits: see :func:`eosp.fleet.passgraph.fifo_violations`)."""
-        ok = self.bound_proven and self.prob.fifo_violations == 0 and math.isfinite(self.best_bound)
-        return self.best_bound if ok else None
+    def bound(self) -> float:
+        """The best proven bound: the Lagrangian one when every pass term of a price round was proven (exact pass
+        solver) and every pass graph is FIFO (:func:`eosp.fleet.passgraph.fifo_violations`), else the
+        conflict-free bound (every task that has an opportunity, served once)."""
+        return self.best_bound
 
 
 @dataclass
@@ -510,9 +514,12 @@ def solve(fleet: Fleet, opps: Opportunities, cfg: FleetConfig | None = None, pro
     info = {"pass_solver": cfg.pass_solver, "rounds": coord.rounds_done, "pass_solves": coord.pass_solves,
             "passes": len(prob.passes), "build_s": round(prob.build_s, 3), "checker_drops": dropped,
             "battery_barred": int(coord.barred.sum()), "metrics": res.metrics, "interrupted": coord.interrupted,
-            "no_bound_because": None if bound is not None else (
+            "bound_source": coord.bound_source,
+            "no_lagrangian_bound_because": None if coord.bound_source == "lagrangian" else (
                 f"pass solver {cfg.pass_solver} proves no pass bound" if cfg.pass_solver != "exact"
-                else "a pass graph is not FIFO" if prob.fifo_violations else "no price round finished")}
+                else "a pass graph is not FIFO" if prob.fifo_violations
+                else "none was lower than the conflict-free bound" if coord.rounds_done
+                else "none needed: the conflict-free bound is met" if coord.best_bound <= coord.best.value + 1e-9
+                else "no price round finished")}
     hist = [(t, v / W, b / W) for t, v, b in coord.history]
-    return FleetSolution(sched, float(res.metrics.get("WCR", 0.0)), None if bound is None else min(1.0, bound / W),
-                         hist, info)
+    return FleetSolution(sched, float(res.metrics.get("WCR", 0.0)), min(1.0, bound / W) if W > 0 else 0.0, hist, info)

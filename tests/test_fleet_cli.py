@@ -22,7 +22,7 @@ def test_solve_validate_export(fleet_dir, tmp_path, capsys):
     out = tmp_path / "s.parquet"
     assert main(["solve", str(fleet_dir), "--solver", "fleet", "--rounds", "2", "--out", str(out)]) == 0
     said = capsys.readouterr().out
-    assert "WCR 1.000000, bound 1.000000, gap 0.0000%" in said
+    assert "WCR 1.000000, bound 1.000000" in said and "gap 0.0000%" in said
     assert main(["validate", str(fleet_dir), str(out)]) == 0
     assert capsys.readouterr().out.startswith("valid: WCR 1.0")
     sol = tmp_path / "solution.json"
