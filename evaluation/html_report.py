@@ -311,7 +311,11 @@ def _map_figure(inst: Instance, views: list[ScheduleView], track) -> tuple[objec
     a = inst.acqs
     prio = inst.priorities()
     fig = go.Figure()
+    west = lon_origin(a.lon)
+    lon = wrap_lon(a.lon, west)
     clon, clat = coastlines()
+    if lon.max() > 180.0:  # the data cross the antimeridian: the coastlines continue east of 180
+        clon, clat = np.r_[clon, np.float32(np.nan), clon + 360.0], np.r_[clat, np.float32(np.nan), clat]
     fig.add_trace(go.Scatter(x=clon, y=clat, mode="lines", line={"color": "#8a8a8a", "width": 0.8},
                              name="coastlines", hoverinfo="skip"))
     counts = {"candidates": inst.n_acq, "taken": 0, "track_points": 0}
@@ -321,7 +325,7 @@ def _map_figure(inst: Instance, views: list[ScheduleView], track) -> tuple[objec
         if sel.size == 0:
             continue
         fig.add_trace(go.Scatter(
-            x=a.lon[sel], y=a.lat[sel], mode="markers", name=_class_name(c),
+            x=lon[sel], y=a.lat[sel], mode="markers", name=_class_name(c),
             marker={"color": CLASS_COLORS[c], "size": 6, "line": {"width": 0}},
             customdata=[[int(i), _when(epoch, a.vtw_start[i]), _when(epoch, a.vtw_end[i]), exact(a.utility[i])]
                         for i in sel],
@@ -336,7 +340,7 @@ def _map_figure(inst: Instance, views: list[ScheduleView], track) -> tuple[objec
                                   ("ground track of the pass", on_pass, {"color": "rgba(40, 90, 200, 0.8)",
                                                                           "width": 2.5})):
             # NaN where the other part runs, and where the track crosses the antimeridian
-            lon_k, lat_k = np.where(keep, tlon, np.nan), np.where(keep, tlat, np.nan)
+            lon_k, lat_k = np.where(keep, wrap_lon(tlon, west), np.nan), np.where(keep, tlat, np.nan)
             blon, blat = _break_wraps(lon_k, lat_k)
             bt = np.insert(t, np.flatnonzero(np.abs(np.diff(lon_k)) > 180.0) + 1, np.nan)
             fig.add_trace(go.Scatter(x=blon, y=blat, mode="lines", line=style, name=name,
@@ -348,27 +352,43 @@ def _map_figure(inst: Instance, views: list[ScheduleView], track) -> tuple[objec
         s = v.schedule
         k = len(s)
         counts["taken"] += k
-        slon, slat = _break_wraps(a.lon[s.acq], a.lat[s.acq])
+        slon, slat = _break_wraps(lon[s.acq], a.lat[s.acq])
         fig.add_trace(go.Scatter(x=slon, y=slat, mode="lines", name=f"{v.label}: slews",
                                  line={"color": v.color, "width": 1.2}, legendgroup=v.label, hoverinfo="skip",
                                  showlegend=False))
         fig.add_trace(go.Scatter(
-            x=a.lon[s.acq], y=a.lat[s.acq], mode="markers", name=f"{v.label} ({k} taken)", legendgroup=v.label,
+            x=lon[s.acq], y=a.lat[s.acq], mode="markers", name=f"{v.label} ({k} taken)", legendgroup=v.label,
             marker={"color": v.color, "size": 11 + 2 * v.index, "line": {"width": 2},
                     "symbol": SCHEDULE_SYMBOLS[v.index % len(SCHEDULE_SYMBOLS)]},
             customdata=[[r + 1, int(s.acq[r]), _when(epoch, s.start[r])] for r in range(k)] or None,
             hovertemplate=f"{html.escape(v.label)} #%{{customdata[0]}}: acquisition %{{customdata[1]}}"
                           "<br>start %{customdata[2]}<extra></extra>"))
-    (x0, x1), (y0, y1) = map_extent(a.lon, a.lat)
+    (x0, x1), (y0, y1) = map_extent(lon, a.lat)
     fig.update_layout(
         title="Map: candidates by priority class, taken targets and slews in order",
-        xaxis={"title": "longitude (deg)", "range": [x0, x1], "showgrid": True, "zeroline": False,
+        xaxis={"title": "longitude (deg)" + (", past 180 east of the antimeridian (subtract 360)" if x1 > 180 else ""),
+               "range": [x0, x1], "showgrid": True, "zeroline": False,
                "constrain": "domain"},
         yaxis={"title": "latitude (deg)", "range": [y0, y1], "scaleanchor": "x", "scaleratio": 1,
                "zeroline": False, "constrain": "domain"},
         height=620, margin={"l": 60, "r": 20, "t": 50, "b": 50}, legend={"itemsizing": "constant"},
         plot_bgcolor="#f4f8fb")
     return fig, counts
+
+
+def lon_origin(lon: np.ndarray) -> float:
+    """The western edge of the narrowest longitude interval holding every point, which may cross the
+    antimeridian: the point after the widest gap between the sorted longitudes.  A pass over a pole has
+    targets at both ends of [-180, 180]: drawn from this edge eastwards, it stays one region of the map."""
+    v = np.sort(np.mod(np.asarray(lon, dtype=np.float64) + 180.0, 360.0) - 180.0)
+    gaps = np.diff(np.r_[v, v[0] + 360.0])
+    return float(v[(int(np.argmax(gaps)) + 1) % v.size])
+
+
+def wrap_lon(lon: np.ndarray, west: float) -> np.ndarray:
+    """Longitudes east of `west` (:func:`lon_origin`) as they are, those west of it plus 360 (so up to 540)."""
+    lon = np.asarray(lon, dtype=np.float64)
+    return np.where(lon < west, lon + 360.0, lon)
 
 
 def map_extent(lon: np.ndarray, lat: np.ndarray, pad: float = 1.5,
@@ -383,7 +403,7 @@ def map_extent(lon: np.ndarray, lat: np.ndarray, pad: float = 1.5,
             lo, hi = mid - min_span / 2, mid + min_span / 2
         return max(lo_lim, lo), min(hi_lim, hi)
 
-    return span(lon, -180.0, 180.0), span(lat, -90.0, 90.0)
+    return span(lon, -180.0, 540.0), span(lat, -90.0, 90.0)
 
 
 def _timeline_figure(inst: Instance, views: list[ScheduleView]) -> tuple[object, dict]:

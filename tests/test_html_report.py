@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 
 from eosp.errors import InputError
-from eosp.evaluation.html_report import (build_report, coastlines, exact, ground_track, map_extent,
-                                          missed_reasons, write_report)
+from eosp.evaluation.html_report import (build_report, coastlines, exact, ground_track, lon_origin, map_extent,
+                                          missed_reasons, wrap_lon, write_report)
 from eosp.graphs.insertion import earliest_path, first_insertion
 from eosp.instances.interchange import write_instance
 from eosp.instances.schedule import Schedule, check, from_internal_nodes, write_schedule
@@ -168,8 +168,11 @@ def test_utc_when_the_instance_has_an_epoch(case):
 def test_map_extent_is_the_data():
     (x0, x1), (y0, y1) = map_extent(np.array([10.0, 12.0, 11.0]), np.array([40.0, 45.0, 41.0]))
     assert (x0, x1) == (8.5, 13.5) and (y0, y1) == (38.5, 46.5)
-    (x0, x1), _ = map_extent(np.array([179.5]), np.array([0.0]))
-    assert x1 == 180.0 and x1 - x0 < 4
+    lon = np.array([170.0, -175.0, 178.0])  # across the antimeridian: drawn from 170 east to 185
+    west = lon_origin(lon)
+    assert west == 170.0 and list(wrap_lon(lon, west)) == [170.0, 185.0, 178.0]
+    assert map_extent(wrap_lon(lon, west), np.zeros(3))[0] == (168.5, 186.5)
+    assert lon_origin(np.array([10.0, 12.0])) == 10.0 and list(wrap_lon(np.array([10.0, 12.0]), 10.0)) == [10, 12]
 
 
 def test_ground_track_follows_the_targets():
@@ -347,7 +350,8 @@ def test_report_hover_and_values_in_headless_chromium(case, tmp_path, chromium):
     values = {k: check(inst, s).value for k, s in scheds.items()}
     assert got["values"] == [exact(values[k]) for k in scheds]
     assert got["diffs"][0] == "0" and got["diffs"][1].startswith(("+", "-", "0"))
-    (x0, x1), (y0, y1) = map_extent(a.lon, a.lat)
+    (x0, x1), (y0, y1) = map_extent(wrap_lon(a.lon, lon_origin(a.lon)), a.lat)
+    assert x1 - x0 < 200  # this pass crosses the south pole: not a world map (it spanned 316 degrees)
     assert got["map"]["x"] == pytest.approx([x0, x1]) and got["map"]["y"] == pytest.approx([y0, y1])
     assert len(got["missed"]) == inst.n_acq - len(set(g.acq.tolist()))
 
