@@ -12,17 +12,24 @@ RLModule's ``model_config``, then to ``EOSPAgent``'s layers.
 Outputs (RUN_DIR/RUN_NAME): ``checkpoints/last`` and ``checkpoints/best`` (agent
 weights + JSON config, loadable by ``eosp solve --solver policy``), ``run.json``
 (the configuration and the MLflow run id), validation results and plots.  The
-MLflow run gets the parameters, per-iteration training and validation metrics,
-the agent as an MLflow model and the plots.
+MLflow run gets the parameters, tags ``mode`` and ``reward`` (and ``primary_metric``),
+per-iteration training and validation metrics (``val/selection_score``, the mean of
+per-instance ratios that picks ``best``, under its own name; ``by_env_steps/...`` with
+env steps as the step), a per-instance table of each validation (``validation/``), HTML
+reports of the logged agent on the first validation instances (``validation/reports/``),
+the agent as an MLflow model carrying its iteration and validation figures (metadata and
+model metrics), and the learning curve against env steps and wall time.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import logging
 import os
 import sys
 import time
+import warnings
 from pathlib import Path
 
 os.environ.setdefault("OMP_NUM_THREADS", "1")
@@ -137,7 +144,7 @@ def _main(argv: list[str] | None) -> int:
     from eosp.training.loop import Trainer
     from eosp.training.plots import learning_curve
     from eosp.training.ppo import estimate_value_scale
-    from eosp.training.validation import Validator, selection_score
+    from eosp.training.validation import Validator, objective_mode, selection_score
 
     torch.set_num_threads(1)
     init_ray(cfg.ray.address, cfg.ray.num_cpus)
@@ -173,10 +180,13 @@ def _main(argv: list[str] | None) -> int:
         cfg.model.value_scale = estimate_value_scale(cfg)
         print(f"[train] value scale {cfg.model.value_scale:.3g} (mean return of random episodes)", flush=True)
 
+    logging.getLogger("mlflow").setLevel(logging.WARNING)  # its INFO lines (creating tables, experiments) are noise
     mlflow.set_tracking_uri(mlflow_uri(cfg))
     mlflow.set_experiment(t.experiment)
     active = mlflow.start_run(run_id=run_id, run_name=None if run_id else t.run_name)
     run_id = active.info.run_id
+    # what a run list filters on: the objective and the reward variant
+    mlflow.set_tags({"mode": objective_mode(cfg.env), "reward": cfg.env.reward})
     if not t.resume:
         mlflow.log_params({k: (json.dumps(v) if isinstance(v, (list, tuple)) else v) for k, v in flatten(cfg).items()})
         mlflow.log_dict(to_dict(cfg), "config.json")
@@ -202,20 +212,25 @@ def _main(argv: list[str] | None) -> int:
         trainer.load(init)
 
     t_start = time.perf_counter()
+    wall0 = history[-1].get("perf/wall_s", 0.0) if history else 0.0  # wall time of the sessions before (resume)
     for it in range(start_iter, t.iterations):
         out_of_time = t.time_budget > 0 and time.perf_counter() - t_start > t.time_budget
         last = it + 1 == t.iterations or out_of_time
         metrics, agent = trainer.train(validate=(it + 1) % t.validate_every == 0 or last)
-        if agent is not None and selection_score(metrics) > best:
+        metrics["perf/wall_s"] = wall0 + time.perf_counter() - t_start
+        improved = agent is not None and selection_score(metrics) > best
+        if improved:
             best = selection_score(metrics)
             save_agent(agent, ckpt_dir / "best", cfg.env, {"iteration": it + 1, "val": metrics})
             save_state(max(start_iter, it + 1 - (it + 1) % t.checkpoint_every))  # `best` is never lost
-        metrics["perf/wall_s"] = time.perf_counter() - t_start
         mlflow.log_metrics(metrics, step=it + 1)
+        if agent is not None:
+            log_validation(trainer.last_validation, metrics, run_dir, it + 1, improved)
         history.append({"iteration": it + 1, **metrics})
         print(f"[train] iteration {it + 1}/{t.iterations}: return {metrics.get('train/episode_return_mean', 0):.3f}"
               f", {metrics.get('perf/env_steps_per_s', 0):.0f} env steps/s"
               + (f", val ratio to greedy {metrics['val/ratio_to_greedy']:.4f} to ramp {metrics['val/ratio_to_ramp']:.4f}"
+                 f" (ratios of means); selection score {selection_score(metrics):.4f}"
                  if "val/ratio_to_greedy" in metrics else ""), flush=True)
         if (it + 1) % t.checkpoint_every == 0 or last:
             agent = agent or trainer.agent()
@@ -234,6 +249,8 @@ def _main(argv: list[str] | None) -> int:
     final = ckpt_dir / ("best" if (ckpt_dir / "best").exists() else "last")
     if final.exists():
         log_agent_model(final)
+        if validator is not None:
+            log_validation_reports(validator, final, run_dir)
     mlflow.log_metric("perf/train_wall_s", wall)
     mlflow.end_run()
     trainer.stop()
@@ -262,14 +279,16 @@ def show_shipped(cfg: RunConfig, wall: float) -> None:
     from eosp.config import family_config
     from eosp.evaluation.shipped import compare, reading
     from eosp.instances.generator import generate
-    from eosp.shards.io import dataset_shards, read_instances
 
     mode = "unitary" if cfg.env.reward == "unitary" else "utility"
     print(f"[train] what this means: policy/X is the mean over the validation instances of the trained policy's value "
           f"over X's (1.0 = as good); wins/ties/losses count the instances where it is above / equal / below. "
           f"{wall:.0f} s of PPO from scratch rarely beats Greedy; imitation of the exact solver does. The shipped "
           f"{mode} model (models/pretrained-agents/{mode}), solving with its defaults:", flush=True)
-    val = read_instances(dataset_shards(cfg.train.val_data))
+    # the demo's validation instances again, from their seeds: the data set keeps only their pruned arcs, the
+    # exact solver needs all of them
+    n_val, seed = DEMO_DATA["data/demo/val"]
+    val = [generate(family_config("uniform", DEMO_ACQ, seed + k)) for k in range(n_val)]
     conflict = [generate(family_config("conflict", DEMO_ACQ, 990_000 + i)) for i in range(8)]
     comps = [compare(f"demo validation ({len(val)})", val, mode),
              compare(f"conflict family ({len(conflict)})", conflict, mode)]
@@ -278,8 +297,60 @@ def show_shipped(cfg: RunConfig, wall: float) -> None:
     print(f"[train] {reading(comps)}", flush=True)
 
 
+def log_validation(result, metrics: dict, run_dir: Path, iteration: int, best: bool) -> None:
+    """After a validation: the primary metric's name as a tag, the training return and the primary metric
+    against env steps (``by_env_steps/...``, step = env steps: MLflow charts them on that axis; wall time is
+    MLflow's own axis), and the per-instance table as an artifact (``validation/``; the best one also as
+    ``validation/best_instances.csv``)."""
+    import mlflow
+
+    from eosp.training.validation import SELECTION_KEY, primary_metric, write_instance_table
+
+    mlflow.set_tag("primary_metric", f"{SELECTION_KEY} = {primary_metric(metrics)}")
+    steps = int(metrics.get("perf/env_steps_lifetime", iteration))
+    mlflow.log_metrics({f"by_env_steps/{k}": metrics[k] for k in (SELECTION_KEY, "train/episode_return_mean")
+                        if k in metrics}, step=steps)
+    if result is None:
+        return
+    table = write_instance_table(result, run_dir / "validation" / f"instances_iter{iteration:05d}.csv")
+    mlflow.log_artifact(str(table), "validation")
+    if best:
+        mlflow.log_artifact(str(write_instance_table(result, run_dir / "validation" / "best_instances.csv")),
+                            "validation")
+
+
+def log_validation_reports(validator, checkpoint: Path, run_dir: Path, n: int = 2) -> None:
+    """HTML reports of the checkpoint's schedules on the first `n` validation instances (next to Greedy's,
+    each missed acquisition explained), logged to ``validation/reports``; a failure only warns."""
+    import mlflow
+
+    from eosp.models.checkpoint import load_agent
+
+    try:
+        for page in validator.reports(load_agent(checkpoint)[0], run_dir / "validation" / "reports", n):
+            mlflow.log_artifact(str(page), "validation/reports")
+    except Exception as exc:  # the reports must not lose the run
+        print(f"[train] warning: could not write the validation reports: {exc}", file=sys.stderr)
+
+
+def model_metadata(checkpoint: Path) -> dict:
+    """What the logged model carries about itself: the iteration it was saved at and its validation figures
+    (from the checkpoint's agent.json), the primary metric named."""
+    from eosp.training.validation import SELECTION_KEY, primary_metric
+
+    meta = json.loads((checkpoint / "agent.json").read_text())
+    val = {k: float(v) for k, v in (meta.get("val") or {}).items() if k.startswith("val/")}
+    out = {"checkpoint": checkpoint.name, "iteration": meta.get("iteration"), "validation": val}
+    if val:
+        out["primary_metric"] = primary_metric(val)
+        out[SELECTION_KEY] = val.get(SELECTION_KEY, val[primary_metric(val)])
+    return out
+
+
 def log_agent_model(checkpoint: Path) -> None:
-    """Log the agent as an MLflow pyfunc model built from code (eosp.training.mlflow_model) and its weights."""
+    """Log the agent as an MLflow pyfunc model built from code (eosp.training.mlflow_model) and its weights,
+    carrying its iteration and validation figures (:func:`model_metadata`) as metadata and as the model's
+    metrics."""
     import importlib.util
 
     import mlflow
@@ -289,7 +360,21 @@ def log_agent_model(checkpoint: Path) -> None:
     try:
         # a progress bar for copying two small local files is noise in a job's log
         os.environ.setdefault("MLFLOW_ENABLE_ARTIFACTS_PROGRESS_BAR", "false")
-        mlflow.pyfunc.log_model(name="agent", python_model=str(code), artifacts={"agent": str(checkpoint)})
+        meta = model_metadata(checkpoint)
+        from mlflow.models import ModelSignature
+        from mlflow.types import ColSpec, Schema
+        from mlflow.types.schema import Array
+
+        # what predict takes and returns (eosp.training.mlflow_model): instance directories in, schedules out
+        signature = ModelSignature(inputs=Schema([ColSpec("string", "instance_dir")]),
+                                   outputs=Schema([ColSpec("string", "instance_dir"), ColSpec("long", "n_acquisitions"),
+                                                   ColSpec("double", "value"), ColSpec(Array("long"), "nodes")]))
+        with warnings.catch_warnings():  # an input example would be an instance directory: none travels with it
+            warnings.filterwarnings("ignore", message=".*input example was not provided.*")
+            info = mlflow.pyfunc.log_model(name="agent", python_model=str(code), artifacts={"agent": str(checkpoint)},
+                                           metadata=meta, signature=signature)
+        if meta["validation"] and getattr(info, "model_id", None):
+            mlflow.log_metrics(meta["validation"], step=int(meta["iteration"] or 0), model_id=info.model_id)
     except Exception as exc:  # logging the model must not lose the run
         print(f"[train] warning: could not log the MLflow model: {exc}", file=sys.stderr)
 

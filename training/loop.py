@@ -41,6 +41,7 @@ class Trainer:
         self.validator = validator
         self.algo = ppo_config(cfg).build_algo()
         self.steps = 0
+        self.last_validation = None  # the ValidationResult of the latest validation
 
     def agent(self):
         from eosp.models.checkpoint import agent_from_rllib_weights
@@ -61,7 +62,8 @@ class Trainer:
         agent = None
         if validate and self.validator is not None:
             agent = self.agent()
-            metrics.update(self.validator.run(agent).metrics)
+            self.last_validation = self.validator.run(agent)  # the per-instance figures behind the metrics
+            metrics.update(self.last_validation.metrics)
         return metrics, agent
 
     def stop(self) -> None:

@@ -92,19 +92,69 @@ def compare(policy: np.ndarray, baselines: dict[str, np.ndarray], prefix: str = 
     return out
 
 
-def selection_score(metrics: dict[str, float]) -> float:
-    """What picks a run's `best` checkpoint: the mean per-instance ratio to the strongest baseline
-    validated (exact, then RAMP, then Greedy), else the mean value.
+SELECTION_KEY = "val/selection_score"  # the primary validation metric, logged under this name too
+
+
+def primary_metric(metrics: dict[str, float]) -> str:
+    """The key of the metric that picks a run's `best` checkpoint: the mean per-instance ratio to the strongest
+    baseline validated (exact, then RAMP, then Greedy), else the mean value.
 
     Why not the mean value: in utility mode it is the sum over instances of values spanning eight orders
     of magnitude (a class-0 acquisition is worth 1e8), so it only sees the instances with top-class
     acquisitions; a policy that loses two class-3 acquisitions on an instance without classes 0-2 (0.92
-    x its optimum) moves it by 1e-5.  The targets are means of per-instance ratios too."""
+    x its optimum) moves it by 1e-5.  Nor the ratio of the means (``val/ratio_to_X``), for the same reason:
+    it can rise while this falls.  The targets are means of per-instance ratios too."""
     for s in ("exact", "ramp", "greedy"):
         v = metrics.get(f"val/mean_ratio_to_{s}")
         if v is not None and np.isfinite(v):
-            return float(v)
-    return float(metrics["val/policy_mean"])
+            return f"val/mean_ratio_to_{s}"
+    return "val/policy_mean"
+
+
+def selection_score(metrics: dict[str, float]) -> float:
+    """The value of :func:`primary_metric`: what picks a run's `best` checkpoint (higher is better)."""
+    return float(metrics[primary_metric(metrics)])
+
+
+def describe_metric(key: str) -> str:
+    """A plot label for a validation metric key, naming which mean it is."""
+    names = {"exact": "optimum", "ramp": "RAMP", "greedy": "Greedy"}
+    if key.startswith("val/mean_ratio_to_"):
+        return f"mean of per-instance ratios, policy / {names.get(key[18:], key[18:])}"
+    if key.startswith("val/ratio_to_"):
+        return f"ratio of means, policy / {names.get(key[13:], key[13:])}"
+    return key
+
+
+def instance_rows(result: "ValidationResult") -> list[dict]:
+    """One row per validation instance: the policy's value, each baseline's and the policy / baseline ratio
+    (NaN where the baseline is 0): the figures behind the means, logged as a table."""
+    rows = []
+    for i, name in enumerate(result.names):
+        row = {"instance": name, "policy": float(result.policy[i])}
+        for s, b in result.baselines.items():
+            row[s] = float(b[i])
+            row[f"policy/{s}"] = float(result.policy[i] / b[i]) if b[i] > 0 else float("nan")
+        rows.append(row)
+    return rows
+
+
+def write_instance_table(result: "ValidationResult", out: str | Path) -> Path:
+    """:func:`instance_rows` as a CSV file (written atomically); returns its path."""
+    import csv
+    import io
+
+    rows = instance_rows(result)
+    buf = io.StringIO()
+    w = csv.DictWriter(buf, fieldnames=list(rows[0]) if rows else ["instance", "policy"])
+    w.writeheader()
+    for r in rows:
+        w.writerow({k: (repr(v) if isinstance(v, float) else v) for k, v in r.items()})
+    out = Path(out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    with atomic_path(out) as tmp:
+        tmp.write_text(buf.getvalue())
+    return out
 
 
 class Validator:
@@ -136,4 +186,23 @@ class Validator:
             nodes, _ = rollout(agent, p, self.env_cfg)
             values.append(self.score(p.inst, nodes))
         policy = np.asarray(values)
-        return ValidationResult(compare(policy, self.baselines), self.names, policy, self.baselines)
+        metrics = compare(policy, self.baselines)
+        metrics[SELECTION_KEY] = selection_score(metrics)
+        return ValidationResult(metrics, self.names, policy, self.baselines)
+
+    def reports(self, agent, out_dir: str | Path, n: int = 2) -> list[Path]:
+        """HTML reports (eosp.evaluation.html_report) of the first `n` validation instances: the policy's
+        schedule (greedy decoding, the reference) next to Greedy's, each missed acquisition explained."""
+        from eosp.evaluation.html_report import write_report
+        from eosp.instances.schedule import from_internal_nodes
+        from eosp.solvers.base import run_solver
+        from eosp.solvers.policy import rollout
+
+        out = []
+        for p in self.prepared[:n]:
+            nodes, _ = rollout(agent, p, self.env_cfg)
+            scheds = {"policy": from_internal_nodes(p.inst, nodes),
+                      "greedy": from_internal_nodes(p.inst, run_solver("greedy", p.inst, mode=self.mode).nodes)}
+            out.append(write_report(p.inst, scheds, Path(out_dir) / f"{p.inst.name}.html", reference="policy",
+                                    overwrite=True))
+        return out
