@@ -148,6 +148,10 @@ def cmd_solve(ns: argparse.Namespace) -> int:
         sol = run_solver(ns.solver, inst, **options)
     except KeyboardInterrupt:
         return interrupted_solve(ns, inst)
+    except Exception:
+        if SIGINT_SEEN:  # Ctrl-C that a library turned into another error (numba compiling its kernels)
+            return interrupted_solve(ns, inst)
+        raise
     elapsed = time.perf_counter() - t0
     sched = from_internal_nodes(inst, sol.nodes)
     verdict = check(inst, sched)
@@ -345,8 +349,56 @@ def build_parser(solver: str | None = None) -> argparse.ArgumentParser:
     return p
 
 
+SIGINT_SEEN: list[bool] = []  # set by Ctrl-C during main: an error that follows it is the interrupt's
+
+
+def _on_sigint(signum, frame) -> None:  # noqa: ARG001 - Python's own handler, remembering that it ran
+    SIGINT_SEEN.append(True)
+    raise KeyboardInterrupt
+
+
 def main(argv: list[str] | None = None) -> int:
+    """The ``eosp`` command.  Ctrl-C anywhere (loading torch for a learned solver's flags, reading, solving) is one
+    line and exit 130; a search's incumbent is written by :func:`cmd_solve` itself."""
+    import signal
+
     argv = sys.argv[1:] if argv is None else argv
+    SIGINT_SEEN.clear()
+    previous, unraisable = None, sys.unraisablehook
+
+    def swallowed(u) -> None:
+        """A Ctrl-C that lands in a C callback (numba compiling) is dropped there by Python ('Exception ignored'):
+        deliver it again, to land in ordinary code, instead of printing it and going on."""
+        if u.exc_type is KeyboardInterrupt:
+            signal.raise_signal(signal.SIGINT)
+        else:
+            unraisable(u)
+
+    sys.unraisablehook = swallowed
+    if signal.getsignal(signal.SIGINT) is signal.default_int_handler:  # an ignored SIGINT stays ignored
+        try:
+            previous = signal.signal(signal.SIGINT, _on_sigint)
+        except ValueError:  # not the main thread (embedded): Python's handler stays
+            previous = None
+    try:
+        return run(argv)
+    except Exception:
+        if not SIGINT_SEEN:
+            raise
+        # Ctrl-C inside a library that turns it into another error (numba compiling its kernels): still Ctrl-C
+    except KeyboardInterrupt:
+        pass
+    finally:
+        sys.unraisablehook = unraisable
+        if previous is not None:
+            signal.signal(signal.SIGINT, previous)
+    name = argv[0] if argv and not argv[0].startswith("-") else ""
+    print(f"eosp{' ' + name if name else ''}: interrupted: nothing written", file=sys.stderr)
+    return 130
+
+
+def run(argv: list[str]) -> int:
+    """:func:`main` without its Ctrl-C line."""
     from eosp.cli.fleet_main import is_fleet_command, route
 
     if is_fleet_command(argv):  # a fleet (aeossp case, fleet directory) where a single pass would be

@@ -76,6 +76,7 @@ class SearchStats:
     best_return: float = -math.inf
     best_actions: list = field(default_factory=list)  # the best complete episode met, from the episode start
     played: list = field(default_factory=list)  # actions played before the current root
+    on_best: Callable[[list], None] | None = None  # told of each new best complete episode (a solver's incumbent)
 
     def record(self, leaf: Node) -> None:
         """Remember a terminal leaf's episode as an action list (no reference to the tree is kept)."""
@@ -85,6 +86,8 @@ class SearchStats:
                 tail.append(node.action)
                 node = node.parent
             self.best_return, self.best_actions = leaf.path_reward, self.played + tail[::-1]
+            if self.on_best is not None:
+                self.on_best(self.best_actions)
 
 
 class MinMax:
@@ -259,7 +262,8 @@ def gumbel_search(env, root: Node, evaluate: EvaluateMany, *, num_simulations: i
 
 def solve(env, evaluate: EvaluateMany, *, num_simulations: int, c_puct: float = 1.25, batch: int = 8,
           reuse_tree: bool = True, seed: int = 0, time_limit: float | None = None,
-          gumbel: bool = False, max_considered: int = 16) -> tuple[np.ndarray, float, SearchStats]:
+          gumbel: bool = False, max_considered: int = 16,
+          on_best: Callable[[list], None] | None = None) -> tuple[np.ndarray, float, SearchStats]:
     """Play one episode from the env's reset state with MCTS before each decision.
 
     The greedy policy's episode is played first (one network call per decision): the answer is
@@ -268,9 +272,10 @@ def solve(env, evaluate: EvaluateMany, *, num_simulations: int, c_puct: float = 
     the time left over the decisions the greedy episode suggests remain (at most
     `num_simulations` simulations each).
     Returns the scheduled nodes, the episode's return in reward units, and search statistics.
+    `on_best(actions)`: told of the greedy episode, then of each better complete episode met.
     """
     t0 = time.perf_counter()
-    stats = SearchStats()
+    stats = SearchStats(on_best=on_best)
     # the greedy episode first: a floor for the answer, and the time plan of an anytime search
     obs, _ = env.reset(seed=seed)
     ret, acts, done = 0.0, [], not obs["action_mask"].any()
@@ -283,6 +288,8 @@ def solve(env, evaluate: EvaluateMany, *, num_simulations: int, c_puct: float = 
         ret, done = ret + r, done or not obs["action_mask"].any()
         acts.append(a)
     stats.best_return, stats.best_actions, expected_steps = ret, acts, max(1, len(acts))
+    if on_best is not None:
+        on_best(acts)
     obs, _ = env.reset(seed=seed)
     rng = np.random.default_rng(seed)
     root = new_node(env, obs, 0.0, False)

@@ -323,6 +323,15 @@ def _walk(indptr, dst, acq_ptr, actions, out):
     return -1
 
 
+def walk(graph, actions) -> np.ndarray | int:
+    """The path (node indices of `graph`) that playing acquisitions `actions` from the source follows, each one's
+    arc; the position of the first action without an arc from the previous node otherwise."""
+    actions = np.asarray(actions, dtype=np.int64)
+    out = np.empty(actions.shape[0], dtype=np.int32)
+    bad = _walk(graph.indptr, graph.dst, graph.acq_ptr, actions, out)
+    return int(bad) if bad >= 0 else out
+
+
 class Polisher:
     """Polish complete schedules of one instance: ``Polisher(graph, weights)(nodes) -> nodes``.
 
@@ -491,12 +500,9 @@ class Polisher:
 
     def nodes_of(self, actions) -> np.ndarray:
         """The path that playing acquisitions `actions` from the source follows (each one's arc)."""
-        eg = self.eg
-        actions = np.asarray(actions, dtype=np.int64)
-        out = np.empty(actions.shape[0], dtype=np.int32)
-        bad = _walk(eg.indptr, eg.dst, eg.acq_ptr, actions, out)
-        if bad >= 0:
-            raise ValueError(f"action {bad} (acquisition {actions[bad]}) has no arc from the previous node")
+        out = walk(self.eg, actions)
+        if isinstance(out, int):
+            raise ValueError(f"action {out} (acquisition {int(actions[out])}) has no arc from the previous node")
         return out
 
     def value(self, nodes) -> float:

@@ -45,6 +45,7 @@ class Best:
     evaluations: int = 0
     improve: Callable[[list], tuple[float, list]] | None = None
     deadline: float | None = None
+    on_best: Callable[[list], None] | None = None  # told of each new best episode's actions (a solver's incumbent)
 
     def offer(self, ret: float, actions: list) -> None:
         if self.actions and self.deadline is not None and time.perf_counter() > self.deadline:
@@ -54,6 +55,8 @@ class Best:
             ret, actions = self.improve(actions)
         if not self.actions and self.ret == -math.inf or ret > self.ret + 1e-12 * max(1.0, abs(self.ret)):
             self.ret, self.actions = ret, list(actions)
+            if self.on_best is not None:
+                self.on_best(self.actions)
 
 
 @dataclass
@@ -110,7 +113,8 @@ def root_state(env, seed: int = 0) -> _State:
 
 def sample(env, evaluate: EvaluateMany, *, samples: int = 16, temperature: float = 1.0, seed: int = 0,
            time_limit: float | None = None, max_rounds: int | None = None,
-           improve: Callable[[list], tuple[float, list]] | None = None) -> Best:
+           improve: Callable[[list], tuple[float, list]] | None = None,
+           on_best: Callable[[list], None] | None = None) -> Best:
     """Best of K episodes (the first greedy, always finished: the floor), then rounds of K sampled
     ones until the time limit.  With no time limit, one round (or `max_rounds`).  `samples` >= 1.
     """
@@ -120,7 +124,7 @@ def sample(env, evaluate: EvaluateMany, *, samples: int = 16, temperature: float
     deadline = None if time_limit is None else t0 + time_limit
     rng = np.random.default_rng(seed)
     root = root_state(env, seed)
-    best = Best(improve=improve, deadline=deadline)
+    best = Best(improve=improve, deadline=deadline, on_best=on_best)
     if root.done:
         best.offer(0.0, [])
         return best
@@ -138,14 +142,15 @@ def sample(env, evaluate: EvaluateMany, *, samples: int = 16, temperature: float
 
 
 def beam(env, evaluate: EvaluateMany, *, width: int = 4, expand: int = 4, seed: int = 0,
-         time_limit: float | None = None, improve: Callable[[list], tuple[float, list]] | None = None) -> Best:
+         time_limit: float | None = None, improve: Callable[[list], tuple[float, list]] | None = None,
+         on_best: Callable[[list], None] | None = None) -> Best:
     """Policy-guided beam search scored by greedy rollouts (see the module docstring)."""
     if width < 1 or expand < 1:
         raise ValueError(f"beam width and expansion must be at least 1, got {width} and {expand}")
     t0 = time.perf_counter()
     deadline = None if time_limit is None else t0 + time_limit
     root = root_state(env, seed)
-    best = Best(improve=improve, deadline=deadline)
+    best = Best(improve=improve, deadline=deadline, on_best=on_best)
     if root.done:
         best.offer(0.0, [])
         return best

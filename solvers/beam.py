@@ -33,6 +33,7 @@ def solve(inst: Instance, cfg: BeamConfig | None = None, *, agent: tuple | None 
     cfg = cfg or BeamConfig()
     cfg.validate()
     return run_search("beam", inst, cfg, agent,
-                      lambda env, ev, improve, limit: beam(env, ev, width=cfg.beam_width, expand=cfg.expand,
-                                                           seed=cfg.seed, time_limit=limit, improve=improve),
+                      lambda env, ev, improve, limit, on_best: beam(env, ev, width=cfg.beam_width, expand=cfg.expand,
+                                                                    seed=cfg.seed, time_limit=limit, improve=improve,
+                                                                    on_best=on_best),
                       beam_width=cfg.beam_width)

@@ -10,7 +10,7 @@ from eosp.instances.instance import Instance
 from eosp.search.mcts import solve as mcts_solve
 from eosp.config import ranged
 from eosp.solvers.base import INCUMBENT, SearchConfig, Solution
-from eosp.solvers.policy import (evaluate_batch, finish, make_env_for, polisher_for, resolve_agent,
+from eosp.solvers.policy import (evaluate_batch, finish, incumbent_reporter, make_env_for, polisher_for, resolve_agent,
                                  search_time, value_weights)
 
 
@@ -50,7 +50,7 @@ def solve(inst: Instance, cfg: MctsConfig | None = None, *, agent: tuple | None 
     nodes, ret, stats = mcts_solve(env, lambda obss: evaluate_batch(model, obss, vw, cfg.guard),
                                    num_simulations=int(budget or 0),
                                    c_puct=c_puct, batch=batch, seed=seed, time_limit=search_time(cfg),
-                                   gumbel=gumbel)
+                                   gumbel=gumbel, on_best=incumbent_reporter(prepared, mode))
     if polisher is not None:  # the played episode and the best one met, both polished: the better
         options = [polisher.actions(prepared.eg.node_acq[nodes])]
         if stats.best_actions:

@@ -181,6 +181,21 @@ def polisher_for(prepared: PreparedInstance, cfg: SearchConfig):
                     window_graph=inst.pruned() if cfg.window_graph == "pruned" else None)
 
 
+def incumbent_reporter(prepared: PreparedInstance, mode: str):
+    """`on_best(actions)` for the searches: a complete episode's path in the environment's graph, reported to the
+    solvers' :data:`eosp.solvers.base.INCUMBENT` with its objective value (what Ctrl-C writes)."""
+    from eosp.search.polish import walk
+
+    eg, weights = prepared.eg, objective_weights(prepared.inst, mode)
+
+    def report(actions: list) -> None:
+        nodes = walk(eg, actions)
+        if not isinstance(nodes, int):
+            INCUMBENT.offer(nodes, float(weights[eg.node_acq[nodes]].sum()) if len(nodes) else 0.0)
+
+    return report
+
+
 def search_time(cfg: SearchConfig) -> float | None:
     """The part of cfg.time_limit the learned search itself gets: the rest goes to refining (cfg.refine)."""
     if cfg.time_limit is None or not cfg.polish:
@@ -198,9 +213,10 @@ def finish(polisher, nodes: np.ndarray, cfg: SearchConfig, t0: float) -> np.ndar
 
 def run_search(name: str, inst: Instance, cfg: SearchConfig, agent: tuple | None, search, **info) -> Solution:
     """The frame every rollout search shares: the agent (given, from cfg.checkpoint, or the shipped model of the
-    mode), an environment sized to the instance, ``search(env, evaluate, improve, time_limit) -> Best`` (the
-    time limit less the refining share), its best episode replayed and scored (:mod:`eosp.search.rollouts`),
-    then refined for the rest of the time (:func:`finish`)."""
+    mode), an environment sized to the instance, ``search(env, evaluate, improve, time_limit, on_best) -> Best``
+    (the time limit less the refining share; `on_best` reports each better episode to the solvers' incumbent,
+    what Ctrl-C writes), its best episode replayed and scored (:mod:`eosp.search.rollouts`), then refined for the
+    rest of the time (:func:`finish`)."""
     import time
 
     from eosp.search.rollouts import replay
@@ -215,7 +231,7 @@ def run_search(name: str, inst: Instance, cfg: SearchConfig, agent: tuple | None
     t0 = time.perf_counter()
     best = search(env, lambda obss: evaluate_batch(model, obss, guard=cfg.guard),
                   None if polisher is None else polisher.actions,
-                  search_time(cfg))
+                  search_time(cfg), incumbent_reporter(prepared, cfg.mode))
     # polished actions may use arcs the environment's (pruned) graph lacks: their nodes come from the polisher
     nodes = replay(env, best.actions, cfg.seed)[0] if polisher is None else polisher.nodes_of(best.actions)
     nodes = finish(polisher, nodes, cfg, t0)

@@ -34,6 +34,8 @@ def solve(inst: Instance, cfg: SampleConfig | None = None, *, agent: tuple | Non
     cfg = cfg or SampleConfig()
     cfg.validate()
     return run_search("sample", inst, cfg, agent,
-                      lambda env, ev, improve, limit: sample(env, ev, samples=cfg.samples, temperature=cfg.temperature,
-                                                             seed=cfg.seed, time_limit=limit, improve=improve),
+                      lambda env, ev, improve, limit, on_best: sample(env, ev, samples=cfg.samples,
+                                                                      temperature=cfg.temperature, seed=cfg.seed,
+                                                                      time_limit=limit, improve=improve,
+                                                                      on_best=on_best),
                       samples=cfg.samples)
