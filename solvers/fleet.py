@@ -164,7 +164,7 @@ class Coordinator:
     best: Primal = field(init=False)
     best_bound: float = math.inf
     bound_proven: bool = True
-    barred: np.ndarray = field(init=False)  # (pass, task) pairs the battery repair took out: bool per pass node
+    barred: np.ndarray = field(init=False)  # [satellite, task]: taken out of that satellite by the battery repair
     history: list[tuple[float, float, float]] = field(default_factory=list)  # (seconds, value, bound)
     t0: float = field(default_factory=time.perf_counter)
     pass_solves: int = 0
@@ -181,7 +181,7 @@ class Coordinator:
         self.lam = np.zeros(n)
         self.round_paths = [np.zeros(0, np.int64)] * len(self.prob.passes)
         self.best = Primal([np.zeros(0, np.int64)] * len(self.prob.passes), np.full(n, -1, np.int64))
-        self.barred = np.zeros(n, dtype=bool)  # tasks barred everywhere by the battery repair (rare)
+        self.barred = np.zeros((len(self.prob.fleet.satellites), n), dtype=bool)
         if self.frozen is None:
             self.frozen = np.zeros(len(self.prob.passes), dtype=bool)
         # the conflict-free bound: every task that has an opportunity, served once
@@ -196,7 +196,7 @@ class Coordinator:
     def _available(self, primal: Primal, p: int) -> np.ndarray:
         tasks = self.prob.passes[p].tasks
         s = primal.served[tasks]
-        return ((s < 0) | (s == p)) & ~self.barred[tasks]
+        return ((s < 0) | (s == p)) & ~self.barred[self.prob.passes[p].satellite, tasks]
 
     def _assign(self, primal: Primal, p: int, path: np.ndarray) -> list[int]:
         """Give pass p the schedule `path`; returns the tasks it freed."""
@@ -306,22 +306,30 @@ class Coordinator:
         return primal
 
     # ------------------------------------------------------------------ battery
-    def battery_repair(self, primal: Primal) -> int:
-        """Drop observations until every battery holds (checker's model); returns the number dropped."""
-        tls = self.timelines(primal)
-        dropped = repair_battery(self.prob.fleet, self.prob.los, tls)
-        if dropped:
+    def battery_repair(self, primal: Primal, deadline: float | None = None) -> int:
+        """Drop observations until every battery holds (checker's model); a dropped task is barred from that
+        satellite, and the passes of other satellites that could serve it are solved again (then the batteries
+        are checked again, a few times at most).  Returns the number dropped."""
+        total = 0
+        for attempt in range(5):  # the last attempt only repairs: what it returns holds
+            tls = self.timelines(primal)
+            dropped = repair_battery(self.prob.fleet, self.prob.los, tls)
+            if not dropped:
+                break
+            total += dropped
             keep = {(k, t) for k, tl in enumerate(tls) for t in tl.task}
+            freed = []
             for p, pg in enumerate(self.prob.passes):
                 path = primal.paths[p]
                 tasks = path_tasks(self.prob, p, path)
                 ok = np.array([(pg.satellite, t) in keep for t in tasks.tolist()], dtype=bool)
                 if not ok.all():
-                    self.barred[tasks[~ok]] = True
-                    primal.served[tasks[~ok]] = -1
-                    primal.paths[p] = path[ok]
-                    primal.value -= float(self.prob.weight[tasks[~ok]].sum())
-        return dropped
+                    self.barred[pg.satellite, tasks[~ok]] = True
+                    self._assign(primal, p, path[ok] if self.frozen[p] else rewalk(pg, path[ok]))
+                    freed += tasks[~ok].tolist()
+            if attempt < 4:
+                self.descend(primal, sorted({q for t in freed for q in self.prob.task_passes[t].tolist()}), deadline)
+        return total
 
     def timelines(self, primal: Primal) -> list[Timeline]:
         prob = self.prob

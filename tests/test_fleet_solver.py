@@ -127,3 +127,22 @@ def test_replanning_keeps_the_frozen_actions_and_never_loses_the_initial_value(p
               if a < cut * 1e6}
     after = set(zip(again.schedule.satellite, again.schedule.task, again.schedule.start_us))
     assert before and before <= after
+
+
+def test_a_battery_that_binds_is_repaired_and_its_tasks_go_to_other_satellites():
+    import dataclasses
+
+    from eosp.solvers.fleet import FleetConfig, Problem, solve
+
+    fleet = synthetic_fleet(n_tasks=16, seed=5)
+    b = fleet.satellites.battery
+    weak = dataclasses.replace(b, initial_wh=np.array([6.0, 400.0]), capacity_wh=np.array([6.0, 400.0]),
+                               idle_w=np.array([1.0, 1.0]), imaging_w=np.array([600.0, 10.0]), sunlit_w=np.zeros(2))
+    fleet = dataclasses.replace(fleet, satellites=dataclasses.replace(fleet.satellites, battery=weak))
+    prob = Problem.build(fleet, compute(fleet, Geometry(fleet)))
+    sol = solve(fleet, prob.opps, FleetConfig(rounds=2), problem=prob)
+    res = validate(fleet, sol.schedule, prob.geo)
+    assert res.valid and sol.info["battery_barred"] > 0
+    by_sat = {s: int((sol.schedule.satellite == s).sum()) for s in fleet.satellites.ids}
+    assert by_sat[fleet.satellites.ids[1]] > by_sat[fleet.satellites.ids[0]]  # the strong battery serves more
+    assert sol.value <= sol.bound + 1e-9
