@@ -43,7 +43,7 @@ def main() -> None:
            "--train.val-data", str(shard.parent), "--train.iterations", str(a.iterations),
            "--train.run-name", run, "--env.reward", "unitary" if a.mode == "unitary" else "normalized",
            "--env.max-acquisitions", str(a.n), "--train.validate-every", "2", "--train.checkpoint-every", "2",
-           "--train.experiment", "single-problem", *extra]
+           "--train.experiment", "single-problem", "--train.overwrite", "true", *extra]  # a rerun replaces its run
     print(" ".join(cmd), flush=True)
     subprocess.run(cmd, check=True, cwd=ROOT)
     hist = json.loads((ROOT / "runs" / run / "run.json").read_text())["history"]

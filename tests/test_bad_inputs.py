@@ -430,6 +430,25 @@ def _checkpoint(root: Path, fault: str) -> Path:
     return ck
 
 
+def _finished_evaluation(root: Path) -> Path:
+    """An evaluation directory eosp wrote and finished (its mark, results.parquet, no partial/)."""
+    from eosp.ownership import mark_dir
+
+    (root / "ev").mkdir()
+    mark_dir(root / "ev", "evaluation")
+    (root / "ev" / "results.parquet").write_bytes(USER_BYTES)
+    return root / "ev"
+
+
+def _eosp_run(root: Path) -> Path:
+    """A run directory eosp wrote (its mark and a checkpoint)."""
+    from eosp.jobs.preflight import make_run_dir
+
+    make_run_dir(root / "run1", replace=False)
+    (root / "run1" / "run.json").write_text("{}")
+    return root / "run1"
+
+
 def _data_dir(root: Path) -> Path:
     """A data set directory holding the base's shard (for the jobs)."""
     (root / "data").mkdir()
@@ -489,6 +508,13 @@ def ownership_cases() -> list[Case]:
              ("f.txt", "not a directory"), prog=B),
         Case("own-evaluate-user-dir", lambda r: ["--data", _data_dir(r), "--out", _user_dir(r)],
              ("--out", "mine", "not an evaluation directory"), job="evaluate", prog="evaluate.py"),
+        Case("own-evaluate-finished-no-overwrite", lambda r: _finished_evaluation(r) and
+             ["--data", _data_dir(r), "--out", r / "ev"], ("--out", "ev", "--overwrite"), job="evaluate",
+             prog="evaluate.py"),
+        Case("own-train-eosp-run-no-overwrite", lambda r: _eosp_run(r) and
+             ["--train.train-data", _data_dir(r), "--train.val-data", "", "--train.run-dir", r, "--train.run-name",
+              "run1"], ("--train.run-dir", "run1", "already exists", "--train.overwrite"), job="train",
+             prog="train.py"),
         Case("own-train-user-run-dir", lambda r: ["--train.train-data", _data_dir(r), "--train.val-data", "",
                                                   "--train.run-dir", r, "--train.run-name", _user_dir(r).name],
              ("--train.run-dir", "mine", "not a run directory written by eosp"), job="train", prog="train.py"),
