@@ -62,7 +62,7 @@ def what(kind: str) -> str:
 
 
 def _a(noun: str) -> str:
-    return ("an " if noun[:1].lower() in "aeiou" or noun.startswith(("HTML", "SVG", "MP")) else "a ") + noun
+    return ("an " if noun[:1].lower() in "aeiou" or noun.startswith(("HTML", "SVG")) else "a ") + noun
 
 
 # --------------------------------------------------------------------------- marks, one per format
