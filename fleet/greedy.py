@@ -128,12 +128,15 @@ def _intervals(los: LineOfSight, tl: Timeline, sat: int) -> tuple[Intervals, Int
     return Intervals(st, en), Intervals(np.asarray(w0, dtype=np.int64), st.copy())
 
 
-def repair_battery(fleet: Fleet, los: LineOfSight, tls: list[Timeline]) -> int:
-    """Drop the least valuable observations until every battery stays above zero; returns drops."""
-    sun = SunCache(los.geo)
+def repair_battery(fleet: Fleet, los: LineOfSight, tls: list[Timeline], sats=None, sun: SunCache | None = None) -> int:
+    """Drop the least valuable observations until every battery stays above zero; returns drops.
+
+    `sats`: only these satellites' timelines (default: all); `sun`: a cache of sunlight kept between calls."""
+    sun = sun or SunCache(los.geo)
     w, dur = fleet.tasks.weight, fleet.tasks.duration_s
     dropped = 0
-    for sat, tl in enumerate(tls):
+    for sat in range(len(tls)) if sats is None else sats:
+        tl = tls[sat]
         while True:
             run = simulate(fleet, sun, sat, *_intervals(los, tl, sat))
             if run.ok or not tl.start:

@@ -35,6 +35,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from eosp.config import WEEK_S, choice, ranged
+from eosp.fleet.battery import SunCache
 from eosp.fleet.geometry import Geometry
 from eosp.fleet.greedy import Timeline, repair_battery, to_schedule
 from eosp.fleet.model import Fleet, Schedule
@@ -184,6 +185,8 @@ class Coordinator:
         self.barred = np.zeros((len(self.prob.fleet.satellites), n), dtype=bool)
         if self.frozen is None:
             self.frozen = np.zeros(len(self.prob.passes), dtype=bool)
+        self.sun = SunCache(self.prob.geo)  # sunlight, computed once for every battery simulation
+        self.battery_ok: dict[int, tuple] = {}  # satellite -> the timeline last found to hold its battery
         # the conflict-free bound: every task that has an opportunity, served once
         served_somewhere = np.array([len(h) > 0 for h in self.prob.task_passes], dtype=bool)
         self.best_bound = float(self.prob.weight[served_somewhere].sum())
@@ -313,7 +316,11 @@ class Coordinator:
         total = 0
         for attempt in range(5):  # the last attempt only repairs: what it returns holds
             tls = self.timelines(primal)
-            dropped = repair_battery(self.prob.fleet, self.prob.los, tls)
+            keys = [tuple(zip(tl.task, tl.start)) for tl in tls]
+            todo = [k for k, key in enumerate(keys) if self.battery_ok.get(k) != key]  # satellites not seen as is
+            dropped = repair_battery(self.prob.fleet, self.prob.los, tls, sats=todo, sun=self.sun)
+            for k in todo:
+                self.battery_ok[k] = tuple(zip(tls[k].task, tls[k].start))
             if not dropped:
                 break
             total += dropped
