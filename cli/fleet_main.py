@@ -117,6 +117,9 @@ def solve_fleet(ns) -> int:
     from eosp.solvers.fleet import FleetConfig, solve
 
     cfg = config_from_args(FleetConfig, ns)
+    if cfg.pass_solver == "policy":
+        raise InputError("--pass-solver", "policy: no model trained on fleet passes is shipped yet; use exact, ramp "
+                                          "or greedy")
     out = check_output(ns.out, "fleet-schedule", overwrite=ns.overwrite, suffixes=(".parquet",))
     t0 = time.perf_counter()
     fleet, opps = read_fleet(ns.fleet_dir)

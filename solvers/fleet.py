@@ -44,14 +44,16 @@ from eosp.fleet.passgraph import PassGraph, build_passes, fifo_violations, price
 from eosp.fleet.slew import LineOfSight
 
 PASS_SOLVERS = ("greedy", "ramp", "exact")
+LEARNED_PASS_SOLVERS = ("policy",)  # no model is trained on fleet passes yet: refused with one line
 
 
 @dataclass
 class FleetConfig:
     """Options of the fleet solver (``eosp solve FLEET_DIR --solver fleet``)."""
 
-    pass_solver: str = choice("exact", *PASS_SOLVERS)
-    """Single-pass solver of every pass: exact (optima, hence a proven bound), ramp or greedy (no bound)."""
+    pass_solver: str = choice("exact", *PASS_SOLVERS, *LEARNED_PASS_SOLVERS)
+    """Single-pass solver of every pass: exact (optima, hence a proven Lagrangian bound), ramp or greedy (the
+    conflict-free bound only); policy needs a model trained on fleet passes, which is not shipped yet."""
     time_limit: float = ranged(60.0, 0, WEEK_S, lo_open=True)
     """Seconds of search after the pass graphs are built (not applied with --rounds)."""
     rounds: int | None = ranged(None, 1)

@@ -44,6 +44,7 @@ def test_solve_validate_export(fleet_dir, tmp_path, capsys):
     (["--time-limit", "1e9"], "--time-limit"),
     (["--rounds", "0"], "--rounds"),
     (["--pass-solver", "bogus"], "--pass-solver"),
+    (["--pass-solver", "policy"], "--pass-solver"),
     (["--freeze-until", "2030-01-01T00:00:00Z", "--init", "X"], "--freeze-until"),
 ])
 def test_bad_fleet_solve_options_are_one_line(fleet_dir, tmp_path, capsys, args, why):
