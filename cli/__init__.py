@@ -440,8 +440,9 @@ def run(argv: list[str]) -> int:
         except (OSError, ValueError):  # no real file descriptor (captured output)
             pass
         return 141
-    except OSError as exc:  # the system refused a path of the user's (permission, disk full, ...)
-        print(f"eosp {ns.command}: error: {exc}", file=sys.stderr)
+    except OSError as exc:  # the system refused a path of the user's (permission, disk full, not found, ...)
+        where = f"{exc.filename}: " if exc.filename else ""
+        print(f"eosp {ns.command}: error: {where}{(exc.strerror or str(exc)).lower()}", file=sys.stderr)
         return 2
 
 

@@ -68,6 +68,13 @@ def run_job(main: Any, argv: list[str] | None, prog: str) -> int:
     except errors.InputError as exc:
         print(errors.error_line(exc), file=sys.stderr, flush=True)
         return 2
+    except OSError as exc:
+        if not exc.filename:
+            raise
+        # the system refused a path of the user's (not found, permission): one line naming it
+        print(errors.error_line(f"{exc.filename}: {(exc.strerror or str(exc)).lower()}"), file=sys.stderr,
+              flush=True)
+        return 2
     except KeyboardInterrupt:
         print(f"{prog}: interrupted: stopped (files completed before the interrupt are kept)", file=sys.stderr,
               flush=True)

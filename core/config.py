@@ -58,7 +58,7 @@ class SatelliteConfig:
 
     roll_max_deg: float = 45.0
     pitch_max_deg: float = 30.0
-    slew_model: str = "piecewise"
+    slew_model: str = choice("piecewise", "piecewise", "bang_coast_bang")
     """'piecewise' (time as a piecewise-linear function of the rotation angle) or
     'bang_coast_bang' (maximum rate, acceleration and settling time)."""
     piecewise_angles_deg: tuple[float, ...] = (0.0, 5.0, 20.0, 45.0, 90.0, 180.0)
@@ -72,7 +72,7 @@ class SatelliteConfig:
 class TargetConfig:
     """Where the candidate targets lie and what they are worth."""
 
-    distribution: str = "uniform"
+    distribution: str = choice("uniform", "uniform", "clusters", "csv")
     """'uniform' (worldwide), 'clusters' (dense regional clusters) or 'csv' (user points)."""
     csv_path: str = ""
     """CSV with columns lat, lon (degrees) for distribution='csv'."""
@@ -106,7 +106,7 @@ class InstanceConfig:
 
     n_acquisitions: int = ranged(100, 1)
     seed: int = 0
-    family: str = "uniform"
+    family: str = choice("uniform", "uniform", "clusters", "conflict")  # the keys of FAMILIES
     """Generator family (uniform, clusters, conflict): its settings apply before other flags."""
     orbit: OrbitConfig = field(default_factory=OrbitConfig)
     satellite: SatelliteConfig = field(default_factory=SatelliteConfig)
@@ -255,7 +255,7 @@ class DatasetConfig:
 
     out: str = "data/train"
     """Directory of the data set (shards and manifest.json)."""
-    family: str = "uniform"
+    family: str = choice("uniform", "uniform", "clusters", "conflict")  # the keys of FAMILIES
     """Generator family (see eosp.config.FAMILIES)."""
     n_acquisitions: int = ranged(100, 1)
     n_instances: int = ranged(16, 1)

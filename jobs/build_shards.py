@@ -166,6 +166,12 @@ def _main(argv: list[str] | None) -> int:
     from eosp.jobs.preflight import require_findable
 
     require_findable(cfg.out, "--out")
+    from eosp.errors import InputError
+
+    for flag, path in (("--instance.orbit.tle", cfg.instance.orbit.tle),
+                       ("--instance.targets.csv-path", cfg.instance.targets.csv_path)):
+        if path and not Path(path).is_file():  # read by every Ray task: checked here, before Ray starts
+            raise InputError(f"{flag} {path}", "file not found")
     m = run(cfg, ray_cfg)
     tot = sum(s["bytes"] for s in m["shards"])
     print(f"[build_shards] {cfg.n_instances} instances in {len(m['shards'])} shards, {tot / 1e6:.1f} MB, "
