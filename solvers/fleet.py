@@ -65,6 +65,8 @@ class FleetConfig:
     """Seconds the exact solver may spend on one pass (its bound is used when it stops early)."""
     span_s: float = ranged(3600.0, 1)
     """Length of the time span freed by one large-neighbourhood move."""
+    workers: int = ranged(1, 1, 256)
+    """Processes solving the passes of a price round (forked from this one, the pass graphs shared)."""
 
 
 @dataclass
@@ -140,6 +142,50 @@ def rewalk(pg: PassGraph, path: np.ndarray) -> np.ndarray:
     return np.asarray(out, dtype=np.int64)
 
 
+_POOL_PROBLEM: Problem | None = None  # the problem a forked worker inherits
+_POOL_CFG: FleetConfig | None = None
+
+
+def _solve_chunk(args: tuple[list[int], list[np.ndarray]]) -> list[PassResult]:
+    passes, utils = args
+    return [solve_pass(_POOL_PROBLEM, p, u, _POOL_CFG) for p, u in zip(passes, utils)]
+
+
+class PassPool:
+    """Processes that solve passes under given utilities.  They are forked once the pass graphs are built, so
+    every worker holds them without any copy; a round sends only pass ids and utilities, and gets paths back."""
+
+    def __init__(self, prob: Problem, cfg: FleetConfig):
+        import multiprocessing
+
+        global _POOL_PROBLEM, _POOL_CFG
+        _POOL_PROBLEM, _POOL_CFG = prob, cfg
+        self.workers = cfg.workers
+        self.pool = multiprocessing.get_context("fork").Pool(cfg.workers)
+
+    def solve(self, passes: list[int], utils: list[np.ndarray], deadline: float | None) -> dict[int, PassResult]:
+        """Every pass of `passes` (in chunks, about four per worker); None when the deadline came first."""
+        n = max(1, len(passes) // (4 * self.workers))
+        chunks = [(passes[i:i + n], utils[i:i + n]) for i in range(0, len(passes), n)]
+        job = self.pool.map_async(_solve_chunk, chunks)
+        timeout = None if deadline is None else max(0.0, deadline - time.perf_counter())
+        try:
+            results = job.get(timeout)
+        except multiprocessing_timeout():
+            return None
+        return {p: r for chunk, res in zip(chunks, results) for p, r in zip(chunk[0], res)}
+
+    def close(self) -> None:
+        self.pool.terminate()
+        self.pool.join()
+
+
+def multiprocessing_timeout() -> type:
+    import multiprocessing
+
+    return multiprocessing.TimeoutError
+
+
 @dataclass
 class Primal:
     """A schedule as pass paths; ``served[i]`` = pass serving task i, or -1."""
@@ -176,6 +222,7 @@ class Coordinator:
     interrupted: bool = False
     bound_source: str = "conflict-free"  # until a proven Lagrangian bound is lower
 
+    pool: PassPool | None = None  # worker processes for the price rounds (--workers > 1)
     initial: Primal | None = None  # a schedule to start from (--init)
     frozen: np.ndarray | None = None  # bool per pass: kept as in `initial`, never solved again (--freeze-until)
 
@@ -259,6 +306,14 @@ class Coordinator:
         count = np.zeros(len(w))
         total = float(self.lam.sum())
         proven = True
+        todo = np.flatnonzero(~self.frozen).tolist()
+        solved = None
+        if self.pool is not None:
+            solved = self.pool.solve(todo, [w[self.prob.passes[p].tasks] - self.lam[self.prob.passes[p].tasks]
+                                            for p in todo], deadline)
+            if solved is None:
+                return None  # cut by the deadline
+            self.pass_solves += len(todo)
         for p, pg in enumerate(self.prob.passes):
             if deadline is not None and time.perf_counter() > deadline:
                 return None
@@ -266,6 +321,8 @@ class Coordinator:
                 kept = path_tasks(self.prob, p, self.initial.paths[p])
                 res = PassResult(self.initial.paths[p], float((w[kept] - self.lam[kept]).sum()), None)
                 res.bound = res.value
+            elif solved is not None:
+                res = solved[p]
             else:
                 res = self._solve(p, w[pg.tasks] - self.lam[pg.tasks])
             self.round_paths[p] = res.nodes
@@ -515,8 +572,13 @@ def solve(fleet: Fleet, opps: Opportunities, cfg: FleetConfig | None = None, pro
     if freeze_until_s is not None:
         frozen = prob.pass_time[:, 0] < freeze_until_s
         start = start or Primal([np.zeros(0, np.int64)] * len(prob.passes), np.full(len(fleet.tasks), -1, np.int64))
-    coord = Coordinator(prob, cfg, initial=start, frozen=frozen)
-    best = coord.run()
+    pool = PassPool(prob, cfg) if cfg.workers > 1 else None
+    coord = Coordinator(prob, cfg, pool=pool, initial=start, frozen=frozen)
+    try:
+        best = coord.run()
+    finally:
+        if pool is not None:
+            pool.close()
     sched = coord.schedule(best)
     res = validate(fleet, sched, prob.geo)
     dropped = 0

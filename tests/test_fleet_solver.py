@@ -146,3 +146,11 @@ def test_a_battery_that_binds_is_repaired_and_its_tasks_go_to_other_satellites()
     by_sat = {s: int((sol.schedule.satellite == s).sum()) for s in fleet.satellites.ids}
     assert by_sat[fleet.satellites.ids[1]] > by_sat[fleet.satellites.ids[0]]  # the strong battery serves more
     assert sol.value <= sol.bound + 1e-9
+
+
+def test_two_worker_processes_give_the_same_run_as_one(problem):
+    from eosp.solvers.fleet import FleetConfig, solve
+
+    one, two = (solve(problem.fleet, problem.opps, FleetConfig(rounds=2, seed=3, workers=w), problem=problem)
+                for w in (1, 2))
+    assert one.schedule.task.tolist() == two.schedule.task.tolist() and one.bound == two.bound
