@@ -380,9 +380,13 @@ def test_job_entry_points_parse_their_arguments(entry_points, capsys):
     from eosp.jobs.train import parse
 
     seen = set()
-    # the jobs ask the cluster's MLflow server whether it answers before any work: not reachable from here
+    # the jobs ask the cluster's MLflow server whether it answers, and check their data sets and checkpoints,
+    # before any work: neither is reachable from here
     no_network = mock.patch("eosp.jobs.preflight.check_mlflow")
     no_network.start()
+    no_data = [mock.patch("eosp.jobs.preflight.require_data"), mock.patch("eosp.jobs.preflight.require_checkpoint")]
+    for patch in no_data:
+        patch.start()
     for where, script, args in entry_points:
         if script == "train.py":
             cfg, _ = parse(args)
@@ -405,6 +409,8 @@ def test_job_entry_points_parse_their_arguments(entry_points, capsys):
             continue
         seen.add((where, script))
     no_network.stop()
+    for patch in no_data:
+        patch.stop()
     assert {s for _, s in seen} == {"train.py", "build_shards.py", "tune.py", "evaluate.py"}
     assert len(seen) >= 7  # the four RayJobs and the examples of the launcher, compose and RayCluster files
 
@@ -472,7 +478,7 @@ def test_checkpoints_load_with_weights_only_and_refuse_pickled_code(tmp_path):
     # a weights file carrying code: refused, and the code never runs
     marker = tmp_path / "pwned"
     torch.save({"w": torch.zeros(1), "x": _Payload(str(marker))}, ck / WEIGHTS)
-    with pytest.raises(InputError, match="cannot read the weights"):
+    with pytest.raises(InputError, match="holds Python objects besides tensors, which are never unpickled"):
         load_agent(ck)
     assert not marker.exists()
 
