@@ -59,9 +59,8 @@ class _Doc:
                                         + ", ".join(CASE_FILES) + ")") from None
         except (OSError, UnicodeDecodeError) as exc:
             raise InputError(self.path, f"cannot read: {exc}") from None
-        loader = getattr(yaml, "CSafeLoader", yaml.SafeLoader)
-        try:
-            doc = yaml.load(text, Loader=loader)
+        try:  # the C loader when the build has it; either way a safe one
+            doc = yaml.load(text, Loader=yaml.CSafeLoader) if hasattr(yaml, "CSafeLoader") else yaml.safe_load(text)
         except yaml.YAMLError as exc:
             mark = getattr(exc, "problem_mark", None)
             at = f" at line {mark.line + 1}" if mark is not None else ""

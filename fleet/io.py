@@ -264,8 +264,10 @@ def write_schedule(schedule: Schedule, fleet: Fleet, path: str | os.PathLike, ov
         "start_s": pa.array(schedule.start_us / 1e6, type=pa.float64()),
         "end_s": pa.array(schedule.end_us / 1e6, type=pa.float64()),
     })
+    from eosp.ownership import parquet_mark
+
     md = {b"kind": SCHEDULE_KIND, b"fleet_fingerprint": fingerprint(fleet).encode(),
-          b"builder": builder_version().encode()}
+          b"builder": builder_version().encode(), **parquet_mark("fleet-schedule")}
     for k, v in (info or {}).items():
         md[k.encode()] = json.dumps(v).encode()
     table = table.replace_schema_metadata(md)

@@ -319,15 +319,38 @@ def log_validation(result, metrics: dict, run_dir: Path, iteration: int, best: b
                             "validation")
 
 
+def write_validation_reports(validator, agent, out_dir: Path, n: int = 2) -> list[Path]:
+    """HTML reports (eosp.evaluation.html_report) of the first `n` validation instances: the policy's schedule
+    (greedy decoding, the reference) next to Greedy's when the data set kept the unpruned arcs Greedy needs,
+    each missed acquisition explained."""
+    from eosp.errors import InputError
+    from eosp.evaluation.html_report import write_report
+    from eosp.instances.schedule import from_internal_nodes
+    from eosp.solvers.base import run_solver
+    from eosp.solvers.policy import rollout
+
+    pages = []
+    for p in validator.prepared[:n]:
+        nodes, _ = rollout(agent, p, validator.env_cfg)
+        scheds = {"policy": from_internal_nodes(p.inst, nodes)}
+        try:
+            scheds["greedy"] = from_internal_nodes(p.inst, run_solver("greedy", p.inst, mode=validator.mode).nodes)
+        except InputError:
+            pass
+        pages.append(write_report(p.inst, scheds, Path(out_dir) / f"{p.inst.name}.html", reference="policy",
+                                  overwrite=True))
+    return pages
+
+
 def log_validation_reports(validator, checkpoint: Path, run_dir: Path, n: int = 2) -> None:
-    """HTML reports of the checkpoint's schedules on the first `n` validation instances (next to Greedy's,
-    each missed acquisition explained), logged to ``validation/reports``; a failure only warns."""
+    """:func:`write_validation_reports` of the checkpoint, logged to ``validation/reports``; a failure only warns."""
     import mlflow
 
     from eosp.models.checkpoint import load_agent
 
     try:
-        for page in validator.reports(load_agent(checkpoint)[0], run_dir / "validation" / "reports", n):
+        for page in write_validation_reports(validator, load_agent(checkpoint)[0], run_dir / "validation" / "reports",
+                                             n):
             mlflow.log_artifact(str(page), "validation/reports")
     except Exception as exc:  # the reports must not lose the run
         print(f"[train] warning: could not write the validation reports: {exc}", file=sys.stderr)

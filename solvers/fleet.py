@@ -370,10 +370,10 @@ class Coordinator:
     # ------------------------------------------------------------------ battery
     def battery_repair(self, primal: Primal, deadline: float | None = None) -> int:
         """Drop observations until every battery holds (checker's model); a dropped task is barred from that
-        satellite, and the passes of other satellites that could serve it are solved again (then the batteries
-        are checked again, a few times at most).  Returns the number dropped."""
+        satellite, and the passes of other satellites that could serve it are solved again once (then the
+        batteries are checked and repaired again).  Returns the number dropped."""
         total = 0
-        for attempt in range(5):  # the last attempt only repairs: what it returns holds
+        for attempt in range(2):  # the last attempt only repairs: what it returns holds
             tls = self.timelines(primal)
             keys = [tuple(zip(tl.task, tl.start)) for tl in tls]
             todo = [k for k, key in enumerate(keys) if self.battery_ok.get(k) != key]  # satellites not seen as is
@@ -393,7 +393,7 @@ class Coordinator:
                     self.barred[pg.satellite, tasks[~ok]] = True
                     self._assign(primal, p, path[ok] if self.frozen[p] else rewalk(pg, path[ok]))
                     freed += tasks[~ok].tolist()
-            if attempt < 4:
+            if attempt < 1:  # one round of re-solves of the passes that could take the dropped tasks
                 self.descend(primal, sorted({q for t in freed for q in self.prob.task_passes[t].tolist()}), deadline)
         return total
 

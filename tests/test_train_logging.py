@@ -104,13 +104,15 @@ def test_validation_reports(tmp_path):
     from eosp.config import EnvConfig, ModelConfig
     from eosp.envs.sources import prepare_instance
     from eosp.models.agent import EOSPAgent
+    from eosp.jobs.train import write_validation_reports
     from eosp.training.validation import Validator
     from tests.conftest import generated
 
-    v = Validator.__new__(Validator)  # without shards, baselines or Ray: only what reports() reads
+    v = Validator.__new__(Validator)  # without shards, baselines or Ray: only what the reports read
     v.env_cfg, v.mode = EnvConfig(), "utility"
     v.prepared = [prepare_instance(generated("uniform", 12, s), True) for s in (100, 101, 102)]
-    pages = v.reports(EOSPAgent(ModelConfig(hidden_dim=8, n_layers=1, heads=1)).eval(), tmp_path / "reports", 2)
+    pages = write_validation_reports(v, EOSPAgent(ModelConfig(hidden_dim=8, n_layers=1, heads=1)).eval(),
+                                     tmp_path / "reports", 2)
     assert [p.name for p in pages] == [f"{p.inst.name}.html" for p in v.prepared[:2]]
     text = pages[0].read_text()
     assert "policy <small>(reference)</small>" in text and "<tr data-schedule='greedy'" in text

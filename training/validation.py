@@ -189,20 +189,3 @@ class Validator:
         metrics = compare(policy, self.baselines)
         metrics[SELECTION_KEY] = selection_score(metrics)
         return ValidationResult(metrics, self.names, policy, self.baselines)
-
-    def reports(self, agent, out_dir: str | Path, n: int = 2) -> list[Path]:
-        """HTML reports (eosp.evaluation.html_report) of the first `n` validation instances: the policy's
-        schedule (greedy decoding, the reference) next to Greedy's, each missed acquisition explained."""
-        from eosp.evaluation.html_report import write_report
-        from eosp.instances.schedule import from_internal_nodes
-        from eosp.solvers.base import run_solver
-        from eosp.solvers.policy import rollout
-
-        out = []
-        for p in self.prepared[:n]:
-            nodes, _ = rollout(agent, p, self.env_cfg)
-            scheds = {"policy": from_internal_nodes(p.inst, nodes),
-                      "greedy": from_internal_nodes(p.inst, run_solver("greedy", p.inst, mode=self.mode).nodes)}
-            out.append(write_report(p.inst, scheds, Path(out_dir) / f"{p.inst.name}.html", reference="policy",
-                                    overwrite=True))
-        return out
