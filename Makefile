@@ -19,8 +19,10 @@ install: $(VENV)/.installed
 demo: install
 	$(PY) jobs/train.py --demo
 
+# the tests without Ray on two xdist workers, then those with Ray one after another
 test: install
-	$(PY) -m pytest -q -n 2 --dist loadgroup --durations=15
+	$(PY) -m pytest -q -n 2 -m "not slow and not ray" --durations=10
+	$(PY) -m pytest -q -m "ray and not slow" --durations=10
 
 test-all: install
 	$(PY) -m pytest -q -m ""

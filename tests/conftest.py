@@ -33,9 +33,9 @@ def tiny():
     return generated("uniform", 12, 0, 2.0)
 
 
-# Tests that start Ray (or Ray-based jobs and services) run one after another on one pytest-xdist worker
-# (``-n 2 --dist loadgroup``, as `make test` runs): two Ray clusters on two cores would starve each other, while
-# the other worker takes the rest of the suite.
+# Tests that start Ray (or Ray-based jobs and services) carry the marker `ray`: `make test` runs the others on two
+# pytest-xdist workers, then these one after another with the cores to themselves (two Ray clusters, or a Ray
+# cluster beside a CPU-bound worker, starve each other and make the timing-sensitive ones flaky).
 RAY_MODULES = {"test_platform", "test_platform_multinode", "test_train", "test_tune", "test_jobs_faults",
                "test_jobs_smoke", "test_overlap", "test_expert", "test_readme"}
 RAY_TESTS = {"test_shard_source_splits_shards_between_workers"}
@@ -44,4 +44,4 @@ RAY_TESTS = {"test_shard_source_splits_shards_between_workers"}
 def pytest_collection_modifyitems(config, items):
     for item in items:
         if item.module.__name__.rpartition(".")[2] in RAY_MODULES or item.originalname in RAY_TESTS:
-            item.add_marker(pytest.mark.xdist_group("ray"))
+            item.add_marker(pytest.mark.ray)
