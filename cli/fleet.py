@@ -1,4 +1,7 @@
-"""``eosp fleet ...`` commands: import an aeossp case, inspect, solve, validate and export schedules.
+"""The fleet commands: import an aeossp case, inspect a fleet, solve, validate and export schedules.
+
+``eosp import CASE``, ``eosp info|solve|validate FLEET``, ``eosp export-schedule`` (routed by
+:mod:`eosp.cli.fleet_main`).
 
 Each function takes plain arguments and returns the exit status (0 done or valid, 1 invalid
 schedule); user mistakes raise :class:`~eosp.errors.InputError`, which the CLI prints as one line
@@ -25,7 +28,7 @@ def is_aeossp_case(path) -> bool:
 
 
 def is_fleet_dir(path) -> bool:
-    """A fleet interchange directory written by ``eosp fleet import``."""
+    """A fleet interchange directory written by ``eosp import CASE``."""
     from eosp.fleet.io import is_fleet_dir as _is
 
     return _is(path)
@@ -93,7 +96,7 @@ def cmd_fleet_solve(fleet_dir, solver: str = "greedy", out=None, overwrite: bool
     """Solve a fleet and write a fleet schedule (Parquet) to `out`.
 
     The greedy solver is deterministic and fast: it ignores `seed` and `time_limit`."""
-    from eosp.atomic import check_output_file
+    from eosp.ownership import check_output
     from eosp.fleet.check import validate
     from eosp.fleet.geometry import Geometry
     from eosp.fleet.greedy import solve
@@ -103,9 +106,7 @@ def cmd_fleet_solve(fleet_dir, solver: str = "greedy", out=None, overwrite: bool
         raise InputError(solver, f"unknown fleet solver (choose from {', '.join(SOLVERS)})")
     if out is None:
         raise InputError(fleet_dir, "give --out SCHEDULE.parquet")
-    out = check_output_file(out, suffixes=(".parquet",), what="fleet schedule")
-    if out.exists() and not overwrite:
-        raise InputError(out, "already exists (use --overwrite to replace it)")
+    out = check_output(out, "fleet-schedule", overwrite=overwrite, suffixes=(".parquet",))
     t0 = time.perf_counter()
     fleet, opps = read_fleet(fleet_dir)
     geo = Geometry(fleet)

@@ -323,11 +323,11 @@ def solution_payload(schedule: Schedule, horizon: Horizon) -> dict:
 
 def write_solution(schedule: Schedule, horizon: Horizon, path: str | os.PathLike, overwrite: bool = False) -> Path:
     """Write an aeossp ``solution.json`` atomically; an existing file is replaced only with `overwrite`."""
-    from eosp.atomic import atomic_path, check_output_file
+    from eosp.atomic import atomic_path
+    from eosp.ownership import check_output, json_mark
 
-    path = check_output_file(path, suffixes=(".json",), what="solution file")
-    if path.exists() and not overwrite:
-        raise InputError(path, "already exists (use --overwrite to replace it)")
+    path = check_output(path, "fleet-solution", overwrite=overwrite, suffixes=(".json",))
     with atomic_path(path) as tmp:
-        tmp.write_text(json.dumps(solution_payload(schedule, horizon), indent=2) + "\n", encoding="utf-8")
+        payload = {**json_mark("fleet-solution"), **solution_payload(schedule, horizon)}  # the verifier ignores "eosp"
+        tmp.write_text(json.dumps(payload, indent=2) + "\n", encoding="utf-8")
     return path

@@ -250,11 +250,10 @@ def write_schedule(schedule: Schedule, fleet: Fleet, path: str | os.PathLike, ov
     """Write a fleet schedule (Parquet); `info` may hold ``value`` (WCR), ``bound``, ``gap``, ``solver``."""
     import pyarrow as pa
     import pyarrow.parquet as pq
-    from eosp.atomic import atomic_path, check_output_file
+    from eosp.atomic import atomic_path
+    from eosp.ownership import check_output
 
-    path = check_output_file(path, suffixes=(".parquet",), what="fleet schedule")
-    if path.exists() and not overwrite:
-        raise InputError(path, "already exists (use --overwrite to replace it)")
+    path = check_output(path, "fleet-schedule", overwrite=overwrite, suffixes=(".parquet",))
     start = np.datetime64(fleet.horizon.start.replace(tzinfo=None), "us")
     table = pa.table({
         "satellite": pa.array(schedule.satellite.tolist(), type=pa.string()),
@@ -315,16 +314,16 @@ def read_schedule(path: str | os.PathLike, fleet: Fleet) -> tuple[Schedule, dict
 
 def write_csv(schedule: Schedule, fleet: Fleet, path: str | os.PathLike, overwrite: bool = False) -> Path:
     """One observation a line: satellite, task, start and end in UTC (ISO 8601), duration in seconds."""
-    from eosp.atomic import atomic_path, check_output_file
+    from eosp.atomic import atomic_path
+    from eosp.ownership import check_output, comment_mark
 
-    path = check_output_file(path, suffixes=(".csv",), what="CSV schedule")
-    if path.exists() and not overwrite:
-        raise InputError(path, "already exists (use --overwrite to replace it)")
+    path = check_output(path, "fleet-csv", overwrite=overwrite, suffixes=(".csv",))
     import csv
     import io
 
     h = fleet.horizon
     buf = io.StringIO()
+    buf.write(comment_mark("fleet-csv") + "\n")
     w = csv.writer(buf, lineterminator="\n")
     w.writerow(["satellite_id", "task_id", "start_time", "end_time", "duration_s"])
     for s, t, a, b in zip(schedule.satellite.tolist(), schedule.task.tolist(), schedule.start_us.tolist(),

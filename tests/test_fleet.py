@@ -265,12 +265,19 @@ def test_schedule_files_round_trip(tmp_path):
     write_solution(sol, fleet.horizon, tmp_path / "solution.json")
     again = read_solution(tmp_path / "solution.json", fleet.horizon)
     assert np.array_equal(again.start_us, sol.start_us)
-    assert json.loads((tmp_path / "solution.json").read_text()) == json.loads(
-        (FIXTURES / "duplicate_observation_no_bonus_valid" / "solution.json").read_text()) | {
-        "actions": json.loads((tmp_path / "solution.json").read_text())["actions"]}
+    written = json.loads((tmp_path / "solution.json").read_text())
+    assert written.pop("eosp") == "fleet-solution"  # eosp's mark: the verifier ignores other keys
+    assert written == json.loads((FIXTURES / "duplicate_observation_no_bonus_valid" / "solution.json").read_text()) | {
+        "actions": written["actions"]}
     write_csv(sol, fleet, tmp_path / "s.csv")
     lines = (tmp_path / "s.csv").read_text().splitlines()
-    assert lines[1] == "sat_001,task_001,2025-07-17T04:12:00Z,2025-07-17T04:12:05Z,5"
+    assert lines[0] == "# eosp: fleet-csv" and lines[2] == "sat_001,task_001,2025-07-17T04:12:00Z,2025-07-17T04:12:05Z,5"
+    # a user's file of the same name is never replaced, even with overwrite
+    (tmp_path / "mine.parquet").write_bytes(b"user data")
+    with pytest.raises(InputError):
+        write_schedule(sol, fleet, tmp_path / "mine.parquet", overwrite=True)
+    assert (tmp_path / "mine.parquet").read_bytes() == b"user data"
+    write_schedule(sol, fleet, tmp_path / "s.parquet", overwrite=True)  # eosp's own: replaced with overwrite
 
 
 # --- bad inputs ---------------------------------------------------------------------------------------
