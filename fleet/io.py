@@ -22,6 +22,7 @@ from eosp.errors import InputError
 from eosp.fleet.model import (US, Attitude, Battery, Fleet, Horizon, Satellites, Schedule, Tasks, Tles, iso_z,
                               parse_utc, strings)
 from eosp.fleet.opportunities import Opportunities
+from eosp.instances.interchange import read_parquet
 
 SCHEMA_VERSION = 1
 KIND = "eosp-fleet"
@@ -120,14 +121,8 @@ def write_fleet(fleet: Fleet, opps: Opportunities, out: str | os.PathLike, overw
 def _read_parquet(path: Path, expected: dict) -> dict:
     """Columns of a Parquet file, checked: present, nothing unexpected, right kind, no nulls/NaN."""
     import pyarrow as pa
-    import pyarrow.parquet as pq
 
-    if not path.is_file():
-        raise InputError(path, "file not found")
-    try:
-        table = pq.read_table(path)
-    except (pa.ArrowException, OSError) as exc:
-        raise InputError(path, f"not a readable Parquet file: {exc}") from None
+    table = read_parquet(path)  # the project's checked reader: one line for a missing or unreadable file
     names = set(table.column_names)
     for c in expected:
         if c not in names:
@@ -278,9 +273,6 @@ def write_schedule(schedule: Schedule, fleet: Fleet, path: str | os.PathLike, ov
 def read_schedule(path: str | os.PathLike, fleet: Fleet) -> tuple[Schedule, dict]:
     """A schedule from a fleet schedule (Parquet, checked against the fleet's fingerprint) or an aeossp
     ``solution.json``; returns it with its metadata."""
-    import pyarrow as pa
-    import pyarrow.parquet as pq
-
     path = Path(path)
     if path.suffix.lower() == ".json":
         from eosp.fleet.aeossp import read_solution
@@ -288,12 +280,7 @@ def read_schedule(path: str | os.PathLike, fleet: Fleet) -> tuple[Schedule, dict
         return read_solution(path, fleet.horizon), {}
     if path.suffix.lower() != ".parquet":
         raise InputError(path, "unknown extension: a schedule is a .parquet (fleet schedule) or .json (aeossp solution)")
-    if not path.is_file():
-        raise InputError(path, "file not found")
-    try:
-        table = pq.read_table(path)
-    except (pa.ArrowException, OSError) as exc:
-        raise InputError(path, f"not a readable Parquet file: {exc}") from None
+    table = read_parquet(path)
     md = table.schema.metadata or {}
     if md.get(b"kind") != SCHEDULE_KIND:
         raise InputError(path, "not a fleet schedule (no eosp-fleet-schedule metadata)")
