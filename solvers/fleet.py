@@ -163,27 +163,24 @@ class PassPool:
         self.workers = cfg.workers
         self.pool = multiprocessing.get_context("fork").Pool(cfg.workers)
 
-    def solve(self, passes: list[int], utils: list[np.ndarray], deadline: float | None) -> dict[int, PassResult]:
+    def solve(self, passes: list[int], utils: list[np.ndarray],
+              deadline: float | None) -> dict[int, PassResult] | None:
         """Every pass of `passes` (in chunks, about four per worker); None when the deadline came first."""
         n = max(1, len(passes) // (4 * self.workers))
         chunks = [(passes[i:i + n], utils[i:i + n]) for i in range(0, len(passes), n)]
         job = self.pool.map_async(_solve_chunk, chunks)
         timeout = None if deadline is None else max(0.0, deadline - time.perf_counter())
+        import multiprocessing
+
         try:
             results = job.get(timeout)
-        except multiprocessing_timeout():
+        except multiprocessing.TimeoutError:
             return None
         return {p: r for chunk, res in zip(chunks, results) for p, r in zip(chunk[0], res)}
 
     def close(self) -> None:
         self.pool.terminate()
         self.pool.join()
-
-
-def multiprocessing_timeout() -> type:
-    import multiprocessing
-
-    return multiprocessing.TimeoutError
 
 
 @dataclass
@@ -212,7 +209,6 @@ class Coordinator:
     lam: np.ndarray = field(init=False)
     best: Primal = field(init=False)
     best_bound: float = math.inf
-    bound_proven: bool = True
     barred: np.ndarray = field(init=False)  # [satellite, task]: taken out of that satellite by the battery repair
     history: list[tuple[float, float, float]] = field(default_factory=list)  # (seconds, value, bound)
     t0: float = field(default_factory=time.perf_counter)
@@ -332,7 +328,6 @@ class Coordinator:
             else:
                 total += res.bound
             count[path_tasks(self.prob, p, res.nodes)] += 1
-        self.bound_proven &= proven
         if proven and self.prob.fifo_violations == 0 and total < self.best_bound:
             self.best_bound, self.bound_source = total, "lagrangian"
         g = 1.0 - count
