@@ -147,7 +147,8 @@ def solve_fleet(ns) -> int:
             "bound": sol.bound, "gap": sol.gap, "bound_source": sol.info["bound_source"]}
     write_schedule(sol.schedule, fleet, out, overwrite=ns.overwrite, info=info)
     why = sol.info["no_lagrangian_bound_because"]
-    bound = f", bound {sol.bound:.6f} ({sol.info['bound_source']}{'' if why is None else ': ' + why}), gap {sol.gap:.4%}"
+    source = sol.info["bound_source"] + ("" if why is None else f": {why}")
+    bound = f", bound {sol.bound:.6f} ({source}), gap {sol.gap:.4%}"
     stop = " (interrupted: the best schedule so far)" if sol.info.get("interrupted") else ""
     print(f"{Path(out)}: {len(sol.schedule)} observations, WCR {sol.value:.6f}{bound}; {sol.info['rounds']} rounds, "
           f"{sol.info['pass_solves']} pass solves ({elapsed:.1f} s){stop}")

@@ -35,13 +35,18 @@ class Comparison:
 def compare(name: str, instances: list[Instance], mode: str, exact_limit: float = 30.0) -> Comparison:
     """Greedy, RAMP, exact (time-limited: its status says whether the optimum is proven) and the shipped policy."""
     from eosp.solvers.base import run_solver
+    from eosp.solvers.policy import PolicyConfig, resolve_agent
+    from eosp.solvers.policy import solve as policy
 
+    agent = resolve_agent("policy", "", None, mode)  # the shipped model, loaded once for every instance
     values = {s: np.zeros(len(instances)) for s in ("greedy", "ramp", "exact", "policy")}
     proven = 0
     for i, inst in enumerate(instances):
         for s in values:
-            opts = {"time_limit": exact_limit} if s == "exact" else {}
-            sol = run_solver(s, inst, mode=mode, **opts)
+            if s == "policy":
+                sol = policy(inst, PolicyConfig(mode=mode), agent=agent)
+            else:
+                sol = run_solver(s, inst, mode=mode, **({"time_limit": exact_limit} if s == "exact" else {}))
             values[s][i] = sol.value
             proven += s == "exact" and sol.info.get("status") == "optimal"
     return Comparison(name, values, proven)
