@@ -11,6 +11,7 @@ format               mark                                                    hel
 ===================  ======================================================  ==================
 Parquet              key-value metadata ``eosp.kind = KIND``                 :func:`parquet_mark`
 JSON / JSON lines    a key ``"eosp": KIND`` in the (first) object            :func:`json_mark`
+CZML                 a key ``"eosp": KIND`` in the first (document) packet   :func:`json_mark`
 HTML                 ``<meta name="eosp" content="KIND">`` in the head       :func:`html_mark`
 PNG                  a text chunk ``eosp = KIND``                            :func:`png_mark`
 SVG, KML, XML        a comment ``<!-- eosp: KIND -->`` after the first line  :func:`comment_mark`
@@ -132,6 +133,19 @@ def _json_kind(data: bytes) -> str | None:
     return None
 
 
+def _czml_kind(data: bytes) -> str | None:
+    """The mark of a CZML file (a JSON array of packets): the key ``"eosp"`` of its first packet, the document
+    packet, read on its own (the file may be far longer than the head read)."""
+    text = data.decode("utf-8", errors="replace").lstrip()
+    if not text.startswith("["):
+        return None
+    try:
+        obj, _ = json.JSONDecoder().raw_decode(text, 1 + len(text[1:]) - len(text[1:].lstrip()))
+    except ValueError:
+        return None
+    return obj[KEY] if isinstance(obj, dict) and isinstance(obj.get(KEY), str) else None
+
+
 def _png_kind(path: Path) -> str | None:
     """The ``eosp`` tEXt chunk of a PNG file (chunks read up to the image data)."""
     try:
@@ -207,6 +221,8 @@ def kind_of(path: str | os.PathLike) -> str | None:
         return _png_kind(p)
     if suffix in (".json", ".jsonl"):
         return _json_kind(_head(p, 1 << 20))
+    if suffix == ".czml":
+        return _czml_kind(_head(p))
     return _text_kind(_head(p), suffix)
 
 
