@@ -1,6 +1,6 @@
 """The fleet commands: import an aeossp case, inspect a fleet, solve, validate and export schedules.
 
-``eosp import CASE``, ``eosp info|solve|validate FLEET``, ``eosp export-schedule`` (routed by
+``eosp import CASE``, ``eosp generate --fleet``, ``eosp info|solve|validate FLEET``, ``eosp export-schedule`` (routed by
 :mod:`eosp.cli.fleet_main`).
 
 Each function takes plain arguments and returns the exit status (0 done or valid, 1 invalid
@@ -48,6 +48,35 @@ def cmd_fleet_import(case_dir, out, overwrite: bool = False) -> int:
     check_output_dir(out, overwrite=overwrite, owned=owned, what="fleet directory")
     t0 = time.perf_counter()
     fleet = read_case(case_dir)
+    opps = compute(fleet, Geometry(fleet))
+    write_fleet(fleet, opps, out, overwrite=overwrite)
+    print(f"{out}: {len(fleet.satellites)} satellites, {len(fleet.tasks)} tasks, {len(opps)} opportunities, "
+          f"{opps.n_passes} passes ({time.perf_counter() - t0:.1f} s)")
+    return 0
+
+
+def cmd_fleet_generate(cfg, out, overwrite: bool = False) -> int:
+    """Draw a synthetic fleet (:mod:`eosp.fleet.generate`), compute its opportunities, write the fleet directory.
+
+    The memory it needs is estimated from the request and checked against what the machine has before any
+    work (one line, exit 2, instead of the kernel's out-of-memory killer hours later)."""
+    from eosp.atomic import check_output_dir
+    from eosp.fleet.generate import estimate_bytes, generate
+    from eosp.fleet.geometry import Geometry
+    from eosp.fleet.io import is_fleet_dir as owned
+    from eosp.fleet.io import write_fleet
+    from eosp.fleet.opportunities import compute
+    from eosp.memory import require_memory
+
+    check_output_dir(out, overwrite=overwrite, owned=owned, what="fleet directory")
+    require_memory("--satellites/--tasks", estimate_bytes(cfg), f"a fleet of {cfg.satellites} satellites and "
+                                                                f"{cfg.tasks} tasks over {cfg.hours:g} h")
+    t0 = time.perf_counter()
+    try:
+        fleet = generate(cfg)
+    except ValueError as exc:  # "FleetGenConfig.planes: reason" -> "--planes: reason"
+        name, _, reason = str(exc).partition(": ")
+        raise InputError("--" + name.rpartition(".")[2].replace("_", "-"), reason) from None
     opps = compute(fleet, Geometry(fleet))
     write_fleet(fleet, opps, out, overwrite=overwrite)
     print(f"{out}: {len(fleet.satellites)} satellites, {len(fleet.tasks)} tasks, {len(opps)} opportunities, "

@@ -1,6 +1,7 @@
 """The command line for fleets: the same commands as for a single pass, taking a fleet where a pass was.
 
-``eosp import CASE_DIR --out FLEET_DIR`` (an astro-reason aeossp case), ``eosp info FLEET_DIR``,
+``eosp import CASE_DIR --out FLEET_DIR`` (an astro-reason aeossp case), ``eosp generate --fleet ... --out
+FLEET_DIR`` (a synthetic fleet), ``eosp info FLEET_DIR``,
 ``eosp solve FLEET_DIR --solver greedy|fleet ...``, ``eosp validate FLEET_DIR S``, and
 ``eosp export-schedule FLEET_DIR S --format aeossp|csv --out FILE``.  :func:`route` recognizes a fleet
 command from its first path argument and parses it here (one-line errors, exit 2); any other command
@@ -33,6 +34,8 @@ def is_fleet_command(argv: list[str]) -> bool:
         return False
     if argv[0] == "export-schedule":
         return True
+    if argv[0] == "generate":
+        return "--fleet" in argv
     path = _first_path(argv)
     if path is None or argv[0] not in ("import", "info", "solve", "validate"):
         return False
@@ -45,7 +48,15 @@ def parser(command: str) -> Parser:
     from eosp.solvers.fleet import FleetConfig
 
     p = Parser(prog=f"eosp {command}")
-    if command == "import":
+    if command == "generate":
+        from eosp.fleet.generate import FleetGenConfig
+
+        p.description = "Draw a synthetic fleet (Walker-delta orbits, tasks on land, in cities or clusters)."
+        p.add_argument("--fleet", action="store_true", required=True, help="generate a fleet (not a single pass)")
+        p.add_argument("--out", required=True, help="fleet directory to write")
+        p.add_argument("--overwrite", action="store_true", help="replace a fleet directory eosp wrote")
+        add_config_args(p, FleetGenConfig)
+    elif command == "import":
         p.add_argument("case_dir", help="an astro-reason aeossp_standard case (mission.yaml, satellites.yaml, "
                                         "tasks.yaml)")
         p.add_argument("--out", required=True, help="fleet directory to write")
@@ -93,6 +104,10 @@ def route(argv: list[str]) -> int:
 def _run(command: str, ns) -> int:
     from eosp.cli import fleet as cmds
 
+    if command == "generate":
+        from eosp.fleet.generate import FleetGenConfig
+
+        return cmds.cmd_fleet_generate(config_from_args(FleetGenConfig, ns), ns.out, overwrite=ns.overwrite)
     if command == "import":
         return cmds.cmd_fleet_import(ns.case_dir, ns.out, overwrite=ns.overwrite)
     if command == "info":

@@ -81,6 +81,61 @@ def _ranges(lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return owner, np.arange(int(n.sum())) - first + lo[owner]
 
 
+REACH_STEP_S = 60  # the reach scan samples each satellite once a minute
+R_POLAR_M = 6356752.314245  # WGS84 semi-minor axis: no target is nearer the Earth's centre (at altitude >= 0)
+
+
+def reach_segments(fleet: Fleet, geo: Geometry, sat: int, tasks: np.ndarray, lo: np.ndarray,
+                   hi: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Base-grid index ranges (owner, first, last) inside each task's window [lo, hi] that hold every instant
+    at which satellite `sat` could see the task; the fine test then scans only these.
+
+    A target is seen only within the Earth-central angle ``asin(r sin(eta) / R) - eta`` of the sub-satellite
+    point (off-nadir limit eta, satellite radius r, target radius R; also below the horizon angle
+    ``acos(R / r)``), largest for the highest satellite radius and the smallest target radius.  The satellite
+    is sampled once a minute; a target within that angle plus the ground-track motion over half a minute of
+    a sample is paired with the sample's minute (neighbours overlap by a base step), and the pairs of a task
+    are merged into contiguous ranges.  Without it the scan tests every task at every instant of its window:
+    satellites x tasks x window samples, 10^10 tests for a 200-satellite, 20,000-task day.
+    """
+    from scipy.spatial import cKDTree
+
+    base = geo.base_step_s
+    pos = geo.grid_positions(sat)
+    n_base = len(pos)
+    ratio = max(1, REACH_STEP_S // base)
+    coarse = pos[::ratio]
+    r_max = float(np.sqrt((pos ** 2).sum(axis=1)).max())
+    r_tgt = max(1.0, R_POLAR_M + min(0.0, float(fleet.tasks.alt_m[tasks].min())))
+    eta = np.radians(float(fleet.satellites.attitude.max_off_nadir_deg[sat]) + 1e-3)
+    horizon_angle = np.arccos(min(1.0, r_tgt / r_max))
+    x = r_max * np.sin(eta) / r_tgt
+    reach = horizon_angle if x >= 1.0 else min(horizon_angle, np.arcsin(x) - eta)
+    unit = coarse / np.sqrt((coarse ** 2).sum(axis=1))[:, None]
+    step_angle = np.arccos(np.clip((unit[1:] * unit[:-1]).sum(axis=1), -1.0, 1.0)).max() if len(unit) > 1 else 0.0
+    theta = min(np.pi, reach + 0.6 * step_angle + np.radians(0.1))
+    tgt = geo.target_ecef[tasks]
+    tgt = tgt / np.maximum(np.sqrt((tgt ** 2).sum(axis=1)), 1.0)[:, None]
+    pairs = cKDTree(tgt).sparse_distance_matrix(cKDTree(unit), 2.0 * np.sin(theta / 2.0), output_type="ndarray")
+    owner, k = pairs["i"].astype(np.int64), pairs["j"].astype(np.int64)
+    half = ratio // 2 + 1
+    first = np.maximum(k * ratio - half, lo[owner])
+    last = np.minimum(np.minimum(k * ratio + half, n_base - 1), hi[owner])
+    keep = first <= last
+    owner, first, last = owner[keep], first[keep], last[keep]
+    order = np.lexsort((first, owner))
+    owner, first, last = owner[order], first[order], last[order]
+    if len(owner) == 0:
+        return owner, first, last
+    big = np.int64(n_base + 2)
+    run_end = np.maximum.accumulate(owner * big + last) - owner * big  # latest end so far within the task
+    new = np.r_[True, (owner[1:] != owner[:-1]) | (first[1:] > run_end[:-1] + 1)]
+    seg = np.cumsum(new) - 1
+    seg_last = np.zeros(int(seg[-1]) + 1, np.int64)
+    np.maximum.at(seg_last, seg, last)
+    return owner[new], first[new], seg_last
+
+
 def satellite_opportunities(fleet: Fleet, geo: Geometry, sat: int) -> tuple[np.ndarray, np.ndarray]:
     """(task, start action-grid index) of every opportunity of satellite `sat`."""
     h, tk = fleet.horizon, fleet.tasks
@@ -88,19 +143,21 @@ def satellite_opportunities(fleet: Fleet, geo: Geometry, sat: int) -> tuple[np.n
     tasks = np.flatnonzero(tk.sensor == fleet.satellites.sensor[sat])
     if len(tasks) == 0:
         return np.zeros(0, np.int64), np.zeros(0, np.int64)
-    lo = np.round(tk.release_s[tasks] / base).astype(np.int64)
-    hi = np.round(tk.due_s[tasks] / base).astype(np.int64)
+    t_lo = np.round(tk.release_s[tasks] / base).astype(np.int64)
+    t_hi = np.round(tk.due_s[tasks] / base).astype(np.int64)
+    seg_task, lo, hi = reach_segments(fleet, geo, sat, tasks, t_lo, t_hi)  # seg_task: index into `tasks`
     owner, j = _ranges(lo, hi)
     pos = geo.grid_positions(sat)
-    vis, on = pointing_ok(pos[j], geo.target_ecef[tasks[owner]], fleet.satellites.attitude.max_off_nadir_deg[sat])
+    vis, on = pointing_ok(pos[j], geo.target_ecef[tasks[seg_task[owner]]],
+                          fleet.satellites.attitude.max_off_nadir_deg[sat])
     ok = vis & on
     g_ratio = h.geometry_step_s // base
     bad_g = ~ok & ((j % g_ratio) == 0)
-    cs = np.cumsum(bad_g)  # flat; differences within one task's segment count its bad grid points
+    cs = np.cumsum(bad_g)  # flat; differences within one segment count its bad grid points
     seg0 = np.cumsum(np.maximum(hi - lo + 1, 0)) - np.maximum(hi - lo + 1, 0)
-    dur_b = np.round(tk.duration_s[tasks] / base).astype(np.int64)
+    dur_b = np.round(tk.duration_s[tasks[seg_task]] / base).astype(np.int64)
     a_ratio = h.action_step_s // base
-    # candidate starts: base indices on the action grid with the action inside the window
+    # candidate starts: base indices on the action grid with the action inside the segment
     s_lo = -(-lo // a_ratio) * a_ratio
     s_hi = hi - dur_b
     k_owner, k_start = _ranges(s_lo // a_ratio, np.floor_divide(s_hi, a_ratio))
@@ -110,7 +167,7 @@ def satellite_opportunities(fleet: Fleet, geo: Geometry, sat: int) -> tuple[np.n
     fe = seg0[k_owner] + (e - lo[k_owner])
     inside_bad = cs[fe - 1] - cs[fb]
     good = ok[fb] & ok[fe] & (inside_bad == 0)
-    return tasks[k_owner[good]], k_start[good]
+    return tasks[seg_task[k_owner[good]]], k_start[good]
 
 
 def passes(fleet: Fleet, sat_of: np.ndarray, task: np.ndarray, start: np.ndarray) -> np.ndarray:
