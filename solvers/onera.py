@@ -1,0 +1,424 @@
+"""ONERA constellation solver: greedy insertion, then large-neighbourhood search, with a proven bound.
+
+The transition model is time-independent, so a satellite's plan is a sequence of activities and the
+classic insertion test of routing with time windows is exact for that order: each position keeps its
+earliest start (forward) and latest start (backward) given its neighbours, and an activity fits between
+two neighbours when its own earliest start is at most its latest start there.  Downloads are in every
+sequence from the start (they are mandatory) and float inside their windows like observations do.
+
+* ``greedy``: requests in decreasing order of their best value (fewest opportunities first on ties),
+  each at the best observation(s) that fit: one-shot and video one observation, stereo both images of
+  the best pair that fits (on one satellite), periodic the best fitting observation of every slot.
+* ``lns``: from the greedy plan, repeatedly free a time span of one satellite and re-insert the freed
+  requests and the unserved ones that have opportunities there, in a noisy greedy order; a move that
+  lowers the value is undone.  Stops at the time limit.
+
+Times are integer seconds: earliest starts are rounded up and latest starts down, so every plan is
+valid for :mod:`eosp.fleet.onera_check`.  The bound comes from :mod:`eosp.solvers.onera_bound`.
+"""
+
+from __future__ import annotations
+
+import math
+import random
+import time
+from bisect import bisect_left, bisect_right
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from eosp.config import WEEK_S, choice, ranged
+from eosp.fleet.onera import PERIODIC, STEREO, TAU_MAX_S, OneraFleet, OneraSchedule
+from eosp.fleet.onera_check import best_values, periodic_value
+
+
+@dataclass
+class OneraConfig:
+    """Options of the ONERA solver (``eosp solve ONERA_DIR --solver onera``)."""
+
+    time_limit: float = ranged(30.0, 0, WEEK_S)
+    """Seconds of large-neighbourhood search after the greedy plan (0: the greedy plan)."""
+    seed: int = ranged(0, 0)
+    """Seed of the large-neighbourhood moves."""
+    span_s: float = ranged(1200.0, 1)
+    """Length of the time span of one satellite freed by one move."""
+    bound: str = choice("lp", "conflict-free", "none")
+    """Upper bound: lp (the time-capacity relaxation, solved by HiGHS, certified from its duals),
+    conflict-free (each request at its best), none."""
+
+
+@dataclass
+class Solution:
+    schedule: OneraSchedule
+    value: float
+    bound: float | None
+    gap: float | None
+    info: dict = field(default_factory=dict)
+
+
+class Plan:
+    """Per-satellite sequences with earliest/latest starts, and the requests' assignments."""
+
+    def __init__(self, f: OneraFleet):
+        o, d = f.observations, f.downloads
+        self.f = f
+        self.n_obs = n_obs = len(o)
+        dur = np.concatenate([o.duration.astype(np.float64), d.duration])
+        ws = np.concatenate([o.start, d.start]).astype(np.float64)
+        ls = np.floor(np.concatenate([o.end, d.end]) - dur + 1e-9)
+        self.WS, self.LS, self.DUR = ws.astype(np.int64).tolist(), ls.astype(np.int64).tolist(), dur.tolist()
+        self.LAT = np.concatenate([o.lat, d.lat]).tolist()
+        self.LON = np.concatenate([o.lon, d.lon]).tolist()
+        self.REQ = np.concatenate([o.request, np.full(len(d), -1)]).tolist()
+        self.SAT = np.concatenate([o.satellite, d.satellite]).tolist()
+        self.VAL = o.value.tolist()
+        self.SLOT = o.slot.tolist()
+        self.KIND = f.requests.kind.tolist()
+        n_sat = len(f.satellites)
+        self.seq: list[list[int]] = [[] for _ in range(n_sat)]
+        self.est: list[list[int]] = [[] for _ in range(n_sat)]
+        self.lst: list[list[int]] = [[] for _ in range(n_sat)]
+        self.assigned: list[list[int]] = [[] for _ in range(len(f.requests))]
+        self.value = [0.0] * len(f.requests)
+        self.in_plan = bytearray(n_obs + len(d))
+        self.journal: list | None = None
+        self._slots = {}
+        for g in sorted(range(len(d)), key=lambda j: d.start[j]):
+            gg = n_obs + g
+            s = self.SAT[gg]
+            found = self.find(s, gg)
+            if found is None:
+                raise ValueError(f"download {d.id[g]}: no room in satellite {f.satellites[s]}'s plan (overlapping "
+                                 "mandatory downloads): the instance has no valid plan")
+            self.insert(s, gg, found)
+
+    # ---------------------------------------------------------------- timing
+    def tau(self, a: int, b: int) -> float:
+        ra = self.REQ[a]
+        if ra >= 0 and ra == self.REQ[b]:
+            return 0.0
+        t = math.hypot(self.LAT[a] - self.LAT[b], self.LON[a] - self.LON[b])
+        return t if t < TAU_MAX_S else TAU_MAX_S
+
+    def find(self, s: int, g: int) -> int | None:
+        """The first position of satellite `s`'s sequence where activity `g` fits, or None."""
+        seq, est, lst = self.seq[s], self.est[s], self.lst[s]
+        ws, ls, d = self.WS[g], self.LS[g], self.DUR[g]
+        p = bisect_left(lst, ws + d)  # a next activity must be able to start after g ends
+        hi = bisect_right(est, ls)  # a previous activity must start before g's latest start
+        p = min(p, hi)
+        n = len(seq)
+        while p <= hi and p <= n:
+            if p > 0:
+                q = seq[p - 1]
+                e = est[p - 1] + self.DUR[q] + self.tau(q, g)
+                e = max(ws, math.ceil(e - 1e-9))
+            else:
+                e = ws
+            if p < n:
+                q = seq[p]
+                l_ = min(ls, math.floor(lst[p] - d - self.tau(g, q) + 1e-9))
+            else:
+                l_ = ls
+            if e <= l_:
+                return p
+            p += 1
+        return None
+
+    def insert(self, s: int, g: int, p: int) -> None:
+        seq, est, lst = self.seq[s], self.est[s], self.lst[s]
+        seq.insert(p, g)
+        est.insert(p, self.WS[g])
+        lst.insert(p, self.LS[g])
+        self._forward(s, p)
+        self._backward(s, p)
+        self.in_plan[g] = 1
+        if self.journal is not None:
+            self.journal.append((0, s, g, p))
+
+    def remove(self, s: int, g: int) -> None:
+        seq = self.seq[s]
+        p = seq.index(g)
+        del seq[p], self.est[s][p], self.lst[s][p]
+        if p < len(seq):
+            self._forward(s, p, removal=True)
+        if p > 0:
+            self._backward(s, p - 1, removal=True)
+        self.in_plan[g] = 0
+        if self.journal is not None:
+            self.journal.append((1, s, g, p))
+
+    def _forward(self, s: int, p: int, removal: bool = False) -> None:
+        seq, est = self.seq[s], self.est[s]
+        n = len(seq)
+        q = p
+        while q < n:
+            g = seq[q]
+            if q > 0:
+                a = seq[q - 1]
+                e = max(self.WS[g], math.ceil(est[q - 1] + self.DUR[a] + self.tau(a, g) - 1e-9))
+            else:
+                e = self.WS[g]
+            if e == est[q] and q != p:
+                break
+            est[q] = e
+            q += 1
+
+    def _backward(self, s: int, p: int, removal: bool = False) -> None:
+        seq, lst = self.seq[s], self.lst[s]
+        n = len(seq)
+        q = p
+        while q >= 0:
+            g = seq[q]
+            if q < n - 1:
+                b = seq[q + 1]
+                l_ = min(self.LS[g], math.floor(lst[q + 1] - self.DUR[g] - self.tau(g, b) + 1e-9))
+            else:
+                l_ = self.LS[g]
+            if l_ == lst[q] and q != p:
+                break
+            lst[q] = l_
+            q -= 1
+
+    # ---------------------------------------------------------------- requests
+    def request_value(self, r: int) -> float:
+        rows = self.assigned[r]
+        if not rows:
+            return 0.0
+        if self.KIND[r] != PERIODIC:
+            return float(sum(self.VAL[g] for g in rows))
+        slots = self._slot_list(r)
+        served = np.zeros(len(slots), bool)
+        classes = np.zeros(len(slots))
+        for g in rows:
+            k = slots.index(self.SLOT[g])
+            served[k] = True
+            classes[k] = self.VAL[g]
+        return periodic_value(classes, served)
+
+    def _slot_list(self, r: int) -> list[int]:
+        sl = self._slots.get(r)
+        if sl is None:
+            sl = self._slots[r] = self.f.slots(r).tolist()
+        return sl
+
+    def set_assigned(self, r: int, rows: list[int]) -> None:
+        if self.journal is not None:
+            self.journal.append((2, r, list(self.assigned[r]), self.value[r]))
+        self.assigned[r] = rows
+        self.value[r] = self.request_value(r)
+
+    def try_place(self, g: int) -> bool:
+        s = self.SAT[g]
+        p = self.find(s, g)
+        if p is None:
+            return False
+        self.insert(s, g, p)
+        return True
+
+    def undo(self, mark: int) -> None:
+        """Undo the journal's entries after `mark`, newest first."""
+        j = self.journal
+        self.journal = None
+        while len(j) > mark:
+            op = j.pop()
+            if op[0] == 0:
+                self.remove(op[1], op[2])
+            elif op[0] == 1:
+                s, g, p = op[1], op[2], op[3]
+                seq = self.seq[s]
+                seq.insert(p, g)
+                self.est[s].insert(p, self.WS[g])
+                self.lst[s].insert(p, self.LS[g])
+                self._forward(s, p)
+                self._backward(s, p)
+                self.in_plan[g] = 1
+            else:
+                self.assigned[op[1]], self.value[op[1]] = op[2], op[3]
+        self.journal = j
+
+    def schedule(self) -> OneraSchedule:
+        f = self.f
+        ids = np.concatenate([f.observations.id, f.downloads.id])
+        sat, act, start = [], [], []
+        for s in range(len(self.seq)):
+            sat += [int(f.satellites[s])] * len(self.seq[s])
+            act += self.seq[s]
+            start += self.est[s]
+        return OneraSchedule(np.asarray(sat, np.int64), ids[np.asarray(act, np.int64)] if act else np.zeros(0, np.int64),
+                             np.asarray(start, np.int64))
+
+
+class Search:
+    """Greedy and large-neighbourhood search over a :class:`Plan`."""
+
+    def __init__(self, f: OneraFleet, seed: int = 0):
+        self.f = f
+        self.plan = Plan(f)
+        o, r = f.observations, f.requests
+        self.rng = random.Random(seed)
+        first = r.first.tolist()
+        val = o.value.tolist()
+        self.best = best_values(f)
+        # candidates per request: one-shot/video a list of rows; stereo a list of (g1, g2, value) pairs; periodic
+        # a list per slot; each sorted by value, best first (earliest window first on ties)
+        self.cands: list = []
+        starts = o.start.tolist()
+        slot = o.slot.tolist()
+        for k in range(len(r)):
+            rows = sorted(range(first[k], first[k + 1]), key=lambda g: (-val[g], starts[g]))
+            kind = int(r.kind[k])
+            if kind == STEREO:
+                by: dict[int, list[int]] = {}
+                for g in sorted(range(first[k], first[k + 1]), key=lambda g: starts[g]):
+                    by.setdefault(slot[g], []).append(g)
+                pairs = [(a, b, val[a] + val[b]) for a, b in by.values()]
+                self.cands.append(sorted(pairs, key=lambda t: (-t[2], starts[t[0]])))
+            elif kind == PERIODIC:
+                by = {}
+                for g in rows:
+                    by.setdefault(slot[g], []).append(g)
+                self.cands.append([by[sl] for sl in sorted(by)])
+            else:
+                self.cands.append(rows)
+        self.pair_value = [0.0] * len(o)  # stereo: the value of the pair an observation belongs to
+        for k in np.flatnonzero(r.kind == STEREO).tolist():
+            for a, b, v in self.cands[k]:
+                self.pair_value[a] = self.pair_value[b] = v
+        n_opp = np.diff(r.first)
+        self.order = sorted(range(len(r)), key=lambda k: (-self.best[k], n_opp[k], k))
+        # opportunities of each satellite by window start, to find the requests a freed span may serve
+        self.sat_rows = []
+        self.sat_starts = []
+        for s in range(len(f.satellites)):
+            rows = np.flatnonzero(o.satellite == s)
+            rows = rows[np.argsort(o.start[rows], kind="stable")]
+            self.sat_rows.append(rows)
+            self.sat_starts.append(o.start[rows])
+
+    @property
+    def objective(self) -> float:
+        return float(sum(self.plan.value))
+
+    def place(self, k: int) -> bool:
+        """Insert request `k` (or, periodic, its unserved slots) at its best fitting observations."""
+        pl = self.plan
+        kind = pl.KIND[k]
+        if kind == PERIODIC:
+            done = {pl.SLOT[g] for g in pl.assigned[k]}
+            added = []
+            for slot_rows in self.cands[k]:
+                if pl.SLOT[slot_rows[0]] in done:
+                    continue
+                for g in slot_rows:
+                    if pl.try_place(g):
+                        added.append(g)
+                        break
+            if added:
+                pl.set_assigned(k, pl.assigned[k] + added)
+            return bool(added)
+        if pl.assigned[k]:
+            return False
+        if kind == STEREO:
+            for a, b, _ in self.cands[k]:
+                if not pl.try_place(a):
+                    continue
+                if pl.try_place(b):
+                    pl.set_assigned(k, [a, b])
+                    return True
+                pl.remove(pl.SAT[a], a)
+            return False
+        for g in self.cands[k]:
+            if pl.try_place(g):
+                pl.set_assigned(k, [g])
+                return True
+        return False
+
+    def greedy(self) -> None:
+        for k in self.order:
+            self.place(k)
+
+    def lns(self, deadline: float, span_s: float, trace: list, t0: float) -> int:
+        """Destroy-and-repair moves until `deadline`; returns the number of moves."""
+        pl, rng, f = self.plan, self.rng, self.f
+        n_sat = len(f.satellites)
+        obj = self.objective
+        moves = 0
+        pl.journal = []
+        while time.perf_counter() < deadline:
+            moves += 1
+            s = rng.randrange(n_sat)
+            rows = self.sat_rows[s]
+            if not len(rows):
+                continue
+            centre = int(self.sat_starts[s][rng.randrange(len(rows))])
+            lo = centre - span_s * rng.random()
+            hi = lo + span_s
+            mark = len(pl.journal)
+            seq, est = pl.seq[s], pl.est[s]
+            a, b = bisect_left(est, lo), bisect_right(est, hi)
+            touched = {pl.REQ[g] for g in seq[a:b] if g < pl.n_obs}
+            i0, i1 = np.searchsorted(self.sat_starts[s], [lo - 300, hi])
+            span_rows = rows[i0:i1].tolist()
+            for g in span_rows:  # requests served elsewhere that the span could serve better move too
+                k = pl.REQ[g]
+                if pl.assigned[k] and pl.KIND[k] != PERIODIC and k not in touched:
+                    better = pl.VAL[g] > pl.value[k] + 1e-12 if pl.KIND[k] != STEREO else \
+                        self.pair_value[g] > pl.value[k] + 1e-12
+                    if better:
+                        touched.add(k)
+            for k in touched:  # free the whole request (a stereo pair goes as a whole), a periodic request
+                keep = []      # only its observations in the span
+                for g in pl.assigned[k]:
+                    if pl.KIND[k] != PERIODIC or (pl.SAT[g] == s and lo <= pl.est[s][pl.seq[s].index(g)] <= hi):
+                        pl.remove(pl.SAT[g], g)
+                    else:
+                        keep.append(g)
+                pl.set_assigned(k, keep)
+            cand = set(touched)
+            for g in span_rows:
+                k = pl.REQ[g]
+                if k not in cand and (not pl.assigned[k] or pl.KIND[k] == PERIODIC):
+                    cand.add(k)
+            order = sorted(cand, key=lambda k: -self.best[k] * (0.7 + 0.6 * rng.random()))
+            for k in order:
+                self.place(k)
+            new = self.objective
+            if new >= obj - 1e-9:
+                if new > obj + 1e-9:
+                    trace.append((time.perf_counter() - t0, new))
+                obj = new
+                pl.journal.clear()
+            else:
+                pl.undo(mark)
+                pl.journal.clear()
+        pl.journal = None
+        return moves
+
+
+def solve(f: OneraFleet, cfg: OneraConfig | None = None, greedy_only: bool = False) -> Solution:
+    """Greedy plan, then (unless `greedy_only`) large-neighbourhood search until the time limit; the bound."""
+    cfg = cfg or OneraConfig()
+    t0 = time.perf_counter()
+    search = Search(f, seed=cfg.seed)
+    search.greedy()
+    trace = [(time.perf_counter() - t0, search.objective)]
+    greedy_value = search.objective
+    moves = 0
+    if not greedy_only and cfg.time_limit > 0:
+        moves = search.lns(time.perf_counter() + cfg.time_limit, cfg.span_s, trace, t0)
+    value = search.objective
+    t_search = time.perf_counter() - t0
+    bound, source = None, cfg.bound
+    if cfg.bound == "conflict-free":
+        bound = float(search.best.sum())
+    elif cfg.bound == "lp":
+        from eosp.solvers.onera_bound import lp_bound
+
+        bound = min(lp_bound(f), float(search.best.sum()))
+    gap = None if bound is None else (0.0 if bound <= 0 else max(0.0, (bound - value) / bound))
+    t99 = next(t for t, v in trace if v >= 0.99 * value - 1e-12)
+    return Solution(search.plan.schedule(), value, bound, gap,
+                    {"greedy_value": greedy_value, "moves": moves, "seconds_search": t_search,
+                     "seconds": time.perf_counter() - t0, "time_to_99": t99, "bound_source": source,
+                     "trace": trace})
