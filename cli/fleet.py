@@ -17,7 +17,7 @@ from pathlib import Path
 from eosp.errors import InputError
 
 SOLVERS = ("greedy",)
-EXPORT_FORMATS = ("aeossp", "csv")
+EXPORT_FORMATS = ("aeossp", "csv", "czml", "kml")
 
 
 def is_aeossp_case(path) -> bool:
@@ -170,7 +170,8 @@ def cmd_fleet_validate(fleet_dir, schedule) -> int:
 
 
 def cmd_fleet_export_schedule(fleet_dir, schedule, fmt: str, out, overwrite: bool = False) -> int:
-    """Write a schedule as an aeossp ``solution.json`` (fmt "aeossp") or a CSV (fmt "csv")."""
+    """Write a schedule as an aeossp ``solution.json`` (fmt "aeossp"), a CSV (fmt "csv"), or for globe viewers
+    as CZML (fmt "czml", Cesium) or KML (fmt "kml"; :mod:`eosp.fleet.export`)."""
     from eosp.fleet.aeossp import write_solution
     from eosp.fleet.io import read_fleet, read_schedule, write_csv
 
@@ -180,6 +181,10 @@ def cmd_fleet_export_schedule(fleet_dir, schedule, fmt: str, out, overwrite: boo
     sched, _ = read_schedule(schedule, fleet)
     if fmt == "aeossp":
         path = write_solution(sched, fleet.horizon, out, overwrite=overwrite)
+    elif fmt in ("czml", "kml"):
+        from eosp.fleet.export import write_export
+
+        path = write_export(fleet, sched, fmt, out, overwrite=overwrite)
     else:
         path = write_csv(sched, fleet, out, overwrite=overwrite)
     print(f"{Path(path)}: {len(sched)} observations")

@@ -69,7 +69,8 @@ def parser(command: str) -> Parser:
     elif command == "export-schedule":
         p.add_argument("fleet_dir")
         p.add_argument("schedule")
-        p.add_argument("--format", required=True, choices=("aeossp", "csv"))
+        p.add_argument("--format", required=True, choices=("aeossp", "csv", "czml", "kml"),
+                       help="aeossp solution.json, CSV, CZML (Cesium) or KML (tracks, targets, observations)")
         p.add_argument("--out", required=True)
         p.add_argument("--overwrite", action="store_true")
     elif command == "solve":

@@ -11,7 +11,7 @@ format               mark                                                    hel
 ===================  ======================================================  ==================
 Parquet              key-value metadata ``eosp.kind = KIND``                 :func:`parquet_mark`
 JSON / JSON lines    a key ``"eosp": KIND`` in the (first) object            :func:`json_mark`
-CZML                 a key ``"eosp": KIND`` in the first (document) packet   :func:`json_mark`
+CZML                 2nd packet: id ``eosp``, properties ``{"eosp": KIND}``  (by hand)
 HTML                 ``<meta name="eosp" content="KIND">`` in the head       :func:`html_mark`
 PNG                  a text chunk ``eosp = KIND``                            :func:`png_mark`
 SVG, KML, XML        a comment ``<!-- eosp: KIND -->`` after the first line  :func:`comment_mark`
@@ -134,16 +134,24 @@ def _json_kind(data: bytes) -> str | None:
 
 
 def _czml_kind(data: bytes) -> str | None:
-    """The mark of a CZML file (a JSON array of packets): the key ``"eosp"`` of its first packet, the document
-    packet, read on its own (the file may be far longer than the head read)."""
-    text = data.decode("utf-8", errors="replace").lstrip()
-    if not text.startswith("["):
+    """The mark of a CZML file (a JSON array of packets): the second packet, ``{"id": "eosp", "properties":
+    {"eosp": KIND}}`` (the document packet may not carry properties), read on its own with the one before it
+    (the file may be far longer than the head read)."""
+    text = data.decode("utf-8", errors="replace")
+    dec, at = json.JSONDecoder(), text.find("[") + 1
+    if at <= 0 or text[:at - 1].strip():
         return None
-    try:
-        obj, _ = json.JSONDecoder().raw_decode(text, 1 + len(text[1:]) - len(text[1:].lstrip()))
-    except ValueError:
-        return None
-    return obj[KEY] if isinstance(obj, dict) and isinstance(obj.get(KEY), str) else None
+    for _ in range(2):
+        while at < len(text) and text[at] in " \t\r\n,":
+            at += 1
+        try:
+            obj, at = dec.raw_decode(text, at)
+        except ValueError:
+            return None
+        props = obj.get("properties") if isinstance(obj, dict) and obj.get("id") == KEY else None
+        if isinstance(props, dict) and isinstance(props.get(KEY), str):
+            return props[KEY]
+    return None
 
 
 def _png_kind(path: Path) -> str | None:
