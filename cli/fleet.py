@@ -169,6 +169,27 @@ def cmd_fleet_validate(fleet_dir, schedule) -> int:
     return 0
 
 
+def cmd_fleet_report(fleet_dir, schedules, out, overwrite: bool = False, title: str = "") -> int:
+    """Write the planner's page of a fleet's day (:mod:`eosp.evaluation.fleet_report`) for one or more schedules;
+    a schedule of another fleet is refused (fingerprint) before anything is written."""
+    from eosp.evaluation.fleet_report import check_report_out, write_page
+    from eosp.fleet.io import read_fleet, read_schedule
+
+    check_report_out(out, overwrite)
+    t0 = time.perf_counter()
+    fleet, opps = read_fleet(fleet_dir)
+    scheds = {}
+    for path in schedules:
+        label = Path(path).stem
+        while label in scheds:
+            label += "'"
+        scheds[label] = read_schedule(path, fleet)[0]
+    page = write_page(fleet, opps, scheds, out, overwrite=overwrite, title=title or None)
+    print(f"{page}: {len(scheds)} schedule(s) of {len(fleet.satellites)} satellites and {len(fleet.tasks)} tasks "
+          f"({page.stat().st_size / 1e6:.1f} MB, {time.perf_counter() - t0:.1f} s)")
+    return 0
+
+
 def cmd_fleet_export_schedule(fleet_dir, schedule, fmt: str, out, overwrite: bool = False) -> int:
     """Write a schedule as an aeossp ``solution.json`` (fmt "aeossp"), a CSV (fmt "csv"), or for globe viewers
     as CZML (fmt "czml", Cesium) or KML (fmt "kml"; :mod:`eosp.fleet.export`)."""

@@ -37,7 +37,7 @@ def is_fleet_command(argv: list[str]) -> bool:
     if argv[0] == "generate":
         return "--fleet" in argv
     path = _first_path(argv)
-    if path is None or argv[0] not in ("import", "info", "solve", "validate"):
+    if path is None or argv[0] not in ("import", "info", "solve", "validate", "report"):
         return False
     from eosp.cli.fleet import is_aeossp_case, is_fleet_dir
 
@@ -63,6 +63,14 @@ def parser(command: str) -> Parser:
         p.add_argument("--overwrite", action="store_true", help="replace a fleet directory eosp wrote")
     elif command == "info":
         p.add_argument("fleet_dir")
+    elif command == "report":
+        p.description = ("One self-contained HTML page of a constellation day: Gantt per satellite (UTC), map with "
+                         "tracks and targets, every task with the reason it was missed, summaries, differences.")
+        p.add_argument("fleet_dir")
+        p.add_argument("schedules", nargs="+", help="fleet schedules (.parquet) or aeossp solutions (.json)")
+        p.add_argument("--out", required=True, help="HTML file to write")
+        p.add_argument("--title", default="")
+        p.add_argument("--overwrite", action="store_true")
     elif command == "validate":
         p.add_argument("fleet_dir")
         p.add_argument("schedule", help="fleet schedule (.parquet) or aeossp solution (.json)")
@@ -113,6 +121,8 @@ def _run(command: str, ns) -> int:
         return cmds.cmd_fleet_import(ns.case_dir, ns.out, overwrite=ns.overwrite)
     if command == "info":
         return cmds.cmd_fleet_info(ns.fleet_dir)
+    if command == "report":
+        return cmds.cmd_fleet_report(ns.fleet_dir, ns.schedules, ns.out, overwrite=ns.overwrite, title=ns.title)
     if command == "validate":
         return cmds.cmd_fleet_validate(ns.fleet_dir, ns.schedule)
     if command == "export-schedule":

@@ -223,6 +223,8 @@ def explain(fleet: Fleet, opps: Opportunities, schedule: Schedule, geo: Geometry
     kind[~carried[missed]] = SENSOR
     kind[carried[missed] & (per_task[missed] == 0)] = NO_OPP
     open_ = (kind == BLOCKED_NONE)
+    if not open_.any():
+        return Reasons(missed, kind, sat_out, start_out, blockers, per_task[missed])
 
     # every opportunity of a still-open missed task, with its fewest removals (99: none up to three)
     rows = np.flatnonzero(open_[np.maximum(row_of[opps.task], 0)] & (row_of[opps.task] >= 0))

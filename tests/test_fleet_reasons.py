@@ -110,3 +110,11 @@ def test_reasons_of_an_empty_schedule_are_all_insertable_or_not_servable():
     assert len(r) == 12
     per_task = opps.per_task(12)
     assert np.all((r.kind == INSERTABLE) == (per_task[r.task] > 0))
+
+
+def test_a_schedule_missing_nothing_has_no_reasons():
+    fleet = synthetic_fleet(1, seed=2)
+    geo = Geometry(fleet)
+    opps = compute(fleet, geo)
+    s = solve(fleet, opps, geo)
+    assert len(s) == 1 and len(explain(fleet, opps, s, geo)) == 0

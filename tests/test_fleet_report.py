@@ -1,0 +1,167 @@
+"""The fleet page (eosp report FLEET_DIR S...): contents, bad input, and rendering in a real headless browser."""
+
+import dataclasses
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from eosp.cli import main
+from eosp.evaluation.fleet_report import build_page, write_page
+from eosp.fleet.check import validate
+from eosp.fleet.geometry import Geometry
+from eosp.fleet.greedy import solve
+from eosp.fleet.model import Schedule, strings
+from eosp.fleet.opportunities import compute
+from tests.test_fleet import synthetic_fleet
+from tests.test_html_report import resources
+
+FIXTURES = Path(__file__).parent / "fixtures" / "aeossp"
+
+
+@pytest.fixture(scope="module")
+def day():
+    fleet = synthetic_fleet(30, seed=4)
+    geo = Geometry(fleet)
+    opps = compute(fleet, geo)
+    s = solve(fleet, opps, geo)
+    half = Schedule(s.satellite[::2], s.task[::2], s.start_us[::2], s.end_us[::2])
+    assert validate(fleet, s, geo).valid and len(s) >= 6
+    return fleet, opps, {"greedy": s, "half": half}
+
+
+def overlapping(s: Schedule) -> Schedule:
+    """The schedule with its first observation again, 5 s later on the same satellite: an overlap."""
+    return Schedule(np.r_[s.satellite, s.satellite[:1]], np.r_[s.task, s.task[1:2]], np.r_[s.start_us, s.start_us[:1] + 5_000_000],
+                    np.r_[s.end_us, s.end_us[:1] + 5_000_000])
+
+
+def test_page_contents(day):
+    fleet, opps, scheds = day
+    text = build_page(fleet, opps, scheds)
+    r = resources(text)
+    assert r.urls == [] and "http" not in text.split("<script type='application/json'")[0].lower()
+    assert text.count("<tr data-schedule=") == 2 and text.count("class='ok'>valid") == 2
+    assert "no ground stations" in text and f"data-tasks='{len(fleet.tasks)}'" in text
+    assert len(text.encode()) < 2e6
+
+
+def test_invalid_schedule_and_no_geometry(day):
+    fleet, opps, scheds = day
+    bad = overlapping(scheds["greedy"])
+    res = validate(fleet, bad)
+    assert not res.valid
+    text = build_page(fleet, opps, {"bad": bad})
+    assert "class='bad'>invalid: " in text and "is not valid (each violation is marked" in text
+    broken = dataclasses.replace(fleet, satellites=dataclasses.replace(
+        fleet.satellites, tle=dataclasses.replace(fleet.satellites.tle, line2=strings(["2 garbage"] * 2))))
+    text = build_page(broken, opps, {"greedy": scheds["greedy"]})
+    assert "cannot be propagated" in text and "not checked" in text
+
+
+def test_cli_report_and_another_fleets_schedule(tmp_path, capsys):
+    fl = tmp_path / "fl"
+    assert main(["import", str(FIXTURES / "duplicate_observation_no_bonus_valid"), "--out", str(fl)]) == 0
+    s = tmp_path / "s.parquet"
+    assert main(["solve", str(fl), "--solver", "greedy", "--out", str(s)]) == 0
+    out = tmp_path / "out" / "day.html"
+    assert main(["report", str(fl), str(s), "--out", str(out)]) == 0
+    assert out.stat().st_size > 20000 and "1 schedule(s)" in capsys.readouterr().out
+    assert main(["report", str(fl), str(s), "--out", str(out)]) == 2  # needs --overwrite
+    other = tmp_path / "other"
+    assert main(["import", str(FIXTURES / "full_completion_valid"), "--out", str(other)]) == 0
+    s2 = tmp_path / "s2.parquet"
+    assert main(["solve", str(other), "--solver", "greedy", "--out", str(s2)]) == 0
+    r = subprocess.run([sys.executable, "-m", "eosp.cli", "report", str(fl), str(s), str(s2), "--out",
+                        str(tmp_path / "bad.html")], capture_output=True, text=True, timeout=300)
+    assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1 and "another fleet" in r.stderr
+    assert str(s2) in r.stderr and not (tmp_path / "bad.html").exists()
+
+
+# --------------------------------------------------------------------------- real browser
+
+@pytest.fixture(scope="session")
+def chromium():
+    from tests.browser import ensure_chromium
+
+    path, why = ensure_chromium()
+    if path is None:
+        pytest.skip(why)
+    return path
+
+
+PROBE_JS = """(async () => {
+  const p = window.fleetPage;
+  const out = {ready: p.ready, drawn: p.drawn, ms: p.renderMs};
+  const tip = document.getElementById('tip');
+  const move = (el, at) => el.dispatchEvent(new MouseEvent('mousemove', {clientX: at.x, clientY: at.y, bubbles: true}));
+  move(document.getElementById('gantt'), p.barAt(0));
+  out.bar = tip.textContent;
+  move(document.getElementById('map'), p.taskAt(TASK));
+  out.task = tip.textContent;
+  out.rows = Array.from(document.querySelectorAll('#tasks tbody tr')).map(r => [r.dataset.task, r.dataset.status, r.dataset.kind]);
+  out.reasons = Array.from(document.querySelectorAll('#tasks tbody td.reason')).map(e => e.textContent);
+  out.sats = document.querySelectorAll('#per-sat tbody tr').length;
+  out.weights = document.querySelectorAll('#per-weight tbody tr').length;
+  out.diff = Array.from(document.querySelectorAll('.diffrow')).map(e => [e.dataset.onlyA, e.dataset.onlyB]);
+  out.resources = performance.getEntriesByType('resource').map(e => e.name);
+  return out;
+})()"""
+
+
+def test_page_renders_in_headless_chromium(day, tmp_path, chromium):
+    from tests.browser import Browser
+
+    fleet, opps, scheds = day
+    page = write_page(fleet, opps, scheds, tmp_path / "day.html")
+    s = scheds["greedy"]
+    missed = sorted(set(fleet.tasks.ids.tolist()) - set(s.task.tolist()))
+    observed_task = int(fleet.task_index()[s.task[0]])
+    with Browser(chromium, tmp_path / "chromium.log") as b:
+        b.open(page)
+        got = b.evaluate(PROBE_JS.replace("TASK", str(observed_task)))
+        shot = b.screenshot(tmp_path / "day.png", full_page=True)
+        errors, requests = b.errors(), b.requests()
+    print(f"screenshot: {shot}")
+    assert errors == [] and requests == [page.resolve().as_uri()] and got["resources"] == []
+    assert got["ready"]
+    g = got["drawn"]["gantt"]
+    assert g["bars"] == len(s) and g["slews"] == len(s) and g["violations"] == 0 and g["eclipses"] >= 0
+    assert g["battery_points"] > 2 * len(fleet.satellites)
+    m = got["drawn"]["map"]
+    assert m["points"] == len(fleet.tasks) and m["observed"] == len(set(s.task.tolist())) and m["tracks"] == 2
+    # the hover of the first observation: its satellite, task and UTC times
+    h = fleet.horizon
+    st = (h.start + (s.start_us[0] * 1e-6) * (h.end - h.start) / h.seconds).strftime("%Y-%m-%d %H:%M:%S")
+    assert got["bar"].startswith(f"{s.satellite[0]}: task {s.task[0]} ") and f"{st} UTC to " in got["bar"]
+    dur = (s.end_us[0] - s.start_us[0]) / 1e6
+    assert re.search(rf", {dur:.1f} s", got["bar"]) and "slew and settling" in got["bar"]
+    assert got["task"].startswith(f"task {s.task[0]} ") and "observed by" in got["task"]
+    # the table: one row per task, every missed one with a reason
+    assert len(got["rows"]) == len(fleet.tasks)
+    assert sorted(r[0] for r in got["rows"] if r[1] == "missed") == missed
+    assert all(r[2] for r in got["rows"] if r[1] == "missed") and all(got["reasons"][i] for i, r in
+                                                                     enumerate(got["rows"]) if r[1] == "missed")
+    assert got["sats"] == 2 and got["weights"] == len(set(fleet.tasks.weight.tolist()))
+    half = scheds["half"]
+    assert got["diff"] == [[str(len(set(s.task.tolist()) - set(half.task.tolist()))), "0"]]
+
+
+def test_invalid_schedule_is_marked_in_headless_chromium(day, tmp_path, chromium):
+    from tests.browser import Browser
+
+    fleet, opps, scheds = day
+    bad = overlapping(scheds["greedy"])
+    n_viol = sum(v.time is not None for v in validate(fleet, bad).violations)
+    page = write_page(fleet, opps, {"bad": bad}, tmp_path / "bad.html")
+    with Browser(chromium, tmp_path / "chromium.log") as b:
+        b.open(page)
+        got = b.evaluate("""(async () => {
+          const p = window.fleetPage, g = document.getElementById('gantt'), r = g.getBoundingClientRect();
+          return {drawn: p.drawn.gantt};
+        })()""")
+        errors = b.errors()
+    assert errors == [] and n_viol >= 1 and got["drawn"]["violations"] == n_viol
