@@ -31,6 +31,7 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass, field
+from typing import Callable
 
 import numpy as np
 
@@ -116,9 +117,14 @@ class Problem:
 
 def solve_pass(prob: Problem, p: int, value: np.ndarray, cfg: FleetConfig) -> PassResult:
     """Pass `p` with utility `value[a]` per local task (non-positive ones left out)."""
+    return solve_pass_graph(prob.passes[p], value, cfg)
+
+
+def solve_pass_graph(pg: PassGraph, value: np.ndarray, cfg: FleetConfig) -> PassResult:
+    """One pass graph with utility `value[a]` per local task: what a worker holding the graph runs."""
     from eosp.solvers.base import run_solver
 
-    pp = priced_instance(prob.passes[p], value)
+    pp = priced_instance(pg, value)
     if pp is None:
         return PassResult(np.zeros(0, np.int64), 0.0, 0.0)
     opts = {"time_limit": cfg.pass_time_limit} if cfg.pass_solver in ("exact", "ramp") else {}
@@ -218,7 +224,9 @@ class Coordinator:
     interrupted: bool = False
     bound_source: str = "conflict-free"  # until a proven Lagrangian bound is lower
 
-    pool: PassPool | None = None  # worker processes for the price rounds (--workers > 1)
+    pool: PassPool | None = None  # workers for the price rounds: processes (--workers > 1) or Ray actors
+    on_round: Callable[[Coordinator], None] | None = None  # called after every round (checkpoints, MLflow)
+    start_round: int = 0  # rounds a resumed run has done already
     initial: Primal | None = None  # a schedule to start from (--init)
     frozen: np.ndarray | None = None  # bool per pass: kept as in `initial`, never solved again (--freeze-until)
 
@@ -459,7 +467,7 @@ class Coordinator:
     def run(self) -> Primal:
         cfg, prob = self.cfg, self.prob
         deadline = None if cfg.rounds is not None else self.t0 + cfg.time_limit
-        rng = np.random.default_rng(cfg.seed)
+        rng = np.random.default_rng(cfg.seed if self.start_round == 0 else [cfg.seed, self.start_round])
         order = np.argsort(prob.pass_time[:, 0], kind="stable")
         if self.initial is not None:  # start from the given schedule (its paths re-walked unless frozen)
             first = self.empty()
@@ -479,7 +487,8 @@ class Coordinator:
 
     def _rounds(self, deadline: float | None, rng: np.random.Generator) -> None:
         cfg = self.cfg
-        rounds, stall = 0, 0
+        rounds, stall = self.start_round, 0
+        self.rounds_done = rounds
         while cfg.rounds is None or rounds < cfg.rounds:
             if deadline is not None and time.perf_counter() > deadline:
                 break
@@ -499,6 +508,8 @@ class Coordinator:
                 self.neighbourhood(rng, deadline)
             rounds += 1
             self.rounds_done = rounds
+            if self.on_round is not None:
+                self.on_round(self)
 
     @property
     def bound(self) -> float:
@@ -551,13 +562,29 @@ def primal_of(prob: Problem, sched: Schedule) -> Primal:
     return primal
 
 
+@dataclass
+class Resume:
+    """Where a stopped run was (saved after every round by a job): prices, step, best bound, rounds done.  Its
+    best schedule is passed as the `initial` schedule of :func:`solve`."""
+
+    lam: np.ndarray
+    step: float
+    best_bound: float
+    bound_source: str
+    rounds_done: int
+
+
 def solve(fleet: Fleet, opps: Opportunities, cfg: FleetConfig | None = None, problem: Problem | None = None,
-          initial: Schedule | None = None, freeze_until_s: float | None = None) -> FleetSolution:
+          initial: Schedule | None = None, freeze_until_s: float | None = None, pool=None,
+          on_round: Callable[[Coordinator], None] | None = None, resume: Resume | None = None) -> FleetSolution:
     """Schedule a fleet (see the module docstring); the schedule is checked by the checker before it is returned,
     and an action it rejects is dropped (never expected: the pass graphs and the battery repair use its rules).
 
     `initial`: a schedule to start from; `freeze_until_s`: the passes starting before this time (seconds from
-    the horizon start) keep the initial schedule's actions as they are (so every action before it is kept)."""
+    the horizon start) keep the initial schedule's actions as they are (so every action before it is kept).
+    `pool`: what solves the passes of a price round (anything with PassPool's ``solve`` and ``close``, e.g. Ray
+    actors; default: forked processes when ``cfg.workers > 1``); `on_round`: called after every round;
+    `resume`: prices and bound of a stopped run (its best schedule as `initial`)."""
     from eosp.fleet.check import validate
 
     cfg = cfg or FleetConfig()
@@ -567,12 +594,19 @@ def solve(fleet: Fleet, opps: Opportunities, cfg: FleetConfig | None = None, pro
     if freeze_until_s is not None:
         frozen = prob.pass_time[:, 0] < freeze_until_s
         start = start or Primal([np.zeros(0, np.int64)] * len(prob.passes), np.full(len(fleet.tasks), -1, np.int64))
-    pool = PassPool(prob, cfg) if cfg.workers > 1 else None
-    coord = Coordinator(prob, cfg, pool=pool, initial=start, frozen=frozen)
+    own_pool = pool is None and cfg.workers > 1
+    pool = PassPool(prob, cfg) if own_pool else pool
+    coord = Coordinator(prob, cfg, pool=pool, initial=start, frozen=frozen, on_round=on_round)
+    if resume is not None:
+        if len(resume.lam) != len(fleet.tasks):
+            raise ValueError("resume: prices of another fleet")
+        coord.lam, coord.step, coord.start_round = resume.lam.astype(np.float64), resume.step, resume.rounds_done
+        if resume.best_bound < coord.best_bound:
+            coord.best_bound, coord.bound_source = resume.best_bound, resume.bound_source
     try:
         best = coord.run()
     finally:
-        if pool is not None:
+        if own_pool:
             pool.close()
     sched = coord.schedule(best)
     res = validate(fleet, sched, prob.geo)

@@ -1,0 +1,360 @@
+"""Solve a fleet with the price-coordinated fleet solver, the passes of every price round on Ray actors.
+
+    python jobs/solve_fleet.py --fleet-dir FLEET --run-dir runs/fleet-1 --fleet.workers 2 --fleet.time-limit 600
+    ray job submit --working-dir . -- python jobs/solve_fleet.py --fleet-dir /shared/fleet --run-dir /shared/run \\
+        --fleet.workers 64 --mlflow-uri http://mlflow:5000
+
+The same code runs on a laptop (a local Ray with ``--ray.num-cpus``) and on a cluster (``ray job submit``, or
+``--ray.address``).  Each actor owns the passes of a set of satellites (balanced by opportunities) and builds
+their pass graphs once, where they are solved: the fleet goes to the object store once, and a round sends only
+pass ids and priced utilities and gets paths back.  The driver keeps every graph too (its coordinate descent and
+large-neighbourhood moves solve passes one at a time, where a round trip would cost more than the solve).
+
+Faults: an actor that dies mid-round costs nothing but time: the driver solves that actor's passes of the round
+itself (the same deterministic solver, so the round's result is the same), and Ray restarts the actor, which
+builds its graphs again.  After every round the driver writes its state to the run dir (prices, step, bound,
+rounds done, and the best schedule, each file replaced atomically); a driver killed and started again with the
+same run dir resumes from there.  A run dir of another fleet is refused.  (Tests kill an actor in round R with
+the environment variable ``EOSP_FAULT_KILL_ACTOR_ROUND=R``.)
+
+MLflow: one run per job: value, bound and gap against rounds and wall time, per-pass solve times (CSV and a
+plot), the schedule and a per-satellite summary as artifacts.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from eosp.args import Parser, add_config_args, config_from_args, prefixed_config, run_job  # noqa: E402
+from eosp.config import RayConfig, flatten  # noqa: E402
+from eosp.solvers.fleet import FleetConfig  # noqa: E402
+
+RUN_KIND = "fleet-run"
+STATE = "state.npz"
+BEST = "best.parquet"
+META = "run.json"
+
+
+@dataclass
+class SolveFleetJob:
+    """A fleet solve as a Ray job (``jobs/solve_fleet.py``)."""
+
+    fleet_dir: str = ""
+    """Fleet directory to solve (``eosp import`` or ``eosp generate --fleet``)."""
+    run_dir: str = ""
+    """Where the job keeps its state after every round and writes schedule.parquet and summary.csv; started again
+    with the same run dir, it resumes."""
+    fleet: FleetConfig = field(default_factory=FleetConfig)
+    mlflow_uri: str = ""
+    """MLflow tracking URI (empty: sqlite mlflow.db in the working directory)."""
+    experiment: str = "eosp-fleet"
+    """MLflow experiment."""
+    ray: RayConfig = field(default_factory=RayConfig)
+
+
+class PassWorker:
+    """A Ray actor holding the pass graphs of some passes (built here, once) and solving them on demand."""
+
+    def __init__(self, fleet_opps, passes: list[int], cfg: FleetConfig):
+        from eosp.fleet.geometry import Geometry
+        from eosp.fleet.passgraph import build_pass
+        from eosp.fleet.slew import LineOfSight
+
+        fleet, opps = fleet_opps
+        los = LineOfSight(fleet, Geometry(fleet))
+        off = opps.pass_offsets()
+        self.cfg = cfg
+        self.graphs = {p: build_pass(fleet, opps, los, p, off) for p in passes}
+
+    def ready(self) -> str:
+        """The Ray node this actor runs on (once its graphs are built)."""
+        import ray
+
+        return ray.get_runtime_context().get_node_id()
+
+    def solve(self, passes: list[int], utils: list[np.ndarray]) -> list[tuple]:
+        """(result, seconds) of each pass."""
+        from eosp.solvers.fleet import solve_pass_graph
+
+        out = []
+        for p, u in zip(passes, utils):
+            t = time.perf_counter()
+            res = solve_pass_graph(self.graphs[p], u, self.cfg)
+            out.append((res, time.perf_counter() - t))
+        return out
+
+
+def assign(prob, workers: int) -> np.ndarray:
+    """Worker of every pass: whole satellites per worker (an actor then propagates only its satellites), the
+    heaviest satellites (opportunities) first onto the least loaded worker."""
+    sat_of = np.array([pg.satellite for pg in prob.passes], dtype=np.int64)
+    size = np.array([len(pg.rows) for pg in prob.passes], dtype=np.int64)
+    load_sat = np.bincount(sat_of, weights=size, minlength=len(prob.fleet.satellites))
+    owner_sat = np.zeros(len(load_sat), dtype=np.int64)
+    load = np.zeros(workers)
+    for s in np.argsort(-load_sat, kind="stable").tolist():
+        k = int(np.argmin(load))
+        owner_sat[s] = k
+        load[k] += load_sat[s]
+    return owner_sat[sat_of]
+
+
+class RayPassPool:
+    """The passes of a price round solved by Ray actors (the interface of :class:`eosp.solvers.fleet.PassPool`)."""
+
+    def __init__(self, prob, cfg: FleetConfig):
+        import ray
+
+        self.prob, self.cfg = prob, cfg
+        self.owner = assign(prob, cfg.workers)
+        ref = ray.put((prob.fleet, prob.opps))
+        actor = ray.remote(num_cpus=1, max_restarts=2, max_task_retries=0)(PassWorker)
+        self.actors = [actor.remote(ref, np.flatnonzero(self.owner == k).tolist(), cfg) for k in range(cfg.workers)]
+        self.nodes = ray.get([a.ready.remote() for a in self.actors])  # node of each actor
+        self.calls = 0
+        self.faults = 0  # actor calls lost to a dead actor (their passes solved by the driver)
+        self.times: list[tuple[int, float, int]] = []  # (pass, seconds, worker) of every pass an actor solved
+        self.kill_round = int(os.environ.get("EOSP_FAULT_KILL_ACTOR_ROUND", "0") or 0)
+
+    def solve(self, passes: list[int], utils: list[np.ndarray], deadline: float | None) -> dict | None:
+        import ray
+        from ray.exceptions import RayActorError
+
+        from eosp.solvers.fleet import solve_pass
+
+        self.calls += 1
+        owner = self.owner[np.asarray(passes, dtype=np.int64)] if passes else np.zeros(0, np.int64)
+        refs, parts = [], []
+        for k in range(len(self.actors)):
+            idx = np.flatnonzero(owner == k).tolist()
+            if idx:
+                ids = [passes[i] for i in idx]
+                refs.append(self.actors[k].solve.remote(ids, [utils[i] for i in idx]))
+                parts.append((k, ids, [utils[i] for i in idx]))
+        if self.calls == self.kill_round and self.actors:
+            ray.kill(self.actors[0], no_restart=False)  # a worker lost mid-round (tests)
+        timeout = None if deadline is None else max(0.0, deadline - time.perf_counter())
+        ready, _ = ray.wait(refs, num_returns=len(refs), timeout=timeout)
+        if len(ready) < len(refs):
+            return None  # the deadline came first
+        out = {}
+        for ref, (k, ids, us) in zip(refs, parts):
+            try:
+                results = ray.get(ref)
+            except RayActorError:
+                self.faults += 1
+                results = [(solve_pass(self.prob, p, u, self.cfg), 0.0) for p, u in zip(ids, us)]
+            else:
+                self.times += [(p, s, k) for p, (_, s) in zip(ids, results)]
+            out.update({p: r for p, (r, _) in zip(ids, results)})
+        return out
+
+    def close(self) -> None:
+        import ray
+
+        for a in self.actors:
+            ray.kill(a)
+
+
+def _load_state(run: Path, fleet, fp: str):
+    """The saved state of a run dir of this fleet: (Resume, best schedule), or None for a new run."""
+    from eosp.errors import InputError
+    from eosp.fleet.io import read_schedule
+    from eosp.solvers.fleet import Resume
+
+    meta_path = run / META
+    if not meta_path.exists():
+        return None
+    try:
+        meta = json.loads(meta_path.read_text())
+    except ValueError:
+        raise InputError(meta_path, "not readable JSON: not a fleet run dir eosp wrote") from None
+    if meta.get("fingerprint") != fp:
+        raise InputError(f"--run-dir {run}", f"a run dir of another fleet ({meta.get('case_id', '?')}): use another "
+                                             "--run-dir")
+    if not (run / STATE).exists() or not (run / BEST).exists():
+        return None
+    with np.load(run / STATE, allow_pickle=False) as z:  # never unpickle a file
+        state = {k: z[k] for k in z.files}
+    if len(state["lam"]) != len(fleet.tasks):
+        raise InputError(run / STATE, "prices of another fleet")
+    best, _ = read_schedule(run / BEST, fleet)
+    return Resume(state["lam"], float(state["step"]), float(state["best_bound"]), str(state["bound_source"]),
+                  int(state["rounds_done"])), best
+
+
+class Checkpoint:
+    """After every round: state and best schedule into the run dir (atomic replaces), metrics to MLflow."""
+
+    def __init__(self, run: Path, fleet, mlflow, W: float):
+        self.run, self.fleet, self.mlflow, self.W = run, fleet, mlflow, W
+        self.t0 = time.perf_counter()
+        self.last_value = -1.0
+
+    def __call__(self, coord) -> None:
+        from eosp.atomic import atomic_path
+        from eosp.fleet.io import write_schedule
+
+        with atomic_path(self.run / STATE) as tmp:
+            with open(tmp, "wb") as fh:
+                np.savez(fh, lam=coord.lam, step=np.float64(coord.step), best_bound=np.float64(coord.best_bound),
+                         bound_source=np.str_(coord.bound_source), rounds_done=np.int64(coord.rounds_done))
+        if coord.best.value != self.last_value:
+            write_schedule(coord.schedule(coord.best), self.fleet, self.run / BEST, overwrite=True,
+                           info={"value": coord.best.value / self.W, "partial": True})
+            self.last_value = coord.best.value
+        v, b = coord.best.value / self.W, min(1.0, coord.best_bound / self.W)
+        if self.mlflow is not None:
+            self.mlflow.log_metrics({"value": v, "bound": b, "gap": (b - v) / b if b > 0 else 0.0,
+                                     "wall_s": time.perf_counter() - self.t0}, step=coord.rounds_done)
+
+
+def summary_rows(fleet, sched) -> list[dict]:
+    """Per satellite: observations, weight served, seconds observing."""
+    ti = fleet.task_index()
+    rows = []
+    for sid in fleet.satellites.ids.tolist():
+        m = sched.satellite == sid
+        tasks = np.array([ti[t] for t in sched.task[m].tolist()], dtype=np.int64)
+        rows.append({"satellite": sid, "observations": int(m.sum()),
+                     "weight": float(fleet.tasks.weight[tasks].sum()) if len(tasks) else 0.0,
+                     "observing_s": float((sched.end_us[m] - sched.start_us[m]).sum() / 1e6)})
+    return rows
+
+
+def run(job: SolveFleetJob) -> dict:
+    import csv
+
+    import mlflow
+
+    from eosp.atomic import atomic_path
+    from eosp.config import default_mlflow_uri
+    from eosp.fleet.io import fingerprint, read_fleet, write_schedule
+    from eosp.jobs.preflight import make_run_dir
+    from eosp.jobs.ray_init import init_ray
+    from eosp.solvers.fleet import Problem, solve
+
+    import logging
+
+    logging.getLogger("mlflow").setLevel(logging.WARNING)  # its INFO lines (creating tables, experiments) are noise
+    t0 = time.perf_counter()
+    fleet, opps = read_fleet(job.fleet_dir)
+    fp = fingerprint(fleet)
+    run_dir = Path(job.run_dir)
+    saved = _load_state(run_dir, fleet, fp) if run_dir.is_dir() else None
+    make_run_dir(run_dir, replace=False, kind=RUN_KIND)
+    (run_dir / META).write_text(json.dumps({"fingerprint": fp, "case_id": fleet.case_id,
+                                            "fleet_dir": str(Path(job.fleet_dir).resolve())}, indent=1))
+    prob = Problem.build(fleet, opps)
+    t_build = time.perf_counter() - t0
+    pool = None
+    if job.fleet.workers > 1:
+        init_ray(job.ray.address, max(job.ray.num_cpus, job.fleet.workers))
+        pool = RayPassPool(prob, job.fleet)
+    t_pool = time.perf_counter() - t0
+    mlflow.set_tracking_uri(default_mlflow_uri(job.mlflow_uri))
+    mlflow.set_experiment(job.experiment)
+    with mlflow.start_run(run_name=run_dir.name):
+        mlflow.log_params({k: str(v) for k, v in flatten(job).items()})
+        mlflow.set_tags({"case": fleet.case_id, "resumed": str(saved is not None)})
+        ckpt = Checkpoint(run_dir, fleet, mlflow, prob.total_weight)
+        resume, initial = (saved if saved is not None else (None, None))
+        try:
+            sol = solve(fleet, opps, job.fleet, problem=prob, initial=initial, pool=pool, on_round=ckpt, resume=resume)
+        finally:
+            if pool is not None:
+                pool.close()
+        wall = time.perf_counter() - t0
+        info = {"value": sol.value, "bound": sol.bound, "gap": sol.gap, "solver": "fleet", "seconds": round(wall, 3),
+                "pass_solver": job.fleet.pass_solver, "rounds": sol.info["rounds"]}
+        write_schedule(sol.schedule, fleet, run_dir / "schedule.parquet", overwrite=True, info=info)
+        with atomic_path(run_dir / "summary.csv") as tmp:
+            with open(tmp, "w", newline="") as fh:
+                rows = summary_rows(fleet, sol.schedule)
+                w = csv.DictWriter(fh, fieldnames=list(rows[0]) if rows else ["satellite"])
+                w.writeheader()
+                w.writerows(rows)
+        times = pool.times if pool is not None else []
+        with atomic_path(run_dir / "pass_times.csv") as tmp:
+            with open(tmp, "w", newline="") as fh:
+                w = csv.writer(fh)
+                w.writerow(["pass", "opportunities", "seconds", "worker"])
+                w.writerows([(p, len(prob.passes[p].rows), round(s, 6), k) for p, s, k in times])
+        first_t = sol.history[0][0] if sol.history else None
+        result = {"value": sol.value, "bound": sol.bound, "gap": sol.gap, "rounds": sol.info["rounds"],
+                  "pass_solves": sol.info["pass_solves"], "passes": len(prob.passes), "build_s": round(t_build, 2),
+                  "pool_s": round(t_pool - t_build, 2), "first_schedule_s": None if first_t is None else
+                  round(first_t + t_build, 2), "wall_s": round(wall, 2), "faults": 0 if pool is None else pool.faults,
+                  "workers": job.fleet.workers, "nodes": 0 if pool is None else len(set(pool.nodes)),
+                  "resumed_from_round": 0 if resume is None else resume.rounds_done,
+                  "history": [(round(t + t_build, 3), v, b) for t, v, b in sol.history]}
+        (run_dir / "result.json").write_text(json.dumps(result, indent=1))
+        mlflow.log_metrics({"final/value": sol.value, "final/bound": sol.bound or 0.0, "final/gap": sol.gap or 0.0,
+                            "final/wall_s": wall, "final/faults": result["faults"]})
+        for name in ("schedule.parquet", "summary.csv", "pass_times.csv", "result.json"):
+            mlflow.log_artifact(str(run_dir / name))
+    return result
+
+
+def main(argv: list[str] | None = None, prog: str = "solve_fleet.py") -> int:
+    return run_job(_main, argv, prog)
+
+
+def _main(argv: list[str] | None) -> int:
+    from eosp import errors
+    from eosp.errors import InputError
+    from eosp.fleet.io import is_fleet_dir
+    from eosp.jobs.preflight import check_mlflow, is_run_dir, require_findable
+
+    p = Parser(prog=errors.PROG, description=__doc__.splitlines()[0])
+    add_config_args(p, SolveFleetJob)
+    ns = p.parse_args(argv)
+    job = config_from_args(SolveFleetJob, ns)
+    for flag, value in (("--fleet-dir", job.fleet_dir), ("--run-dir", job.run_dir)):
+        if not value:
+            raise InputError(flag, "required")
+        require_findable(value, flag)
+    if not is_fleet_dir(job.fleet_dir):
+        raise InputError(f"--fleet-dir {job.fleet_dir}", "not a fleet directory (eosp import / eosp generate --fleet)")
+    if job.fleet.pass_solver == "policy":
+        raise InputError("--fleet.pass-solver", "policy: no model trained on fleet passes is shipped yet")
+    run_dir = Path(job.run_dir)
+    if run_dir.is_dir() and any(run_dir.iterdir()) and not is_run_dir(run_dir, RUN_KIND):
+        raise InputError(f"--run-dir {run_dir}", "exists and is not a fleet run dir eosp wrote: refusing to write "
+                                                 "into it")
+    check_mlflow(job.mlflow_uri)
+    if job.ray.address and job.fleet.workers > 1:
+        _require_ray_address(job.ray.address)
+    r = run(job)
+    gap = "" if r["gap"] is None else f", gap {r['gap']:.4%}"
+    print(f"[solve_fleet] {job.run_dir}: WCR {r['value']:.6f}, bound {r['bound']:.6f}{gap}; {r['rounds']} rounds, "
+          f"{r['pass_solves']} pass solves on {r['workers']} worker(s), {r['faults']} lost to faults "
+          f"({r['wall_s']:.1f} s)")
+    return 0
+
+
+def _require_ray_address(address: str) -> None:
+    """One line, before any work, when the Ray address does not answer (host:port of a GCS, or ray://)."""
+    import socket
+
+    from eosp.errors import InputError
+
+    if address in ("auto", "local"):
+        return
+    hostport = address.split("://", 1)[-1]
+    host, _, port = hostport.rpartition(":")
+    try:
+        socket.create_connection((host or "127.0.0.1", int(port)), timeout=5).close()
+    except (OSError, ValueError) as exc:
+        raise InputError(f"--ray.address {address}", f"unreachable ({exc.__class__.__name__}: {exc})") from None
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,114 @@
+"""The fleet solver on Ray (jobs/solve_fleet.py): two nodes give the one-process result, a killed actor and a
+killed driver are survived, and bad run dirs or addresses are refused in one line."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from eosp.fleet.generate import FleetGenConfig, generate
+from eosp.fleet.geometry import Geometry
+from eosp.fleet.io import read_schedule, write_fleet
+from eosp.fleet.opportunities import compute
+from eosp.jobs import solve_fleet as job_mod
+from eosp.solvers.fleet import FleetConfig
+
+ROUNDS = 2
+
+
+@pytest.fixture(scope="module")
+def fleet_dir(tmp_path_factory):
+    f = generate(FleetGenConfig(satellites=6, tasks=400, hours=4.0, window_min_h=1.0, window_max_h=3.0, seed=5))
+    out = tmp_path_factory.mktemp("fleet") / "fleet"
+    write_fleet(f, compute(f, Geometry(f)), out)
+    return out
+
+
+@pytest.fixture(scope="module")
+def two_nodes():
+    """A Ray cluster of two nodes on this machine (one CPU each), the driver attached to it."""
+    import ray
+    from ray.cluster_utils import Cluster
+
+    cluster = Cluster(initialize_head=True, head_node_args={"num_cpus": 1})
+    cluster.add_node(num_cpus=1)
+    cluster.wait_for_nodes()
+    yield cluster
+    ray.shutdown()
+    cluster.shutdown()
+
+
+def job(fleet_dir, run_dir, workers=1, address="", rounds=ROUNDS, mlflow_dir=None):
+    return job_mod.SolveFleetJob(
+        fleet_dir=str(fleet_dir), run_dir=str(run_dir),
+        fleet=FleetConfig(pass_solver="exact", rounds=rounds, workers=workers, seed=0),
+        mlflow_uri=f"sqlite:///{mlflow_dir or run_dir.parent}/mlflow.db",
+        ray=job_mod.RayConfig(address=address, num_cpus=2))
+
+
+def schedule_rows(fleet_dir, path):
+    from eosp.fleet.io import read_fleet
+
+    fleet, _ = read_fleet(fleet_dir, with_opportunities=False)
+    s, _ = read_schedule(path, fleet)
+    return sorted(zip(s.satellite.tolist(), s.task.tolist(), s.start_us.tolist()))
+
+
+def test_two_nodes_give_the_single_process_schedule_and_a_killed_actor_costs_nothing(fleet_dir, two_nodes,
+                                                                                    tmp_path, monkeypatch):
+    alone = job_mod.run(job(fleet_dir, tmp_path / "alone"))
+    spread = job_mod.run(job(fleet_dir, tmp_path / "spread", workers=2, address=two_nodes.address))
+    assert spread["nodes"] == 2  # one actor on each node
+    assert spread["faults"] == 0
+    assert (spread["value"], spread["bound"]) == (alone["value"], alone["bound"])
+    assert alone["value"] > 0 and alone["bound"] >= alone["value"]
+    assert schedule_rows(fleet_dir, tmp_path / "spread/schedule.parquet") == \
+        schedule_rows(fleet_dir, tmp_path / "alone/schedule.parquet")
+    times = (tmp_path / "spread/pass_times.csv").read_text().splitlines()
+    assert times[0] == "pass,opportunities,seconds,worker" and len(times) > 10
+
+    monkeypatch.setenv("EOSP_FAULT_KILL_ACTOR_ROUND", "1")  # actor 0 killed as the first round is sent
+    hurt = job_mod.run(job(fleet_dir, tmp_path / "hurt", workers=2, address=two_nodes.address))
+    assert hurt["faults"] >= 1
+    assert (hurt["value"], hurt["bound"]) == (alone["value"], alone["bound"])
+    assert schedule_rows(fleet_dir, tmp_path / "hurt/schedule.parquet") == \
+        schedule_rows(fleet_dir, tmp_path / "alone/schedule.parquet")
+
+
+def test_a_restarted_driver_resumes_from_its_run_dir(fleet_dir, tmp_path):
+    run_dir = tmp_path / "run"
+    first = job_mod.run(job(fleet_dir, run_dir, rounds=1))
+    with np.load(run_dir / "state.npz", allow_pickle=False) as z:
+        assert int(z["rounds_done"]) == 1 and z["lam"].shape == (400,)
+    again = job_mod.run(job(fleet_dir, run_dir, rounds=3))
+    assert again["resumed_from_round"] == 1 and again["rounds"] == 3
+    assert again["value"] >= first["value"] - 1e-12 and again["bound"] <= first["bound"] + 1e-12
+    assert json.loads((run_dir / "result.json").read_text())["resumed_from_round"] == 1
+
+
+def test_bad_run_dirs_and_addresses_are_refused_in_one_line(fleet_dir, tmp_path, capsys):
+    other = generate(FleetGenConfig(satellites=2, tasks=30, hours=2.0, seed=9))
+    other_dir = tmp_path / "other"
+    write_fleet(other, compute(other, Geometry(other)), other_dir)
+    run_dir = tmp_path / "run"
+    job_mod.run(job(other_dir, run_dir, rounds=1))
+    stranger = tmp_path / "stranger"
+    stranger.mkdir()
+    (stranger / "notes.txt").write_text("mine")
+    cases = [
+        (["--run-dir", str(run_dir)], "a run dir of another fleet"),
+        (["--run-dir", str(stranger)], "is not a fleet run dir eosp wrote"),
+        (["--run-dir", str(tmp_path / "new"), "--fleet.workers", "2", "--ray.address", "127.0.0.1:1"], "unreachable"),
+        (["--run-dir", str(tmp_path / "new"), "--fleet.pass-solver", "policy"], "no model trained on fleet passes"),
+        (["--run-dir", str(tmp_path / "new"), "--fleet.rounds", "0"], "--fleet.rounds"),
+    ]
+    for extra, message in cases:
+        try:
+            rc = job_mod.main(["--fleet-dir", str(fleet_dir), "--mlflow-uri", f"sqlite:///{tmp_path}/m.db", *extra])
+        except SystemExit as exc:  # flags are refused by the parser itself
+            rc = exc.code
+        err = capsys.readouterr().err.strip().splitlines()
+        assert rc == 2 and len(err) == 1 and message in err[0], (extra, err)
+    assert (stranger / "notes.txt").read_text() == "mine" and not (tmp_path / "new").exists()
