@@ -40,7 +40,10 @@ def is_fleet_command(argv: list[str]) -> bool:
     if path is None or argv[0] not in ("import", "info", "solve", "validate", "report"):
         return False
     from eosp.cli.fleet import is_aeossp_case, is_fleet_dir
+    from eosp.cli.onera import wants as onera
 
+    if onera(argv):
+        return True
     return is_aeossp_case(path) if argv[0] == "import" else is_fleet_dir(path)
 
 
@@ -98,6 +101,10 @@ def parser(command: str) -> Parser:
 
 def route(argv: list[str]) -> int:
     """Run a fleet command line (:func:`is_fleet_command`); user errors are one line and exit 2."""
+    from eosp.cli import onera
+
+    if onera.wants(argv):  # an ONERA .pb file or fleet directory: its own model and commands
+        return onera.route(argv)
     command = argv[0]
     ns = parser(command).parse_args(argv[1:])
     try:
