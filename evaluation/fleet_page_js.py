@@ -19,6 +19,7 @@ const page = {drawn: {}, ready: false};
 window.fleetPage = page;
 const fmt = t => new Date(t0 + Math.round(t * 1000)).toISOString().replace('T', ' ').replace(/\.\d+Z$/, '')
     .replace('Z', '') + ' UTC';
+const win = t => H > 86400 ? fmt(t).slice(5, 19) : fmt(t).slice(11, 19);  // date too when the horizon is longer than a day
 const num = (x, d) => (x === null || x === undefined) ? '-' : (+x).toFixed(d);
 const esc = s => String(s).replace(/[&<>"']/g, c => ({'&': '&amp;', '<': '&lt;', '>': '&gt;', '"': '&quot;',
   "'": '&#39;'}[c]));
@@ -197,7 +198,7 @@ function drawMap() {
   if (D.tracks) {
     c.lineWidth = 1;
     D.tracks.forEach(([la, lo], k) => {
-      c.strokeStyle = 'hsla(' + Math.round(k * 137.5 % 360) + ',60%,40%,0.45)'; c.beginPath();
+      c.strokeStyle = 'hsla(' + Math.round(k * 137.5 % 360) + ',60%,40%,' + (NS > 40 ? 0.12 : 0.45) + ')'; c.beginPath();
       let prev = null;
       for (let i = 0; i < la.length; i++) {
         const l = wl(lo[i]);
@@ -274,7 +275,7 @@ function drawTable() {
     const kind = (missed && V === 0 && R && i !== undefined) ? R.kinds[R.kind[i]] : '';
     return "<tr data-task='" + esc(tk.id[t]) + "' data-status='" + (missed ? 'missed' : 'observed') +
       "' data-kind='" + esc(kind) + "'><td>" + esc(tk.id[t]) + '</td><td>' + tk.w[t] + '</td><td>' +
-      fmt(tk.rel[t]).slice(11, 19) + ' to ' + fmt(tk.due[t]).slice(11, 19) + '</td><td' + (missed ? " class='bad'" : '') +
+      win(tk.rel[t]) + ' to ' + win(tk.due[t]) + '</td><td' + (missed ? " class='bad'" : '') +
       '>' + esc(statusText(t)) + "</td><td class='reason'>" + (missed ? esc(reasonText(t)) : '') + '</td></tr>';
   }).join('');
   const pg = document.getElementById('pager');
