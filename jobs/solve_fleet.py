@@ -294,6 +294,7 @@ def run(job: SolveFleetJob) -> dict:
                   round(first_t + t_build, 2), "wall_s": round(wall, 2), "faults": 0 if pool is None else pool.faults,
                   "workers": job.fleet.workers, "nodes": 0 if pool is None else len(set(pool.nodes)),
                   "resumed_from_round": 0 if resume is None else resume.rounds_done,
+                  "price_round_s": sol.info["price_round_s"],
                   "history": [(round(t + t_build, 3), v, b) for t, v, b in sol.history]}
         (run_dir / "result.json").write_text(json.dumps(result, indent=1))
         mlflow.log_metrics({"final/value": sol.value, "final/bound": sol.bound or 0.0, "final/gap": sol.gap or 0.0,

@@ -227,6 +227,7 @@ class Coordinator:
     pool: PassPool | None = None  # workers for the price rounds: processes (--workers > 1) or Ray actors
     on_round: Callable[[Coordinator], None] | None = None  # called after every round (checkpoints, MLflow)
     start_round: int = 0  # rounds a resumed run has done already
+    round_s: list[float] = field(default_factory=list)  # wall seconds of every finished price round
     initial: Primal | None = None  # a schedule to start from (--init)
     frozen: np.ndarray | None = None  # bool per pass: kept as in `initial`, never solved again (--freeze-until)
 
@@ -496,8 +497,10 @@ class Coordinator:
                 break  # proven optimal (energy relaxed in the bound, kept in the schedule)
             if cfg.pass_solver == "exact" or rounds == 0:
                 before = self.best_bound
+                t_round = time.perf_counter()
                 if self.price_round(deadline) is None:
                     break
+                self.round_s.append(time.perf_counter() - t_round)
                 stall = 0 if self.best_bound < before - 1e-9 else stall + 1
                 if stall >= 3:
                     self.step, stall = self.step / 2, 0
@@ -622,7 +625,7 @@ def solve(fleet: Fleet, opps: Opportunities, cfg: FleetConfig | None = None, pro
     info = {"pass_solver": cfg.pass_solver, "rounds": coord.rounds_done, "pass_solves": coord.pass_solves,
             "passes": len(prob.passes), "build_s": round(prob.build_s, 3), "checker_drops": dropped,
             "battery_barred": int(coord.barred.sum()), "metrics": res.metrics, "interrupted": coord.interrupted,
-            "bound_source": coord.bound_source,
+            "bound_source": coord.bound_source, "price_round_s": [round(x, 4) for x in coord.round_s],
             "no_lagrangian_bound_because": None if coord.bound_source == "lagrangian" else (
                 f"pass solver {cfg.pass_solver} proves no pass bound" if cfg.pass_solver != "exact"
                 else "a pass graph is not FIFO" if prob.fifo_violations

@@ -211,7 +211,7 @@ def test_manifests_kinds_and_api_fields():
                                                                 for v in g["rayStartParams"].values()]:
                 assert isinstance(value, str)  # map[string]string
     assert kinds["RayCluster"] == ["eosp"]
-    assert set(kinds["RayJob"]) == {"eosp-train", "eosp-tune", "eosp-evaluate", "eosp-build-shards"}
+    assert set(kinds["RayJob"]) == {"eosp-train", "eosp-tune", "eosp-evaluate", "eosp-build-shards", "eosp-solve-fleet"}
     assert set(kinds["PersistentVolumeClaim"]) == {"eosp-shared", "eosp-mlflow"}
     assert kinds["Deployment"] == ["mlflow"] and kinds["Service"] == ["mlflow"]
 
@@ -351,7 +351,7 @@ def entry_points(tmp_path_factory) -> list[tuple[str, str, list[str]]]:
 
 def test_rayjob_entry_points_survive_the_submitter_shell(entry_points):
     jobs = {where.split(":")[1] for where, _, _ in entry_points if ":" in where}
-    assert jobs == {"eosp-train", "eosp-tune", "eosp-evaluate", "eosp-build-shards"}
+    assert jobs == {"eosp-train", "eosp-tune", "eosp-evaluate", "eosp-build-shards", "eosp-solve-fleet"}
     by_job = {}
     for where, script, args in entry_points:
         by_job.setdefault(where, []).append((script, args))
@@ -376,6 +376,8 @@ def test_job_entry_points_parse_their_arguments(entry_points, capsys):
 
     import eosp.jobs.build_shards
     import eosp.jobs.evaluate
+    import eosp.jobs.generate_fleets
+    import eosp.jobs.solve_fleet
     import eosp.jobs.tune
     from eosp.jobs.train import parse
 
@@ -405,14 +407,28 @@ def test_job_entry_points_parse_their_arguments(entry_points, capsys):
                 assert eosp.jobs.evaluate.main(args) == 0
             cfg = run.call_args.args[0]
             assert all(d.startswith("/shared/data/") for d in cfg.data) and cfg.out.startswith("/shared/"), where
+        elif script == "generate_fleets.py":
+            with mock.patch.object(eosp.jobs.generate_fleets, "run", return_value={"fleets": [], "wall_seconds": 0}) as run:
+                assert eosp.jobs.generate_fleets.main(args) == 0
+            assert run.call_args.args[0].out.startswith("/shared/fleets/"), where
+        elif script == "solve_fleet.py":
+            result = {"value": 0.5, "bound": 0.6, "gap": 0.1, "rounds": 1, "pass_solves": 1, "workers": 16,
+                      "faults": 0, "wall_s": 1.0}
+            with mock.patch.object(eosp.jobs.solve_fleet, "run", return_value=result) as run, \
+                    mock.patch("eosp.fleet.io.is_fleet_dir", return_value=True):
+                assert eosp.jobs.solve_fleet.main(args) == 0
+            job = run.call_args.args[0]
+            assert job.fleet_dir.startswith("/shared/fleets/") and job.run_dir.startswith("/shared/runs/"), where
+            assert job.fleet.workers == 16 and job.fleet.time_limit == 600, where
         else:
             continue
         seen.add((where, script))
     no_network.stop()
     for patch in no_data:
         patch.stop()
-    assert {s for _, s in seen} == {"train.py", "build_shards.py", "tune.py", "evaluate.py"}
-    assert len(seen) >= 7  # the four RayJobs and the examples of the launcher, compose and RayCluster files
+    assert {s for _, s in seen} == {"train.py", "build_shards.py", "tune.py", "evaluate.py", "generate_fleets.py",
+                                    "solve_fleet.py"}
+    assert len(seen) >= 9  # the four RayJobs and the examples of the launcher, compose and RayCluster files
 
 
 def test_runtime_env_file_excludes_local_state():
