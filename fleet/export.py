@@ -55,7 +55,7 @@ def czml_document(fleet: Fleet, schedule: Schedule, geo: Geometry, name: str = "
                Packet(id="eosp", properties={"eosp": CZML_KIND})]
     t_s = sample_times(geo, TRACK_STEP_S)
     for k, sid in enumerate(fleet.satellites.ids.tolist()):
-        pos = positions(geo, k, t_s)
+        pos = np.round(positions(geo, k, t_s), 1)  # decimetres: far below what a globe shows
         samples = np.column_stack([t_s.astype(np.float64), pos]).ravel().tolist()
         packets.append(Packet(
             id=f"sat/{sid}", name=str(sid), availability=horizon,
