@@ -69,7 +69,10 @@ function statusText(t) {
 const G = document.getElementById('gantt');
 const LEFT = 92, TOP = 30, ROWH = NS > 60 ? 14 : 28;
 let GW = 0, PW = 0;
-const gx = t => LEFT + t / H * PW;
+let VA = 0, VB = H;  // the time range shown (drag across the chart to zoom, double-click to see the horizon)
+const gx = t => LEFT + (t - VA) / (VB - VA) * PW;
+const tx = x => VA + (x - LEFT) / PW * (VB - VA);
+const STEPS = [60, 300, 600, 1800, 3600, 3 * 3600, 6 * 3600, 86400];
 function drawGantt() {
   const vd = D.views[V];
   GW = Math.max(900, G.parentElement.clientWidth || 1200); PW = GW - LEFT - 12;
@@ -78,16 +81,19 @@ function drawGantt() {
   c.fillStyle = '#fff'; c.fillRect(0, 0, G.width, G.height);
   const n = {bars: 0, slews: 0, eclipses: 0, violations: 0, battery_points: 0};
   c.font = '11px sans-serif'; c.fillStyle = '#333'; c.textBaseline = 'middle';
-  // hour ticks
-  const step = H > 2 * 86400 ? 6 * 3600 : H > 6 * 3600 ? 3600 : H > 3600 ? 600 : 60;
-  const first = Math.ceil(t0 / 1000 / step) * step - t0 / 1000;
+  // time ticks: about 12 to 24 over the range shown
+  const span = VB - VA, step = STEPS.find(s => span / s <= 24) || 86400;
+  const first = Math.ceil((t0 / 1000 + VA) / step) * step - t0 / 1000;
   c.strokeStyle = '#eee';
-  for (let t = first; t <= H; t += step) {
+  for (let t = first; t <= VB; t += step) {
     const x = gx(t);
     c.beginPath(); c.moveTo(x, TOP - 4); c.lineTo(x, G.height); c.stroke();
-    c.fillStyle = '#333'; c.fillText(fmt(t).slice(11, 16), x - 14, 12);
+    c.fillStyle = '#333'; c.fillText(span > 86400 ? fmt(t).slice(5, 16) : fmt(t).slice(11, 16), x - 14, 12);
   }
-  c.fillText(fmt(0).slice(0, 10) + ' (UTC)', 4, 12);
+  c.fillStyle = '#fff'; c.fillRect(0, 0, LEFT - 2, TOP - 2);
+  c.fillStyle = '#333'; c.fillText(fmt(VA).slice(0, 10) + ' UTC', 4, 12);
+  for (let k = 0; k < NS; k++) { c.fillText(D.sats[k], 4, TOP + k * ROWH + ROWH / 2); }
+  c.save(); c.beginPath(); c.rect(LEFT, 0, PW, G.height); c.clip();
   for (let k = 0; k < NS; k++) {
     const y = TOP + k * ROWH;
     c.fillStyle = '#fffbe6'; c.fillRect(LEFT, y + 1, PW, ROWH - 2);
@@ -96,7 +102,6 @@ function drawGantt() {
       const e = D.eclipses[k];
       for (let j = 0; j < e[0].length; j++) { c.fillRect(gx(e[0][j]), y + 1, Math.max(1, gx(e[1][j]) - gx(e[0][j])), ROWH - 2); n.eclipses++; }
     }
-    c.fillStyle = '#333'; c.fillText(D.sats[k], 4, y + ROWH / 2);
     const obs = vd.by[k];
     if (vd.slew) {
       c.fillStyle = '#ff9f1c';
@@ -128,6 +133,7 @@ function drawGantt() {
     }
     c.lineWidth = 1;
   }
+  c.restore();
   page.drawn.gantt = n;
   G.dataset.bars = n.bars; G.dataset.violations = n.violations;
 }
@@ -135,7 +141,7 @@ function bsearch(a, f) { let lo = 0, hi = a.length; while (lo < hi) { const m = 
 function ganttHover(mx, my) {
   const vd = D.views[V], k = Math.floor((my - TOP) / ROWH);
   if (k < 0 || k >= NS || mx < LEFT) return null;
-  const t = (mx - LEFT) / PW * H, tol = 3 / PW * H, sat = D.sats[k];
+  const t = tx(mx), tol = 3 / PW * (VB - VA), sat = D.sats[k];
   if (vd.viol) for (const [kk, tv, text] of vd.viol) if (kk === k && tv !== null && Math.abs(tv - t) <= tol * 2) return 'violation: ' + text;
   const obs = vd.by[k];
   const j = bsearch(obs, i => vd.en[i] >= t - tol);
@@ -248,6 +254,22 @@ function hook(el, f) {
   el.addEventListener('mouseleave', () => { tip.style.display = 'none'; });
 }
 hook(G, ganttHover); hook(M, mapHover);
+page.zoom = function (a, b) {  // show [a, b] seconds (clamped to the horizon, at least a minute); no args: all
+  if (a === undefined) { VA = 0; VB = H; } else {
+    a = Math.max(0, Math.min(a, b)); b = Math.min(H, Math.max(a + 60, b));
+    VA = a; VB = b;
+  }
+  drawGantt(); return [VA, VB];
+};
+page.view = () => [VA, VB];
+let drag = null;
+G.addEventListener('mousedown', e => { const r = G.getBoundingClientRect(); if (e.clientX - r.left >= LEFT) drag = e.clientX - r.left; });
+G.addEventListener('mouseup', e => {
+  const r = G.getBoundingClientRect(), x = e.clientX - r.left;
+  if (drag !== null && Math.abs(x - drag) > 5) page.zoom(tx(Math.min(x, drag)), tx(Math.max(x, drag)));
+  drag = null;
+});
+G.addEventListener('dblclick', () => page.zoom());
 
 // ------------------------------------------------------------------ task table
 const PAGE = 200;

@@ -295,7 +295,8 @@ th { background: #f0f0f0; } th.sort { cursor: pointer; } th.sort:hover { backgro
 
 _BODY = """
 <h2>Gantt: what each satellite does when (UTC)</h2>
-<p>Schedule drawn: <select id='view'></select></p>
+<p>Schedule drawn: <select id='view'></select> <small>(drag across the chart to zoom in time, double-click to see
+the whole horizon)</small></p>
 <p class='legend'><span><i style='background:#1f77b4'></i>observation</span><span><i style='background:#ff9f1c'>
 </i>slew and settling</span><span><i style='background:#d9d9d9'></i>eclipse</span><span><i style='background:#fffbe6;
 border:1px solid #ddd'></i>sunlit</span><span><i style='background:#2ca02c;height:2px'></i>battery (0 to capacity)

@@ -108,6 +108,16 @@ PROBE_JS = """(async () => {
   out.weights = document.querySelectorAll('#per-weight tbody tr').length;
   out.diff = Array.from(document.querySelectorAll('.diffrow')).map(e => [e.dataset.onlyA, e.dataset.onlyB]);
   out.resources = performance.getEntriesByType('resource').map(e => e.name);
+  // zoom by dragging across the chart from a quarter to half of its width: the bar keeps its hover
+  const g = document.getElementById('gantt'), r = g.getBoundingClientRect(), w = r.width - 92 - 12;
+  const y = r.top + 40, xa = r.left + 92 + w / 4, xb = r.left + 92 + w / 2;
+  g.dispatchEvent(new MouseEvent('mousedown', {clientX: xa, clientY: y, bubbles: true}));
+  g.dispatchEvent(new MouseEvent('mouseup', {clientX: xb, clientY: y, bubbles: true}));
+  out.dragged = p.view();
+  out.view = [p.zoom(BAR_A, BAR_B)];
+  move(g, p.barAt(0));
+  out.bar_zoomed = tip.textContent;
+  out.view.push(p.zoom());
   return out;
 })()"""
 
@@ -122,7 +132,10 @@ def test_page_renders_in_headless_chromium(day, tmp_path, chromium):
     observed_task = int(fleet.task_index()[s.task[0]])
     with Browser(chromium, tmp_path / "chromium.log") as b:
         b.open(page)
-        got = b.evaluate(PROBE_JS.replace("TASK", str(observed_task)))
+        a0 = max(0.0, s.start_us[0] / 1e6 - 30)
+        b0 = max(a0 + 60, min(fleet.horizon.seconds, s.end_us[0] / 1e6 + 30))
+        got = b.evaluate(PROBE_JS.replace("TASK", str(observed_task)).replace("BAR_A", str(a0))
+                         .replace("BAR_B", str(b0)))
         shot = b.screenshot(tmp_path / "day.png", full_page=True)
         errors, requests = b.errors(), b.requests()
     print(f"screenshot: {shot}")
@@ -145,6 +158,11 @@ def test_page_renders_in_headless_chromium(day, tmp_path, chromium):
     assert sorted(r[0] for r in got["rows"] if r[1] == "missed") == missed
     assert all(r[2] for r in got["rows"] if r[1] == "missed") and all(got["reasons"][i] for i, r in
                                                                      enumerate(got["rows"]) if r[1] == "missed")
+    # zoomed to a minute around the first observation: same hover, the horizon back on double-click
+    hs = fleet.horizon.seconds
+    assert got["dragged"] == pytest.approx([hs / 4, hs / 2], abs=hs / 500)
+    assert got["view"][0] == pytest.approx([a0, b0]) and got["bar_zoomed"] == got["bar"]
+    assert got["view"][1] == [0, fleet.horizon.seconds]
     assert got["sats"] == 2 and got["weights"] == len(set(fleet.tasks.weight.tolist()))
     half = scheds["half"]
     assert got["diff"] == [[str(len(set(s.task.tolist()) - set(half.task.tolist()))), "0"]]
