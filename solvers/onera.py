@@ -45,6 +45,8 @@ class OneraConfig:
     bound: str = choice("lp", "conflict-free", "none")
     """Upper bound: lp (the time-capacity relaxation, solved by HiGHS, certified from its duals),
     conflict-free (each request at its best), none."""
+    bound_time_limit: float = ranged(30.0, 0, WEEK_S)
+    """Seconds of cutting-plane rounds of the lp bound (the last solve's certified bound is kept)."""
 
 
 @dataclass
@@ -338,14 +340,14 @@ class Search:
         for k in self.order:
             self.place(k)
 
-    def lns(self, deadline: float, span_s: float, trace: list, t0: float) -> int:
-        """Destroy-and-repair moves until `deadline`; returns the number of moves."""
+    def lns(self, deadline: float, span_s: float, trace: list, t0: float, target: float = math.inf) -> int:
+        """Destroy-and-repair moves until `deadline` or the value `target` (an upper bound); the number of moves."""
         pl, rng, f = self.plan, self.rng, self.f
         n_sat = len(f.satellites)
         obj = self.objective
         moves = 0
         pl.journal = []
-        while time.perf_counter() < deadline:
+        while time.perf_counter() < deadline and obj < target - 1e-9:
             moves += 1
             s = rng.randrange(n_sat)
             rows = self.sat_rows[s]
@@ -406,19 +408,22 @@ def solve(f: OneraFleet, cfg: OneraConfig | None = None, greedy_only: bool = Fal
     greedy_value = search.objective
     moves = 0
     if not greedy_only and cfg.time_limit > 0:
-        moves = search.lns(time.perf_counter() + cfg.time_limit, cfg.span_s, trace, t0)
+        moves = search.lns(time.perf_counter() + cfg.time_limit, cfg.span_s, trace, t0, target=float(search.best.sum()))
     value = search.objective
     t_search = time.perf_counter() - t0
+    schedule = search.plan.schedule()
     bound, source = None, cfg.bound
     if cfg.bound == "conflict-free":
         bound = float(search.best.sum())
     elif cfg.bound == "lp":
         from eosp.solvers.onera_bound import lp_bound
 
-        bound = min(lp_bound(f), float(search.best.sum()))
+        lp_info: dict = {}
+        bound = min(lp_bound(f, time_limit=cfg.bound_time_limit, info=lp_info), float(search.best.sum()))
+        source = f"lp ({lp_info.get('rounds', 0)} rounds, {lp_info.get('cuts', 0)} cuts)"
     gap = None if bound is None else (0.0 if bound <= 0 else max(0.0, (bound - value) / bound))
     t99 = next(t for t, v in trace if v >= 0.99 * value - 1e-12)
-    return Solution(search.plan.schedule(), value, bound, gap,
+    return Solution(schedule, value, bound, gap,
                     {"greedy_value": greedy_value, "moves": moves, "seconds_search": t_search,
                      "seconds": time.perf_counter() - t0, "time_to_99": t99, "bound_source": source,
                      "trace": trace})
