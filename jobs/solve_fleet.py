@@ -15,7 +15,8 @@ itself (the same deterministic solver, so the round's result is the same), and R
 builds its graphs again.  After every round the driver writes its state to the run dir (prices, step, bound,
 rounds done, and the best schedule, each file replaced atomically); a driver killed and started again with the
 same run dir resumes from there.  A run dir of another fleet is refused.  (Tests kill an actor in round R with
-the environment variable ``EOSP_FAULT_KILL_ACTOR_ROUND=R``.)
+the environment variable ``EOSP_FAULT_KILL_ACTOR_ROUND=R``, and the driver after round N has been saved with
+``EOSP_FAULT_KILL_AFTER=N``.)
 
 MLflow: one run per job: value, bound and gap against rounds and wall time, per-pass solve times (CSV and a
 plot), the schedule and a per-satellite summary as artifacts.
@@ -25,6 +26,7 @@ from __future__ import annotations
 
 import json
 import os
+import signal
 import sys
 import time
 from dataclasses import dataclass, field
@@ -210,6 +212,8 @@ class Checkpoint:
             write_schedule(coord.schedule(coord.best), self.fleet, self.run / BEST, overwrite=True,
                            info={"value": coord.best.value / self.W, "partial": True})
             self.last_value = coord.best.value
+        if coord.rounds_done == int(os.environ.get("EOSP_FAULT_KILL_AFTER", "0") or 0):
+            os.kill(os.getpid(), signal.SIGKILL)  # fault injection for the tests: die like a killed driver
         v, b = coord.best.value / self.W, min(1.0, coord.best_bound / self.W)
         if self.mlflow is not None:
             self.mlflow.log_metrics({"value": v, "bound": b, "gap": (b - v) / b if b > 0 else 0.0,
