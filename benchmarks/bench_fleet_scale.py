@@ -1,0 +1,137 @@
+"""The fleet solver at scale: a generated 200-satellite, 24 h, 20,000-task fleet solved with 1 and 2 workers.
+
+    python benchmarks/bench_fleet_scale.py --out runs/scale --time-limit 600 --workers 1 2
+
+Generates the fleet (``eosp generate --fleet`` settings below, seed 0) unless ``--fleet-dir`` is given, then for
+each worker count runs ``jobs/solve_fleet.py`` in a child process (Ray actors when workers > 1) and reads its
+result.json: time to the first schedule, value and gap at 60 s and at the time limit (from the run's history,
+seconds counted from the job's start, the pass-graph build included), price-round times and their speed-up,
+the driver's peak memory, and per-pass solve times by pass size (from the actors' pass_times.csv).  Prints
+Markdown tables and writes ``scale.json``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+import resource
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+SIZES = [(1, 10), (11, 30), (31, 100), (101, 300), (301, 10 ** 9)]
+
+
+def generate(out: Path, satellites: int, tasks: int, hours: float) -> tuple[Path, float, float]:
+    """The fleet dir, its generation seconds and the generating process's peak memory (GB)."""
+    fleet = out / f"fleet-{satellites}x{tasks}-{hours:g}h"
+    if (fleet / "meta.json").exists():
+        return fleet, 0.0, 0.0
+    code = ("import resource, sys, time\nfrom eosp.cli import main\nt = time.perf_counter()\n"
+            f"rc = main(['generate', '--fleet', '--satellites', '{satellites}', '--tasks', '{tasks}', '--hours', "
+            f"'{hours}', '--out', {str(fleet)!r}])\n"
+            "print('RESULT', time.perf_counter() - t, resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1e6)\n"
+            "sys.exit(rc)\n")
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    line = next(x for x in r.stdout.splitlines() if x.startswith("RESULT"))
+    _, secs, gb = line.split()
+    print(r.stdout.strip().splitlines()[0])
+    return fleet, float(secs), float(gb)
+
+
+def at(history: list, t: float) -> tuple[float, float] | None:
+    """(value, bound) of the last history entry at or before `t` seconds."""
+    last = None
+    for ts, v, b in history:
+        if ts <= t:
+            last = (v, b)
+    return last
+
+
+def size_table(path: Path) -> list[dict]:
+    if not path.exists():
+        return []
+    rows = list(csv.DictReader(path.open()))
+    out = []
+    for lo, hi in SIZES:
+        secs = sorted(float(r["seconds"]) for r in rows if lo <= int(r["opportunities"]) <= hi)
+        if secs:
+            out.append({"opportunities": f"{lo}-{hi}" if hi < 10 ** 9 else f">{lo - 1}", "solves": len(secs),
+                        "median_ms": round(1000 * secs[len(secs) // 2], 3),
+                        "p95_ms": round(1000 * secs[int(0.95 * (len(secs) - 1))], 3),
+                        "total_s": round(sum(secs), 2)})
+    return out
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--out", type=Path, default=Path("runs/scale"))
+    ap.add_argument("--fleet-dir", type=Path, default=None)
+    ap.add_argument("--satellites", type=int, default=200)
+    ap.add_argument("--tasks", type=int, default=20000)
+    ap.add_argument("--hours", type=float, default=24.0)
+    ap.add_argument("--time-limit", type=float, default=600.0)
+    ap.add_argument("--workers", type=int, nargs="+", default=[1, 2])
+    args = ap.parse_args()
+    args.out.mkdir(parents=True, exist_ok=True)
+    gen_s = gen_gb = 0.0
+    fleet = args.fleet_dir
+    if fleet is None:
+        fleet, gen_s, gen_gb = generate(args.out, args.satellites, args.tasks, args.hours)
+    meta = json.loads((fleet / "meta.json").read_text())
+    results = {"fleet": str(fleet), "satellites": meta["satellites"], "tasks": meta["tasks"],
+               "opportunities": meta["opportunities"], "passes": meta["passes"], "generate_s": round(gen_s, 1),
+               "generate_peak_gb": round(gen_gb, 2), "runs": []}
+    for w in args.workers:
+        run_dir = args.out / f"run-w{w}-{args.time_limit:g}s-{time.strftime('%H%M%S')}"
+        cmd = [sys.executable, str(ROOT / "jobs/solve_fleet.py"), "--fleet-dir", str(fleet), "--run-dir", str(run_dir),
+               "--fleet.workers", str(w), "--fleet.time-limit", str(args.time_limit), "--ray.num-cpus", str(max(w, 2)),
+               "--mlflow-uri", f"sqlite:///{(args.out / 'mlflow.db').resolve()}"]
+        before = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss
+        t0 = time.perf_counter()
+        r = subprocess.run(cmd, capture_output=True, text=True)
+        wall = time.perf_counter() - t0
+        if r.returncode != 0:
+            print(r.stderr[-2000:])
+            raise SystemExit(f"workers {w}: exit {r.returncode}")
+        res = json.loads((run_dir / "result.json").read_text())
+        hist = res["history"]
+        v60, v_end = at(hist, 60.0), at(hist, 1e18)
+        rounds = res["price_round_s"]
+        row = {"workers": w, "first_schedule_s": res["first_schedule_s"], "build_s": res["build_s"],
+               "pool_s": res["pool_s"], "value_60s": v60 and v60[0], "gap_60s": v60 and (v60[1] - v60[0]) / v60[1],
+               "value": res["value"], "bound": res["bound"], "gap": res["gap"], "rounds": res["rounds"],
+               "price_round_median_s": sorted(rounds)[len(rounds) // 2] if rounds else None,
+               "wall_s": round(wall, 1), "driver_peak_gb": round(max(before, resource.getrusage(
+                   resource.RUSAGE_CHILDREN).ru_maxrss) / 1e6, 2), "faults": res["faults"],
+               "pass_sizes": size_table(run_dir / "pass_times.csv"), "end": v_end}
+        results["runs"].append(row)
+        print(json.dumps({k: v for k, v in row.items() if k != "pass_sizes"}), flush=True)
+    base = next((r for r in results["runs"] if r["workers"] == 1), None)
+    for r in results["runs"]:
+        if base and r["price_round_median_s"] and base["price_round_median_s"]:
+            r["price_round_speedup"] = round(base["price_round_median_s"] / r["price_round_median_s"], 2)
+    (args.out / "scale.json").write_text(json.dumps(results, indent=1))
+    print(f"\n{results['satellites']} satellites, {results['tasks']} tasks, {results['opportunities']} opportunities, "
+          f"{results['passes']} passes; generated in {results['generate_s']} s (peak {results['generate_peak_gb']} GB)\n")
+    print("| workers | first schedule (s) | WCR at 60 s | gap at 60 s | WCR at end | bound | gap at end | rounds | "
+          "price round (s) | speed-up | driver peak (GB) |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|")
+    for r in results["runs"]:
+        f = lambda x, d=4: "-" if x is None else f"{x:.{d}f}"  # noqa: E731
+        print(f"| {r['workers']} | {r['first_schedule_s']} | {f(r['value_60s'])} | {f(r['gap_60s'])} | "
+              f"{f(r['value'])} | {f(r['bound'])} | {f(r['gap'])} | {r['rounds']} | {f(r['price_round_median_s'], 2)} | "
+              f"{r.get('price_round_speedup', '-')} | {r['driver_peak_gb']} |")
+    for r in results["runs"]:
+        if r["pass_sizes"]:
+            print(f"\nPass solve times on the actors ({r['workers']} workers):\n")
+            print("| opportunities | solves | median (ms) | p95 (ms) | total (s) |\n|---|---|---|---|---|")
+            for s in r["pass_sizes"]:
+                print(f"| {s['opportunities']} | {s['solves']} | {s['median_ms']} | {s['p95_ms']} | {s['total_s']} |")
+
+
+if __name__ == "__main__":
+    main()
