@@ -182,7 +182,8 @@ function drawMap() {
   const w = Math.max(700, M.parentElement.clientWidth || 1200);
   let [x0, x1] = D.map.x, [y0, y1] = D.map.y;
   let h = w * (y1 - y0) / (x1 - x0);
-  if (h > 760) { const need = (x1 - x0) * 760 / h, m = (x0 + x1) / 2; h = 760; x0 = m - need / 2; x1 = m + need / 2; }
+  // equal scales on both axes: a range too tall for the page is widened in longitude, one too flat in latitude
+  if (h > 760) { const need = (y1 - y0) * w / 760, m = (x0 + x1) / 2; h = 760; x0 = m - need / 2; x1 = m + need / 2; }
   if (h < 320) { const need = (y1 - y0) * 320 / h, m = (y0 + y1) / 2; h = 320; y0 = m - need / 2; y1 = m + need / 2; }
   M.width = w; M.height = Math.round(h);
   const X = lon => (lon - x0) / (x1 - x0) * w, Y = lat => (y1 - lat) / (y1 - y0) * h;
@@ -297,7 +298,7 @@ function drawTable() {
     const kind = (missed && V === 0 && R && i !== undefined) ? R.kinds[R.kind[i]] : '';
     return "<tr data-task='" + esc(tk.id[t]) + "' data-status='" + (missed ? 'missed' : 'observed') +
       "' data-kind='" + esc(kind) + "'><td>" + esc(tk.id[t]) + '</td><td>' + tk.w[t] + '</td><td>' +
-      win(tk.rel[t]) + ' to ' + win(tk.due[t]) + '</td><td' + (missed ? " class='bad'" : '') +
+      win(tk.rel[t]) + ' to ' + win(tk.due[t]) + '</td><td' + (missed ? " class='bad status'" : " class='status'") +
       '>' + esc(statusText(t)) + "</td><td class='reason'>" + (missed ? esc(reasonText(t)) : '') + '</td></tr>';
   }).join('');
   const pg = document.getElementById('pager');

@@ -284,6 +284,7 @@ p.note { background: #fff7e0; border-left: 4px solid #e6a700; padding: 6px 10px;
 table { border-collapse: collapse; margin: 10px 0 20px; font-size: 0.9em; }
 th, td { border: 1px solid #ccc; padding: 3px 7px; text-align: right; }
 td:first-child, th:first-child { text-align: left; } td.reason, th[data-k='reason'] { text-align: left; }
+td.status, th[data-k='status'], table.summary td:last-child { text-align: left; }
 th { background: #f0f0f0; } th.sort { cursor: pointer; } th.sort:hover { background: #e2e8f0; }
 .ok { color: #1a7f37; font-weight: 600; } .bad { color: #c62828; font-weight: 600; } .na { color: #777; }
 #tip { position: fixed; pointer-events: none; background: rgba(255,255,255,0.96); border: 1px solid #888;

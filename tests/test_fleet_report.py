@@ -100,7 +100,7 @@ PROBE_JS = """(async () => {
   const move = (el, at) => el.dispatchEvent(new MouseEvent('mousemove', {clientX: at.x, clientY: at.y, bubbles: true}));
   move(document.getElementById('gantt'), p.barAt(0));
   out.bar = tip.textContent;
-  move(document.getElementById('map'), p.taskAt(TASK));
+  move(document.getElementById('map'), p.taskAt(OBSERVED_ROW));
   out.task = tip.textContent;
   out.rows = Array.from(document.querySelectorAll('#tasks tbody tr')).map(r => [r.dataset.task, r.dataset.status, r.dataset.kind]);
   out.reasons = Array.from(document.querySelectorAll('#tasks tbody td.reason')).map(e => e.textContent);
@@ -108,6 +108,9 @@ PROBE_JS = """(async () => {
   out.weights = document.querySelectorAll('#per-weight tbody tr').length;
   out.diff = Array.from(document.querySelectorAll('.diffrow')).map(e => [e.dataset.onlyA, e.dataset.onlyB]);
   out.resources = performance.getEntriesByType('resource').map(e => e.name);
+  const mr = document.getElementById('map').getBoundingClientRect();  // zoomed to the data: every target on the map
+  out.outside = D_TASKS.filter(t => { const q = p.taskAt(t); return q.x < mr.left || q.x > mr.right || q.y < mr.top || q.y > mr.bottom; });
+  out.map_box = [mr.width, mr.height];
   // zoom by dragging across the chart from a quarter to half of its width: the bar keeps its hover
   const g = document.getElementById('gantt'), r = g.getBoundingClientRect(), w = r.width - 92 - 12;
   const y = r.top + 40, xa = r.left + 92 + w / 4, xb = r.left + 92 + w / 2;
@@ -134,7 +137,7 @@ def test_page_renders_in_headless_chromium(day, tmp_path, chromium):
         b.open(page)
         a0 = max(0.0, s.start_us[0] / 1e6 - 30)
         b0 = max(a0 + 60, min(fleet.horizon.seconds, s.end_us[0] / 1e6 + 30))
-        got = b.evaluate(PROBE_JS.replace("TASK", str(observed_task)).replace("BAR_A", str(a0))
+        got = b.evaluate(PROBE_JS.replace("OBSERVED_ROW", str(observed_task)).replace("D_TASKS", str(list(range(len(fleet.tasks))))).replace("BAR_A", str(a0))
                          .replace("BAR_B", str(b0)))
         shot = b.screenshot(tmp_path / "day.png", full_page=True)
         errors, requests = b.errors(), b.requests()
@@ -145,6 +148,7 @@ def test_page_renders_in_headless_chromium(day, tmp_path, chromium):
     assert g["bars"] == len(s) and g["slews"] == len(s) and g["violations"] == 0 and g["eclipses"] >= 0
     assert g["battery_points"] > 2 * len(fleet.satellites)
     m = got["drawn"]["map"]
+    assert got["outside"] == [] and got["map_box"][0] > 1000 and got["map_box"][1] >= 300
     assert m["points"] == len(fleet.tasks) and m["observed"] == len(set(s.task.tolist())) and m["tracks"] == 2
     # the hover of the first observation: its satellite, task and UTC times
     h = fleet.horizon
