@@ -46,6 +46,7 @@ REPORT_KIND = "report"
 TRACK_STEP_S = 60
 MAX_TRACK_POINTS = 400_000  # over all satellites
 BATTERY_BINS = 700
+MAX_LISTED = 1000  # violations listed in words per schedule
 
 
 @dataclass
@@ -226,9 +227,17 @@ def _summary(views: list[View]) -> str:
         rows.append(f"<tr data-schedule='{html.escape(v.label, quote=True)}' data-valid='{str(v.valid).lower()}'>"
                     f"<td>{html.escape(v.label)}</td><td>{len(v.schedule)}</td><td>{f('WCR')}</td><td>{f('CR')}</td>"
                     f"<td>{f('TAT', 1)}</td><td>{f('PC', 1)}</td><td>{verdict}</td></tr>")
+    lists = []
+    for v in views:  # every violation in words (the Gantt marks those with a satellite and a time)
+        if v.violations:
+            items = "".join(f"<li>{html.escape(str(x))}</li>" for x in v.violations[:MAX_LISTED])
+            more = f"<li>... and {len(v.violations) - MAX_LISTED} more</li>" if len(v.violations) > MAX_LISTED else ""
+            lists.append(f"<details class='violations' data-schedule='{html.escape(v.label, quote=True)}' "
+                         f"data-count='{len(v.violations)}'><summary>{html.escape(v.label)}: {len(v.violations)} "
+                         f"violation(s)</summary><ol>{items}{more}</ol></details>")
     return ("<table class='summary'><thead><tr><th>schedule</th><th>observations</th><th>WCR</th><th>CR</th>"
             "<th>TAT (s)</th><th>PC (Wh)</th><th>checker</th></tr></thead><tbody>" + "".join(rows) +
-            "</tbody></table>")
+            "</tbody></table>" + "".join(lists))
 
 
 def build_page(fleet: Fleet, opps, schedules: dict[str, Schedule], title: str | None = None) -> str:

@@ -56,6 +56,7 @@ def test_invalid_schedule_and_no_geometry(day):
     assert not res.valid
     text = build_page(fleet, opps, {"bad": bad})
     assert "class='bad'>invalid: " in text and "is not valid (each violation is marked" in text
+    assert f"data-count='{len(res.violations)}'" in text and text.count("<li>") == len(res.violations)
     broken = dataclasses.replace(fleet, satellites=dataclasses.replace(
         fleet.satellites, tle=dataclasses.replace(fleet.satellites.tle, line2=strings(["2 garbage"] * 2))))
     text = build_page(broken, opps, {"greedy": scheds["greedy"]})
