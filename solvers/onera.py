@@ -32,6 +32,9 @@ from eosp.fleet.onera import PERIODIC, STEREO, TAU_MAX_S, OneraFleet, OneraSched
 from eosp.fleet.onera_check import best_values, periodic_value
 
 
+DENSITY_TAU_S = 3.0  # a typical transition between two targets of one pass (s), for the greedy order
+
+
 @dataclass
 class OneraConfig:
     """Options of the ONERA solver (``eosp solve ONERA_DIR --solver onera``)."""
@@ -288,7 +291,11 @@ class Search:
             for a, b, v in self.cands[k]:
                 self.pair_value[a] = self.pair_value[b] = v
         n_opp = np.diff(r.first)
-        self.order = sorted(range(len(r)), key=lambda k: (-self.best[k], n_opp[k], k))
+        # value per second of satellite time (its mean duration plus a typical transition): short observations
+        # of valuable requests first, since a satellite's time is what requests compete for
+        mean_d = np.bincount(o.request, weights=o.duration.astype(np.float64), minlength=len(r)) / np.maximum(n_opp, 1)
+        self.density = (self.best / (mean_d + DENSITY_TAU_S)).tolist()
+        self.order = sorted(range(len(r)), key=lambda k: (-self.density[k], n_opp[k], k))
         # opportunities of each satellite by window start, to find the requests a freed span may serve
         self.sat_rows = []
         self.sat_starts = []
@@ -302,10 +309,22 @@ class Search:
     def objective(self) -> float:
         return float(sum(self.plan.value))
 
-    def place(self, k: int) -> bool:
-        """Insert request `k` (or, periodic, its unserved slots) at its best fitting observations."""
+    def place(self, k: int, full: bool = True) -> bool:
+        """Insert request `k` at its best fitting observations.  A periodic request first gets one observation
+        in its earliest slot that fits (``full`` False: with the authors' max gap, a trailing run of unserved
+        slots costs nothing, so that one observation earns the most of the 0.5 x slots), then (``full``) its
+        other unserved slots."""
         pl = self.plan
         kind = pl.KIND[k]
+        if kind == PERIODIC and not full:
+            if pl.assigned[k]:
+                return False
+            for slot_rows in self.cands[k]:
+                for g in slot_rows:
+                    if pl.try_place(g):
+                        pl.set_assigned(k, [g])
+                        return True
+            return False
         if kind == PERIODIC:
             done = {pl.SLOT[g] for g in pl.assigned[k]}
             added = []
@@ -336,9 +355,14 @@ class Search:
                 return True
         return False
 
-    def greedy(self) -> None:
-        for k in self.order:
-            self.place(k)
+    def greedy(self, order: list[int] | None = None) -> None:
+        """Every request of `order` (default: by value) once, then the periodic ones' other slots."""
+        order = self.order if order is None else order
+        for k in order:
+            self.place(k, full=False)
+        for k in order:
+            if self.plan.KIND[k] == PERIODIC:
+                self.place(k)
 
     def lns(self, deadline: float, span_s: float, trace: list, t0: float, target: float = math.inf) -> int:
         """Destroy-and-repair moves until `deadline` or the value `target` (an upper bound); the number of moves."""
@@ -382,9 +406,8 @@ class Search:
                 k = pl.REQ[g]
                 if k not in cand and (not pl.assigned[k] or pl.KIND[k] == PERIODIC):
                     cand.add(k)
-            order = sorted(cand, key=lambda k: -self.best[k] * (0.7 + 0.6 * rng.random()))
-            for k in order:
-                self.place(k)
+            order = sorted(cand, key=lambda k: -self.density[k] * (0.7 + 0.6 * rng.random()))
+            self.greedy(order)
             new = self.objective
             if new >= obj - 1e-9:
                 if new > obj + 1e-9:

@@ -117,9 +117,14 @@ class _Model:
                 rows_v += [1.0] * len(cols)
                 rhs.append(1.0)
                 row += 1
+            # N z <= sum_k (N - k) x(slot k): the bonus 0.5 (N - max gap) is at most 0.5 (N - k) when k is
+            # the first served slot (the leading run of unserved slots is a gap)
+            uniq = np.unique(slots)
+            n_sl = len(uniq)
+            rank = np.searchsorted(uniq, slots)
             rows_i += [row] * (b - a + 1)
             rows_j += [int(zcol[zi])] + col[a:b].tolist()
-            rows_v += [1.0] + [-1.0] * (b - a)
+            rows_v += [float(n_sl)] + (-(n_sl - rank)).astype(np.float64).tolist()
             rhs.append(0.0)
             row += 1
         self.static = (np.asarray(rows_i), np.asarray(rows_j), np.asarray(rows_v), np.asarray(rhs), row)
@@ -162,6 +167,25 @@ class _Model:
         extra = self.mt[rows[inside]].max() if inside.any() else 0.0
         rhs = (b - a) - float(self.download_load(s, a, b)[0]) + extra
         return uc, agg, rhs
+
+    def initial_cuts(self, widths=(300.0, 450.0, 600.0, 900.0, 1200.0)) -> None:
+        """Capacity rows over a tiling of each satellite's busy time at widths from a window length up (step: a quarter of the
+        width), keeping only the rows whose load can exceed their capacity."""
+        o = self.f.observations
+        for s in range(len(self.f.satellites)):
+            rows = self.sat_obs[s]
+            if not len(rows):
+                continue
+            busy = np.unique(np.floor(o.start[rows] / 60.0))
+            for w in widths:
+                step = w / 4
+                starts = np.unique(np.concatenate([np.arange(b * 60 - w, b * 60 + 60, step) for b in busy]))
+                starts = np.floor(starts / step) * step
+                for a in np.unique(starts).tolist():
+                    cols, coef, rhs = self.cut(s, a, a + w)
+                    if len(cols) and coef.sum() > rhs + 1e-6:
+                        self.cuts.append((cols, coef, rhs))
+                        self.cut_keys.add((s, a, a + w))
 
     def separate(self, x: np.ndarray, per_sat: int = 40) -> int:
         """Add the most violated capacity intervals of each satellite for the LP point `x`; how many."""
@@ -263,6 +287,66 @@ class _Model:
                 added += 1
         return added
 
+    def fits(self, rows: np.ndarray, s: int) -> bool:
+        """Can observations `rows` of satellite `s` all be done, with the downloads whose windows are near them
+        (mandatory, so always there)?  Depth-first over orders, real-valued starts."""
+        o, d = self.f.observations, self.f.downloads
+        lo, hi = o.start[rows].min() - 400, o.end[rows].max() + 400
+        dl = self.sat_dl[s]
+        dl = dl[(d.end[dl] > lo) & (d.start[dl] < hi)]
+        ws = np.r_[o.start[rows], d.start[dl]].astype(np.float64).tolist()
+        dur = np.r_[o.duration[rows].astype(np.float64), d.duration[dl]].tolist()
+        ls = (np.r_[o.end[rows], d.end[dl]] - np.asarray(dur)).tolist()
+        lat, lon = np.r_[o.lat[rows], d.lat[dl]], np.r_[o.lon[rows], d.lon[dl]]
+        req = np.r_[o.request[rows], -1 - np.arange(len(dl))]
+        tau = transition(lat[:, None], lon[:, None], lat[None, :], lon[None, :],
+                         same_request=req[:, None] == req[None, :]).tolist()
+        n = len(ws)
+
+        def dfs(done: int, last: int, t: float) -> bool:
+            if done == (1 << n) - 1:
+                return True
+            for i in range(n):
+                if not done >> i & 1 and ls[i] < t - 1e-9:
+                    return False  # an activity left can no longer start
+            for i in sorted((i for i in range(n) if not done >> i & 1), key=lambda i: ws[i]):
+                st = ws[i] if last < 0 else max(ws[i], t + tau[last][i])
+                if st <= ls[i] + 1e-9 and dfs(done | 1 << i, i, st + dur[i]):
+                    return True
+            return False
+
+        return dfs(0, -1, -1e18)
+
+    def separate_nogoods(self, x: np.ndarray, k_max: int = 6, per_sat: int = 80) -> int:
+        """Add ``sum x <= |S| - 1`` for runs S of consecutive (by window start) chosen observations of one
+        satellite that cannot all be done (with the mandatory downloads) while the LP point takes them all."""
+        o = self.f.observations
+        added = 0
+        for s in range(len(self.f.satellites)):
+            rows = self.sat_obs[s]
+            rows = rows[x[self.col[rows]] > 1e-7]
+            xv = x[self.col[rows]]
+            n_add = 0
+            for i in range(len(rows)):
+                for k in range(2, k_max + 1):
+                    if i + k > len(rows) or n_add >= per_sat:
+                        break
+                    S = rows[i:i + k]
+                    if o.start[S[-1]] - o.end[S[0]] > 300:
+                        break
+                    if xv[i:i + k].sum() <= k - 1 + 1e-6:
+                        continue
+                    key = ("ng", *S.tolist())
+                    if key in self.cut_keys or self.fits(S, s):
+                        continue
+                    self.cut_keys.add(key)
+                    cols, inv = np.unique(self.col[S], return_inverse=True)
+                    self.cuts.append((cols, np.bincount(inv).astype(np.float64), float(k - 1)))
+                    n_add += 1
+                    break
+            added += n_add
+        return added
+
     def matrix(self):
         from scipy.sparse import csr_matrix
 
@@ -288,6 +372,7 @@ def lp_bound(f: OneraFleet, rounds: int = 40, time_limit: float = 60.0, info: di
 
     t0 = time.perf_counter()
     m = _Model(f)
+    m.initial_cuts()
     best = float("inf")
     n_rounds = 0
     for n_rounds in range(1, rounds + 1):
@@ -299,7 +384,7 @@ def lp_bound(f: OneraFleet, rounds: int = 40, time_limit: float = 60.0, info: di
         best = min(best, certified(A, b, m.c, y))
         if time.perf_counter() - t0 > time_limit:
             break
-        if not (m.separate(res.x) + m.separate_cliques(res.x)):
+        if not (m.separate(res.x) + m.separate_cliques(res.x) + m.separate_nogoods(res.x)):
             break
     if info is not None:
         info.update(rounds=n_rounds, cuts=len(m.cuts), seconds=time.perf_counter() - t0)
