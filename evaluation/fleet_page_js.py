@@ -171,6 +171,10 @@ page.barAt = function (i) {  // the viewport position of the middle of observati
   const vd = D.views[V], r = G.getBoundingClientRect(), k = vd.sat[i];
   return {x: r.left + (gx(vd.st[i]) + gx(vd.en[i])) / 2, y: r.top + TOP + k * ROWH + ROWH * 0.4};
 };
+page.violationAt = function (j) {  // the viewport position of the mark of violation j of the drawn schedule
+  const [k, t] = D.views[V].viol[j], r = G.getBoundingClientRect();
+  return {x: r.left + gx(t), y: r.top + TOP + k * ROWH + ROWH / 2};
+};
 
 // ------------------------------------------------------------------ map
 const M = document.getElementById('map');

@@ -178,13 +178,16 @@ def test_invalid_schedule_is_marked_in_headless_chromium(day, tmp_path, chromium
 
     fleet, opps, scheds = day
     bad = overlapping(scheds["greedy"])
-    n_viol = sum(v.time is not None for v in validate(fleet, bad).violations)
+    violations = validate(fleet, bad).violations
+    n_viol = sum(v.time is not None for v in violations)
     page = write_page(fleet, opps, {"bad": bad}, tmp_path / "bad.html")
     with Browser(chromium, tmp_path / "chromium.log") as b:
         b.open(page)
         got = b.evaluate("""(async () => {
-          const p = window.fleetPage, g = document.getElementById('gantt'), r = g.getBoundingClientRect();
-          return {drawn: p.drawn.gantt};
+          const p = window.fleetPage, g = document.getElementById('gantt'), at = p.violationAt(0);
+          g.dispatchEvent(new MouseEvent('mousemove', {clientX: at.x, clientY: at.y, bubbles: true}));
+          return {drawn: p.drawn.gantt, hover: document.getElementById('tip').textContent};
         })()""")
         errors = b.errors()
     assert errors == [] and n_viol >= 1 and got["drawn"]["violations"] == n_viol
+    assert got["hover"] == f"violation: {violations[0]}"
