@@ -106,13 +106,15 @@ class Plan:
         return t if t < TAU_MAX_S else TAU_MAX_S
 
     def find(self, s: int, g: int) -> int | None:
-        """The first position of satellite `s`'s sequence where activity `g` fits, or None."""
+        """The position of satellite `s`'s sequence where activity `g` fits at the least added transition time
+        (cheapest insertion: a pass zig-zagging between targets wastes its time in slews), or None."""
         seq, est, lst = self.seq[s], self.est[s], self.lst[s]
         ws, ls, d = self.WS[g], self.LS[g], self.DUR[g]
         p = bisect_left(lst, ws + d)  # a next activity must be able to start after g ends
         hi = bisect_right(est, ls)  # a previous activity must start before g's latest start
         p = min(p, hi)
         n = len(seq)
+        best, best_cost = None, math.inf
         while p <= hi and p <= n:
             if p > 0:
                 q = seq[p - 1]
@@ -126,9 +128,15 @@ class Plan:
             else:
                 l_ = ls
             if e <= l_:
-                return p
+                if p == 0 or p == n:
+                    cost = 0.0 if n == 0 else self.tau(seq[p - 1], g) if p else self.tau(g, seq[0])
+                else:
+                    a, b = seq[p - 1], seq[p]
+                    cost = self.tau(a, g) + self.tau(g, b) - self.tau(a, b)
+                if cost < best_cost - 1e-9:
+                    best, best_cost = p, cost
             p += 1
-        return None
+        return best
 
     def insert(self, s: int, g: int, p: int) -> None:
         seq, est, lst = self.seq[s], self.est[s], self.lst[s]
