@@ -32,6 +32,7 @@ from eosp.fleet.onera import PERIODIC, STEREO, TAU_MAX_S, OneraFleet, OneraSched
 from eosp.fleet.onera_check import best_values, periodic_value
 
 
+MAX_EXTRA = 60  # requests not freed by a move that may take the freed time (a random sample beyond)
 DENSITY_TAU_S = 3.0  # a typical transition between two targets of one pass (s), for the greedy order
 
 
@@ -409,11 +410,14 @@ class Search:
                     else:
                         keep.append(g)
                 pl.set_assigned(k, keep)
-            cand = set(touched)
+            extra = set()
             for g in span_rows:
                 k = pl.REQ[g]
-                if k not in cand and (not pl.assigned[k] or pl.KIND[k] == PERIODIC):
-                    cand.add(k)
+                if k not in touched and (not pl.assigned[k] or pl.KIND[k] == PERIODIC):
+                    extra.add(k)
+            if len(extra) > MAX_EXTRA:  # a congested span: a sample, so that a move stays short
+                extra = set(rng.sample(sorted(extra), MAX_EXTRA))
+            cand = touched | extra
             order = sorted(cand, key=lambda k: -self.density[k] * (0.7 + 0.6 * rng.random()))
             self.greedy(order)
             new = self.objective
