@@ -177,7 +177,15 @@ def cmd_fleet_report(fleet_dir, schedules, out, overwrite: bool = False, title: 
 
     check_report_out(out, overwrite)
     t0 = time.perf_counter()
-    fleet, opps = read_fleet(fleet_dir)
+    if is_fleet_dir(fleet_dir):
+        fleet, opps = read_fleet(fleet_dir)
+        n_tasks = len(fleet.tasks)
+    else:  # an ONERA fleet directory: its own model and schedules (no orbits)
+        from eosp.fleet.onera import read_onera
+        from eosp.fleet.onera import read_schedule as read_onera_schedule
+
+        fleet, opps, read_schedule = read_onera(fleet_dir), None, read_onera_schedule
+        n_tasks = len(fleet.requests)
     scheds = {}
     for path in schedules:
         label = Path(path).stem
@@ -185,7 +193,7 @@ def cmd_fleet_report(fleet_dir, schedules, out, overwrite: bool = False, title: 
             label += "'"
         scheds[label] = read_schedule(path, fleet)[0]
     page = write_page(fleet, opps, scheds, out, overwrite=overwrite, title=title or None)
-    print(f"{page}: {len(scheds)} schedule(s) of {len(fleet.satellites)} satellites and {len(fleet.tasks)} tasks "
+    print(f"{page}: {len(scheds)} schedule(s) of {len(fleet.satellites)} satellites and {n_tasks} tasks "
           f"({page.stat().st_size / 1e6:.1f} MB, {time.perf_counter() - t0:.1f} s)")
     return 0
 

@@ -44,6 +44,10 @@ def is_fleet_command(argv: list[str]) -> bool:
 
     if onera(argv):
         return True
+    if argv[0] == "report":  # the fleet page takes an ONERA fleet directory too
+        from eosp.cli.onera import is_onera_dir
+
+        return is_fleet_dir(path) or is_onera_dir(path)
     return is_aeossp_case(path) if argv[0] == "import" else is_fleet_dir(path)
 
 

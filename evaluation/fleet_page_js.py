@@ -17,9 +17,14 @@ const t0 = Date.parse(D.start);
 const tip = document.getElementById('tip');
 const page = {drawn: {}, ready: false};
 window.fleetPage = page;
-const fmt = t => new Date(t0 + Math.round(t * 1000)).toISOString().replace('T', ' ').replace(/\.\d+Z$/, '')
-    .replace('Z', '') + ' UTC';
-const win = t => H > 86400 ? fmt(t).slice(5, 19) : fmt(t).slice(11, 19);  // date too when the horizon is longer than a day
+// times: UTC for aeossp fleets; seconds since 0 h (shown as h:mm:ss) when the fleet has no dates (ONERA)
+const pad = x => String(x).padStart(2, '0');
+const rel = t => { const s = Math.round(t); return Math.floor(s / 3600) + ':' + pad(Math.floor(s / 60) % 60) + ':' + pad(s % 60); };
+const fmt = D.relative ? (t => rel(t) + ' (since 0 h)') : (t => new Date(t0 + Math.round(t * 1000)).toISOString()
+    .replace('T', ' ').replace(/\.\d+Z$/, '').replace('Z', '') + ' UTC');
+const hms = t => D.relative ? rel(t) : fmt(t).slice(11, 19);
+const hm = t => D.relative ? rel(t).slice(0, -3) : fmt(t).slice(11, 16);
+const win = t => (H > 86400 && !D.relative) ? fmt(t).slice(5, 19) : hms(t);  // date too when the horizon is longer than a day
 const num = (x, d) => (x === null || x === undefined) ? '-' : (+x).toFixed(d);
 const esc = s => String(s).replace(/[&<>"']/g, c => ({'&': '&amp;', '<': '&lt;', '>': '&gt;', '"': '&quot;',
   "'": '&#39;'}[c]));
@@ -34,6 +39,9 @@ function prepare(vd) {
     if (k >= 0) by[k].push(i);
     if (t >= 0 && (served[t] < 0 || vd.en[i] < vd.en[served[t]])) served[t] = i;
   }
+  if (vd.credit) for (let t = 0; t < NT; t++) if (!vd.credit[t]) served[t] = -1;  // observed, but worth nothing yet
+  vd.dlBy = Array.from({length: NS}, () => []);
+  if (vd.dl) vd.dl.sat.forEach((k, j) => { if (k >= 0) vd.dlBy[k].push(j); });
   for (const l of by) l.sort((a, b) => vd.st[a] - vd.st[b]);
   vd.by = by; vd.served = served;
 }
@@ -79,7 +87,7 @@ function drawGantt() {
   G.width = GW; G.height = TOP + NS * ROWH + 6;
   const c = G.getContext('2d');
   c.fillStyle = '#fff'; c.fillRect(0, 0, G.width, G.height);
-  const n = {bars: 0, slews: 0, eclipses: 0, violations: 0, battery_points: 0};
+  const n = {bars: 0, slews: 0, downloads: 0, eclipses: 0, violations: 0, battery_points: 0};
   c.font = '11px sans-serif'; c.fillStyle = '#333'; c.textBaseline = 'middle';
   // time ticks: about 12 to 24 over the range shown
   const span = VB - VA, step = STEPS.find(s => span / s <= 24) || 86400;
@@ -88,10 +96,10 @@ function drawGantt() {
   for (let t = first; t <= VB; t += step) {
     const x = gx(t);
     c.beginPath(); c.moveTo(x, TOP - 4); c.lineTo(x, G.height); c.stroke();
-    c.fillStyle = '#333'; c.fillText(span > 86400 ? fmt(t).slice(5, 16) : fmt(t).slice(11, 16), x - 14, 12);
+    c.fillStyle = '#333'; c.fillText(span > 86400 && !D.relative ? fmt(t).slice(5, 16) : hm(t), x - 14, 12);
   }
   c.fillStyle = '#fff'; c.fillRect(0, 0, LEFT - 2, TOP - 2);
-  c.fillStyle = '#333'; c.fillText(fmt(VA).slice(0, 10) + ' UTC', 4, 12);
+  c.fillStyle = '#333'; c.fillText(D.relative ? 'since 0 h' : fmt(VA).slice(0, 10) + ' UTC', 4, 12);
   for (let k = 0; k < NS; k++) { c.fillText(D.sats[k], 4, TOP + k * ROWH + ROWH / 2); }
   c.save(); c.beginPath(); c.rect(LEFT, 0, PW, G.height); c.clip();
   for (let k = 0; k < NS; k++) {
@@ -108,6 +116,14 @@ function drawGantt() {
       for (const i of obs) {
         const s = vd.slew[i]; if (s === null) continue;
         c.fillRect(gx(s), y + ROWH * 0.62, Math.max(1, gx(vd.st[i]) - gx(s)), ROWH * 0.22); n.slews++;
+      }
+    }
+    if (vd.dl) {  // downloads, with the transition before each
+      for (const j of vd.dlBy[k]) {
+        const s = vd.dl.slew[j];
+        if (s !== null) { c.fillStyle = '#ff9f1c'; c.fillRect(gx(s), y + ROWH * 0.62, Math.max(1, gx(vd.dl.st[j]) - gx(s)), ROWH * 0.22); n.slews++; }
+        c.fillStyle = '#9467bd'; c.fillRect(gx(vd.dl.st[j]), y + ROWH * 0.18, Math.max(1.5, gx(vd.dl.en[j]) - gx(vd.dl.st[j])), ROWH * 0.44);
+        n.downloads++;
       }
     }
     c.fillStyle = '#1f77b4';
@@ -143,6 +159,9 @@ function ganttHover(mx, my) {
   if (k < 0 || k >= NS || mx < LEFT) return null;
   const t = tx(mx), tol = 3 / PW * (VB - VA), sat = D.sats[k];
   if (vd.viol) for (const [kk, tv, text] of vd.viol) if (kk === k && tv !== null && Math.abs(tv - t) <= tol * 2) return 'violation: ' + text;
+  if (vd.dl) for (const q of vd.dlBy[k]) if (vd.dl.st[q] - tol <= t && t <= vd.dl.en[q] + tol)
+    return sat + ': download ' + vd.dl.id[q] + '\n' + fmt(vd.dl.st[q]) + ' to ' + fmt(vd.dl.en[q]) + ', ' +
+      (vd.dl.en[q] - vd.dl.st[q]).toFixed(1) + ' s';
   const obs = vd.by[k];
   const j = bsearch(obs, i => vd.en[i] >= t - tol);
   for (let q = j; q < obs.length && vd.st[obs[q]] <= t + tol; q++) {
@@ -158,7 +177,7 @@ function ganttHover(mx, my) {
   let s = sat + ' at ' + fmt(t);
   if (D.eclipses) {
     const e = D.eclipses[k]; let dark = false;
-    for (let q = 0; q < e[0].length; q++) if (e[0][q] <= t && t < e[1][q]) { dark = true; s += '\neclipse ' + fmt(e[0][q]).slice(11, 19) + ' to ' + fmt(e[1][q]).slice(11, 19); }
+    for (let q = 0; q < e[0].length; q++) if (e[0][q] <= t && t < e[1][q]) { dark = true; s += '\neclipse ' + hms(e[0][q]) + ' to ' + hms(e[1][q]); }
     if (!dark) s += '\nsunlit';
   }
   if (vd.battery) {
@@ -337,15 +356,16 @@ function drawSummaries() {
     s += "<tr data-sat='" + esc(D.sats[k]) + "'><td>" + esc(D.sats[k]) + '</td><td>' + esc(D.sensor[k]) + '</td><td>' +
       cnt[k] + '</td><td>' + +wsum[k].toFixed(4) + '</td><td>' + (100 * busy[k] / H).toFixed(2) + '</td><td>' +
       (vd.slew ? (100 * slew[k] / H).toFixed(2) : '-') + '</td><td>' + (vd.low ? num(vd.low[k], 2) : '-') + '</td><td>' +
-      D.capacity[k] + '</td><td>' + (D.eclipses ? (100 * dark / H).toFixed(1) : '-') + '</td></tr>';
+      (D.capacity ? D.capacity[k] : '-') + '</td><td>' + (D.eclipses ? (100 * dark / H).toFixed(1) : '-') + '</td></tr>';
   }
   document.getElementById('per-sat').innerHTML = s + '</tbody>';
-  const ws = [...new Set(tk.w)].sort((a, b) => b - a), kinds = R ? R.kinds : [];
-  let w = '<thead><tr><th>weight</th><th>tasks</th><th>observed</th><th>missed</th>' +
+  const grp = D.groups ? D.groups.of : tk.w;  // per weight, or per group (ONERA: request kind)
+  const ws = [...new Set(grp)].sort((a, b) => D.groups ? (a < b ? -1 : 1) : b - a), kinds = R ? R.kinds : [];
+  let w = '<thead><tr><th>' + (D.groups ? esc(D.groups.name) : 'weight') + '</th><th>tasks</th><th>observed</th><th>missed</th>' +
     kinds.map(k => '<th>' + esc(k) + '</th>').join('') + '</tr></thead><tbody>';
   for (const x of ws) {
     let n = 0, o = 0; const byKind = new Array(kinds.length).fill(0);
-    for (let t = 0; t < NT; t++) if (tk.w[t] === x) {
+    for (let t = 0; t < NT; t++) if (grp[t] === x) {
       n++; if (vd.served[t] >= 0) o++;
       else if (V === 0 && R) { const i = reasonOf.get(t); if (i !== undefined) byKind[R.kind[i]]++; }
     }
@@ -353,6 +373,7 @@ function drawSummaries() {
       byKind.map(v => '<td>' + (V === 0 ? v : '-') + '</td>').join('') + '</tr>';
   }
   document.getElementById('per-weight').innerHTML = w + '</tbody>';
+  if (D.groups) document.getElementById('weight-section').previousElementSibling.textContent = 'Per ' + D.groups.name;
 }
 function drawDiff() {
   if (D.views.length < 2) return;

@@ -242,44 +242,123 @@ def _summary(views: list[View]) -> str:
 
 def build_page(fleet: Fleet, opps, schedules: dict[str, Schedule], title: str | None = None) -> str:
     """The page as one HTML string (self-contained: the script, the data and the coastlines inline)."""
-    from eosp.evaluation.html_report import coastlines
-
     views = [View(label, s) for label, s in schedules.items()]
     title = title or f"{fleet.case_id or 'fleet'}: a constellation day"
     data, notes = build_data(fleet, opps, views, title)
-    clon, clat = coastlines()
-    data["coast"] = [_r(clon, 2), _r(clat, 2)]
     h = fleet.horizon
     meta = (f"{len(fleet.satellites)} satellites, {len(fleet.tasks)} tasks, horizon {iso_z(h.start)} to "
             f"{iso_z(h.end)} (UTC); {len(views)} schedule(s), checked by the fleet checker")
-    from eosp.evaluation.fleet_page_js import SCRIPT
-    from eosp.evaluation.html_report import lon_origin, map_extent, wrap_lon
+    return _page(data, notes, _summary(views), title, meta, fleet.tasks.lat_deg, fleet.tasks.lon_deg)
 
-    west = lon_origin(fleet.tasks.lon_deg) if len(fleet.tasks) else -180.0
-    (x0, x1), (y0, y1) = map_extent(wrap_lon(fleet.tasks.lon_deg, west), fleet.tasks.lat_deg) if len(fleet.tasks) \
-        else ((-180.0, 180.0), (-90.0, 90.0))
+
+def _page(data: dict, notes: list[str], summary: str, title: str, meta: str, lat, lon) -> str:
+    from eosp.evaluation.fleet_page_js import SCRIPT
+    from eosp.evaluation.html_report import coastlines, lon_origin, map_extent, wrap_lon
+
+    clon, clat = coastlines()
+    data["coast"] = [_r(clon, 2), _r(clat, 2)]
+    west = lon_origin(lon) if len(lon) else -180.0
+    (x0, x1), (y0, y1) = map_extent(wrap_lon(lon, west), lat) if len(lon) else ((-180.0, 180.0), (-90.0, 90.0))
     data["map"] = {"west": west, "x": [x0, x1], "y": [y0, y1]}
     payload = json.dumps(data, separators=(",", ":"), allow_nan=False).replace("</", "<\\/")
     note_html = "".join(f"<p class='note'>{html.escape(n)}</p>" for n in notes)
     return ("<!DOCTYPE html>\n<html lang='en'><head><meta charset='utf-8'>" + html_mark(REPORT_KIND) +
             f"<title>{html.escape(title)}</title><style>{_STYLE}</style></head>\n"
-            f"<body data-satellites='{len(fleet.satellites)}' data-tasks='{len(fleet.tasks)}' "
-            f"data-schedules='{len(views)}'>\n<h1>{html.escape(title)}</h1><p class='meta'>{meta}</p>{note_html}\n"
-            f"{_summary(views)}<div id='diff'></div>\n{_BODY}\n"
+            f"<body data-satellites='{len(data['sats'])}' data-tasks='{len(data['tasks']['id'])}' "
+            f"data-schedules='{len(data['views'])}'>\n<h1>{html.escape(title)}</h1><p class='meta'>{meta}</p>"
+            f"{note_html}\n{summary}<div id='diff'></div>\n{_BODY}\n"
             f"<script type='application/json' id='fleet-data'>{payload}</script>\n<script>{SCRIPT}</script>\n"
             "</body></html>\n")
+
+
+# --------------------------------------------------------------------------- ONERA fleets (no orbits, downloads)
+
+def build_onera_page(f, schedules: dict, title: str | None = None) -> str:
+    """The page of an ONERA fleet (:mod:`eosp.fleet.onera`): a task row per request (at its first observation's
+    target, worth its best value alone, its kind as the group), observations and the mandatory downloads on
+    the Gantt with the transition before each, no tracks, sunlight, battery or reasons (the instances have no
+    orbits); times are seconds since 0 h, as the instances give them."""
+    from eosp.fleet.onera import KIND_SHORT, activity_durations, transition
+    from eosp.fleet.onera_check import best_values, request_values, validate
+
+    o, d, r = f.observations, f.downloads, f.requests
+    first = r.first[:-1]
+    has = r.first[1:] > first
+    fo = np.where(has, first, 0)
+    rel = np.asarray([o.start[a:b].min() if b > a else 0 for a, b in zip(r.first[:-1], r.first[1:])], dtype=float)
+    due = np.asarray([o.end[a:b].max() if b > a else 0 for a, b in zip(r.first[:-1], r.first[1:])], dtype=float)
+    horizon = float(max(o.end.max() if len(o) else 0, d.end.max() if len(d) else 0, 1))
+    kinds = [KIND_SHORT[k] for k in r.kind.tolist()]
+    data: dict = {"name": title or "", "start": "1970-01-01T00:00:00Z", "relative": True, "seconds": horizon,
+                  "sats": [str(x) for x in f.satellites.tolist()], "sensor": ["-"] * len(f.satellites),
+                  "capacity": None, "views": [], "reasons": None,
+                  "tasks": {"id": [str(x) for x in r.id.tolist()], "lat": _r(o.lat[fo], 4), "lon": _r(o.lon[fo], 4),
+                            "w": _r(best_values(f), 4), "rel": _r(rel, 0), "due": _r(due, 0),
+                            "dur": _r(o.duration[fo], 0), "sensor": kinds},
+                  "groups": {"name": "request kind", "of": kinds}}
+    obs_pos = {int(x): i for i, x in enumerate(o.id.tolist())}
+    dl_pos = {int(x): i for i, x in enumerate(d.id.tolist())}
+    sat_pos = {int(x): i for i, x in enumerate(f.satellites.tolist())}
+    rows = []
+    for label, s in schedules.items():
+        res = validate(f, s)
+        act = s.activity.astype(np.int64)
+        dur = activity_durations(f, act)
+        sat = np.asarray([sat_pos.get(int(x), -1) for x in s.satellite.tolist()], dtype=np.int64)
+        oi = np.asarray([obs_pos.get(int(a), -1) for a in act.tolist()], dtype=np.int64)
+        di = np.asarray([dl_pos.get(int(a), -1) for a in act.tolist()], dtype=np.int64)
+        st = s.start.astype(np.float64)
+        en = st + np.nan_to_num(dur)
+        lat = np.where(oi >= 0, o.lat[np.maximum(oi, 0)], d.lat[np.maximum(di, 0)] if len(d) else 0.0)
+        lon = np.where(oi >= 0, o.lon[np.maximum(oi, 0)], d.lon[np.maximum(di, 0)] if len(d) else 0.0)
+        req = np.where(oi >= 0, o.request[np.maximum(oi, 0)], -1)
+        slew = np.full(len(s), np.nan)  # the transition before each activity, from the one before on its satellite
+        for k in np.unique(sat[sat >= 0]).tolist():
+            m = np.flatnonzero(sat == k)
+            m = m[np.argsort(st[m], kind="stable")]
+            if len(m) > 1:
+                a, b = m[:-1], m[1:]
+                slew[b] = st[b] - transition(lat[a], lon[a], lat[b], lon[b], (req[a] == req[b]) & (req[a] >= 0))
+        is_obs = oi >= 0
+        vd = {"label": label, "sat": sat[is_obs].tolist(), "task": req[is_obs].tolist(), "st": _r(st[is_obs], 3),
+              "en": _r(en[is_obs], 3), "slew": _r(slew[is_obs], 3), "valid": res.valid,
+              "metrics": {"value": res.value}, "viol": [],
+              "dl": {"sat": sat[di >= 0].tolist(), "st": _r(st[di >= 0], 3), "en": _r(en[di >= 0], 3),
+                     "id": act[di >= 0].tolist(), "slew": _r(slew[di >= 0], 3)}}
+        why, val = request_values(f, oi[is_obs])
+        if why is None:
+            vd["credit"] = (val > 0).tolist()  # a request counts only when its rules are met (stereo pairs, ...)
+        data["views"].append(vd)
+        verdict = ("<span class='ok'>valid</span>" if res.valid else
+                   f"<span class='bad'>invalid: {html.escape(str(res.first))}</span>")
+        served = ", ".join(f"{k} {v}" for k, v in res.served.items()) if res.valid else "-"
+        rows.append(f"<tr data-schedule='{html.escape(label, quote=True)}' data-valid='{str(res.valid).lower()}'>"
+                    f"<td>{html.escape(label)}</td><td>{int(is_obs.sum())}</td><td>{int((di >= 0).sum())}</td>"
+                    f"<td>{res.value:.4f}</td><td>{served}</td><td>{verdict}</td></tr>")
+    summary = ("<table class='summary'><thead><tr><th>schedule</th><th>observations</th><th>downloads</th>"
+               "<th>value</th><th>requests served by kind</th><th>checker</th></tr></thead><tbody>" + "".join(rows) +
+               "</tbody></table>")
+    notes = ["ONERA instances have no orbits (a satellite is an id; each observation carries its own window): no "
+             "ground tracks, sunlight or battery are drawn, and missed requests get no reasons (the insertion "
+             "procedure needs the orbit and attitude model of aeossp fleets).  Times are seconds since 0 h, as the "
+             "instance gives them; thin bars are the transitions (min(angular distance, 90) s) before each "
+             "activity; a checker violation is named in the summary (the ONERA checker names the first)."]
+    title = title or f"{f.name or 'ONERA fleet'}: a constellation day"
+    meta = (f"{len(f.satellites)} satellites, {len(r)} requests ({len(o)} observations), {len(d)} mandatory "
+            f"downloads; {len(schedules)} schedule(s), checked by the ONERA checker")
+    return _page(data, notes, summary, title, meta, o.lat[fo], o.lon[fo])
 
 
 def check_report_out(out, overwrite: bool = False) -> Path:
     return check_output(out, REPORT_KIND, overwrite, suffixes=(".html", ".htm"))
 
 
-def write_page(fleet: Fleet, opps, schedules: dict[str, Schedule], out, overwrite: bool = False,
-               title: str | None = None) -> Path:
-    """Build the page and write it atomically; an existing page is replaced only when eosp wrote it and
-    `overwrite` is given."""
+def write_page(fleet, opps, schedules: dict, out, overwrite: bool = False, title: str | None = None) -> Path:
+    """Build the page (of an aeossp fleet, or of an ONERA fleet when `opps` is None and `fleet` is one) and
+    write it atomically; an existing page is replaced only when eosp wrote it and `overwrite` is given."""
     out = check_report_out(out, overwrite)
-    text = build_page(fleet, opps, schedules, title)
+    text = build_page(fleet, opps, schedules, title) if isinstance(fleet, Fleet) else \
+        build_onera_page(fleet, schedules, title)
     with atomic_path(out, suffix=".html") as tmp:
         tmp.write_text(text, encoding="utf-8")
     return out
@@ -308,7 +387,7 @@ _BODY = """
 <p>Schedule drawn: <select id='view'></select> <small>(drag across the chart to zoom in time, double-click to see
 the whole horizon)</small></p>
 <p class='legend'><span><i style='background:#1f77b4'></i>observation</span><span><i style='background:#ff9f1c'>
-</i>slew and settling</span><span><i style='background:#d9d9d9'></i>eclipse</span><span><i style='background:#fffbe6;
+</i>slew and settling (transition)</span><span><i style='background:#9467bd'></i>download</span><span><i style='background:#d9d9d9'></i>eclipse</span><span><i style='background:#fffbe6;
 border:1px solid #ddd'></i>sunlit</span><span><i style='background:#2ca02c;height:2px'></i>battery (0 to capacity)
 </span><span><i style='background:#e00000'></i>checker violation</span></p>
 <section id='gantt-section'><div class='wrap'><canvas id='gantt'></canvas></div></section>

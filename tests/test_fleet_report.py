@@ -191,3 +191,53 @@ def test_invalid_schedule_is_marked_in_headless_chromium(day, tmp_path, chromium
         errors = b.errors()
     assert errors == [] and n_viol >= 1 and got["drawn"]["violations"] == n_viol
     assert got["hover"] == f"violation: {violations[0]}"
+
+
+# --------------------------------------------------------------------------- an ONERA fleet: no orbits, downloads
+
+ONERA_JS = """(async () => {
+  const p = window.fleetPage, tip = document.getElementById('tip'), g = document.getElementById('gantt');
+  const at = p.barAt(0);
+  g.dispatchEvent(new MouseEvent('mousemove', {clientX: at.x, clientY: at.y, bubbles: true}));
+  return {drawn: p.drawn, bar: tip.textContent,
+          rows: Array.from(document.querySelectorAll('#tasks tbody tr')).map(r => [r.dataset.task, r.dataset.status]),
+          groups: Array.from(document.querySelectorAll('#per-weight tbody tr')).map(r => r.dataset.weight),
+          heading: document.getElementById('weight-section').previousElementSibling.textContent};
+})()"""
+
+
+def test_onera_fleet_page_in_headless_chromium(tmp_path, chromium, capsys):
+    """An ONERA fleet has no orbits but mandatory downloads: the page draws observations, downloads and
+    transitions, requests by kind, and says what it cannot draw."""
+    from eosp.fleet.onera import read_onera
+    from eosp.fleet.onera import read_schedule as read_onera_schedule
+    from eosp.fleet.onera_check import request_values
+    from tests.browser import Browser
+    from tests.test_onera import TINY
+
+    (tmp_path / "t.pb").write_text(TINY)
+    fl, s, out = tmp_path / "fl", tmp_path / "s.parquet", tmp_path / "o.html"
+    assert main(["import", str(tmp_path / "t.pb"), "--out", str(fl)]) == 0
+    assert main(["solve", str(fl), "--solver", "greedy", "--out", str(s)]) == 0
+    assert main(["report", str(fl), str(s), "--out", str(out)]) == 0
+    f = read_onera(fl)
+    sched, _ = read_onera_schedule(s, f)
+    is_dl = np.isin(sched.activity, f.downloads.id)
+    assert is_dl.sum() == len(f.downloads) == 2
+    text = out.read_text()
+    assert "have no orbits" in text and "class='ok'>valid" in text
+    with Browser(chromium, tmp_path / "chromium.log") as b:
+        b.open(out)
+        got = b.evaluate(ONERA_JS)
+        errors = b.errors()
+    assert errors == []
+    g, m = got["drawn"]["gantt"], got["drawn"]["map"]
+    assert g["downloads"] == 2 and g["bars"] == int((~is_dl).sum()) and g["battery_points"] == 0
+    assert m["tracks"] == 0 and m["points"] == len(f.requests)
+    assert "(since 0 h)" in got["bar"] and got["bar"].split(": ")[0] in {str(x) for x in f.satellites}
+    # a request counts as observed only when it is worth something (a stereo request needs its pair)
+    rows = set(np.flatnonzero(np.isin(f.observations.id, sched.activity)).tolist())
+    _, val = request_values(f, np.asarray(sorted(rows), dtype=np.int64))
+    assert sorted(r[0] for r in got["rows"] if r[1] == "observed") == sorted(str(f.requests.id[k])
+                                                                             for k in np.flatnonzero(val > 0))
+    assert got["heading"] == "Per request kind" and sorted(got["groups"]) == ["one-shot", "periodic", "stereo", "video"]
