@@ -109,7 +109,8 @@ class Browser:
             buf += chunk
             *msgs, buf = buf.split(b"\0")
             for m in msgs:
-                self._messages.put(json.loads(m))
+                if m.strip():  # an empty frame (seen once at start-up) is no message: it must not kill the reader
+                    self._messages.put(json.loads(m))
 
     def _next(self, deadline: float) -> dict:
         try:
