@@ -41,59 +41,8 @@ import numba
 import numpy as np
 
 from eosp.graphs.discrete import arc_to_acq
-
-
-@numba.njit(cache=True)
-def _rechain(indptr, dst, acq_ptr, node_acq, path, n, i0, cur, tmp, m):
-    """From node `cur`, re-reach the acquisitions of path[i0:n] one arc at a time, writing the new nodes to
-    tmp[m:], until one equals the old node (from there the path is unchanged: an arc's destination depends
-    only on its source and target acquisition).  Returns the end of tmp's new nodes, or -1 when an arc is
-    missing."""
-    for i in range(i0, n):
-        nx = arc_to_acq(indptr, dst, acq_ptr, cur, node_acq[path[i]])
-        if nx < 0:
-            return -1
-        if nx == path[i]:
-            break
-        tmp[m] = nx
-        m += 1
-        cur = nx
-    return m
-
-
-@numba.njit(cache=True)
-def _try_put(indptr, dst, acq_ptr, node_acq, path, n, k, j, tmp, drop):
-    """Nodes of path[:n] with acquisition j put at position k, as tmp[:m]: inserted before position k (drop 0:
-    tmp replaces path[k:k+m-1]) or replacing position k's acquisition (drop 1: tmp replaces path[k:k+m]; in
-    the pruned graph the arc that would skip position k is often pruned, so a swap is tried as a replacement,
-    not as a removal followed by an insertion).  Returns m, or -1 when a needed arc is missing."""
-    v = arc_to_acq(indptr, dst, acq_ptr, 0 if k == 0 else path[k - 1], j)
-    if v < 0:
-        return -1
-    tmp[0] = v
-    return _rechain(indptr, dst, acq_ptr, node_acq, path, n, k + drop, v, tmp, 1)
-
-
-@numba.njit(cache=True)
-def _apply_insert(path, n, k, tmp, m):
-    for i in range(n, k, -1):
-        path[i] = path[i - 1]
-    for i in range(m):
-        path[k + i] = tmp[i]
-    return n + 1
-
-
-@numba.njit(cache=True)
-def _remove(indptr, dst, acq_ptr, node_acq, path, n, k, tmp):
-    """Drop position k in place; returns the new length, or -1 (path unchanged) when a needed arc is missing."""
-    m = _rechain(indptr, dst, acq_ptr, node_acq, path, n, k + 1, 0 if k == 0 else path[k - 1], tmp, 0)
-    if m < 0:
-        return -1
-    for i in range(k, n - 1):
-        path[i] = path[i + 1]
-    for i in range(m):
-        path[k + i] = tmp[i]
-    return n - 1
+from eosp.search.chain import apply_insert, remove, try_put
+from eosp.search.repair import FIRST_WORK, LONG_BEAM, MAX_WORK, replan_windows, scratch
 
 
 @numba.njit(cache=True)
@@ -121,9 +70,9 @@ def _insert_pass(indptr, dst, acq_ptr, node_acq, node_time, order, first_t, last
         while p <= n:
             if p > 0 and node_time[path[p - 1]] > last_t[j]:
                 break
-            m = _try_put(indptr, dst, acq_ptr, node_acq, path, n, p, j, tmp, 0)
+            m = try_put(indptr, dst, acq_ptr, node_acq, path, n, p, j, tmp, 0)
             if m > 0:
-                n = _apply_insert(path, n, p, tmp, m)
+                n = apply_insert(path, n, p, tmp, m)
                 in_path[j] = True
                 break
             p += 1
@@ -144,9 +93,9 @@ def _fill(indptr, dst, acq_ptr, node_acq, node_time, weight, order, first_t, las
         if hi < wn and first_t[j] > node_time[work[hi]] + span:
             continue
         for p in range(lo, hi + 1):
-            m = _try_put(indptr, dst, acq_ptr, node_acq, work, wn, p, j, tmp, 0)
+            m = try_put(indptr, dst, acq_ptr, node_acq, work, wn, p, j, tmp, 0)
             if m > 0:
-                wn = _apply_insert(work, wn, p, tmp, m)
+                wn = apply_insert(work, wn, p, tmp, m)
                 in_path[j] = True
                 ins[n_ins] = j
                 n_ins += 1
@@ -168,7 +117,7 @@ def _swap_pass(indptr, dst, acq_ptr, node_acq, node_time, weight, order, first_t
         # (1) drop position k, then fill the gap
         for i in range(n):
             work[i] = path[i]
-        wn = _remove(indptr, dst, acq_ptr, node_acq, work, n, k, tmp)
+        wn = remove(indptr, dst, acq_ptr, node_acq, work, n, k, tmp)
         n_ins = 0
         if wn >= 0:
             wn, gain, n_ins = _fill(indptr, dst, acq_ptr, node_acq, node_time, weight, order, first_t, last_t, span,
@@ -185,7 +134,7 @@ def _swap_pass(indptr, dst, acq_ptr, node_acq, node_time, weight, order, first_t
             for q in range(n_ins):  # undo the previous attempt
                 in_path[ins[q]] = False
             n_ins = 0
-            m = _try_put(indptr, dst, acq_ptr, node_acq, path, n, k, j, tmp, 1)
+            m = try_put(indptr, dst, acq_ptr, node_acq, path, n, k, j, tmp, 1)
             if m < 0:
                 continue
             tries += 1
@@ -274,7 +223,7 @@ def _ruin_recreate(indptr, dst, acq_ptr, node_acq, node_time, weight, first_t, l
         lost = 0.0
         for _q in range(r):
             a = node_acq[work[s]]
-            m = _remove(indptr, dst, acq_ptr, node_acq, work, wn, s, tmp)
+            m = remove(indptr, dst, acq_ptr, node_acq, work, wn, s, tmp)
             if m < 0:
                 break
             wn = m
@@ -374,17 +323,15 @@ class Polisher:
         _walk(eg.indptr, eg.dst, eg.acq_ptr, np.zeros(0, dtype=np.int64), empty)
         _ruin_recreate(eg.indptr, eg.dst, eg.acq_ptr, eg.node_acq, eg.node_time, self.weight, self.first_t,
                        self.last_t, self.span, empty, 0, 0, 1, 1.0, 0, self.tol)
-        # window re-planning (search/repair.py, which builds on this module's kernels): nodes by time, and a
-        # random 64-bit key per acquisition whose XOR over a label's acquisitions tells equal sets apart
-        from eosp.search import repair
-
-        self._repair, self._max_work, self._first_work = repair._repair, repair.MAX_WORK, repair.FIRST_WORK
+        # window re-planning (search/repair.py): nodes by time, and a random 64-bit key per acquisition whose
+        # XOR over a label's acquisitions tells equal sets apart
+        self._repair, self._max_work, self._first_work = replan_windows, MAX_WORK, FIRST_WORK
         self.window_time = 0.5  # the share of the time left one window may take at most
         # the most time window re-planning may take over the ruin and recreate's: at 1000-1500 acquisitions the
         # windows find what is left (a long window takes ~0.5-1.3 s there), the ruin and recreate little
         self.window_ratio = 3.0
-        self.long_beam = repair.LONG_BEAM  # the most labels per node of a long window
-        self._scratch = repair.scratch(wg, max(window_beam, self.long_beam), repair.MAX_WORK)
+        self.long_beam = LONG_BEAM  # the most labels per node of a long window
+        self._scratch = scratch(wg, max(window_beam, self.long_beam), MAX_WORK)
         self.by_time = (np.argsort(eg.node_time[1:], kind="stable") + 1).astype(np.int32)
         self.sorted_t = eg.node_time[self.by_time].astype(np.float64)
         self.key = np.random.default_rng(0).integers(1, 2**63, size=eg.acq_ptr.shape[0] - 1, dtype=np.uint64)
@@ -490,7 +437,7 @@ class Polisher:
 
     def _run_windows(self, path, n, count, budget, seed, span=1, long_span=0, max_work=None, long_beam=1):
         """`count` windows of 1..span positions at most (or, half of them, 1..long_span with `long_beam` labels
-        per node: :func:`eosp.search.repair._repair`), until `budget` arcs: (length, tried, aborted, arcs, long
+        per node: :func:`eosp.search.repair.replan_windows`), until `budget` arcs: (length, tried, aborted, arcs, long
         tried, long aborted)."""
         eg, wg = self.eg, self.wg
         return self._repair(eg.indptr, eg.dst, wg.indptr, wg.dst, eg.acq_ptr, eg.node_acq, eg.node_time, self.weight,

@@ -40,7 +40,7 @@ import numba
 import numpy as np
 
 from eosp.graphs.discrete import arc_to_acq
-from eosp.search.polish import _rechain
+from eosp.search.chain import rechain
 
 MAX_WORK = 100_000_000  # arcs a window may look at (~1 s; the refinement also caps it by the time left)
 FIRST_WORK = 3_000_000  # arcs of a refinement's first round of windows, before their rate is known (~10 ms)
@@ -216,7 +216,7 @@ def _splice(indptr, dst, acq_ptr, node_acq, path, n, s, r, seg, m, tmp, work):
     """path[:s] + seg[:m] + path[s + r:n] re-chained from the segment's last node, into work; returns the
     new length, or -1 when the re-chaining misses an arc."""
     cur = seg[m - 1] if m > 0 else (path[s - 1] if s > 0 else 0)
-    k = _rechain(indptr, dst, acq_ptr, node_acq, path, n, s + r, cur, tmp, 0)
+    k = rechain(indptr, dst, acq_ptr, node_acq, path, n, s + r, cur, tmp, 0)
     if k < 0:
         return -1
     for i in range(s):
@@ -265,7 +265,7 @@ def _try(indptr, dst, w_indptr, w_dst, acq_ptr, node_acq, node_time, weight, key
 
 
 def scratch(graph, beam: int, max_work: int = MAX_WORK) -> tuple:
-    """The working arrays of :func:`_repair` for one graph, allocated once (a search's refinement runs
+    """The working arrays of :func:`replan_windows` for one graph, allocated once (a search's refinement runs
     thousands of rounds; fresh arrays each round cost ~1 ms of page faults at 100 acquisitions): slot
     [N, beam] (`beam`: the most labels per node any window keeps), cnt [N], wval [N], mval [N], stamp [N] (stamp == a
     window's id marks its entries, so nothing is cleared between windows), the label arrays (at most one label
@@ -280,7 +280,7 @@ def scratch(graph, beam: int, max_work: int = MAX_WORK) -> tuple:
 
 
 @numba.njit(cache=True)
-def _repair(indptr, dst, w_indptr, w_dst, acq_ptr, node_acq, node_time, weight, key, span, by_time, sorted_t, path,
+def replan_windows(indptr, dst, w_indptr, w_dst, acq_ptr, node_acq, node_time, weight, key, span, by_time, sorted_t, path,
             n, window, beam, long_window, long_beam, iters, seed, tol, max_work, budget, scratch):
     """Re-plan up to `iters` windows of path[:n] (int32) in place, each 1..window consecutive positions at
     random with `beam` labels per node, or (every other window on average, when `long_window` > window)

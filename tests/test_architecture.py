@@ -94,6 +94,80 @@ def test_layer_check_catches_an_upward_import(tmp_path):
     assert layer_of("eosp.solvers.greedy") > layer_of("eosp.models.mod")
 
 
+def import_edges(path: Path, module: str, known: set[str]) -> set[str]:
+    """The modules of `known` that `path` (module `module`) imports, lazy imports inside functions included:
+    ``from eosp.search import repair`` is an edge to eosp.search.repair only (the package's __init__ runs first,
+    but every submodule import runs it: counted, each package that re-exports a module would be a circle)."""
+    out = set()
+    for node in ast.walk(ast.parse(path.read_text())):
+        if isinstance(node, ast.Import):
+            out |= {a.name for a in node.names}
+        elif isinstance(node, ast.ImportFrom):
+            base = node.module
+            if node.level:
+                pkg = module.rsplit(".", node.level)[0] if path.stem != "__init__" else module
+                base = f"{pkg}.{node.module}" if node.module else pkg
+            for a in node.names:
+                out.add(f"{base}.{a.name}" if f"{base}.{a.name}" in known else base)
+    return {n for n in out if n in known and n != module}
+
+
+def import_graph() -> dict[str, set[str]]:
+    """Module -> the project modules it imports (:func:`import_edges`)."""
+    mods = dict(modules())
+    return {name: import_edges(path, name, set(mods)) for name, path in mods.items()}
+
+
+def import_circles(graph: dict[str, set[str]]) -> list[list[str]]:
+    """The import circles of `graph`: its strongly connected components of more than one module (Tarjan)."""
+    index, low, stack, on, out = {}, {}, [], set(), []
+
+    def visit(v):
+        index[v] = low[v] = len(index)
+        stack.append(v)
+        on.add(v)
+        for w in sorted(graph.get(v, ())):
+            if w not in index:
+                visit(w)
+                low[v] = min(low[v], low[w])
+            elif w in on:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            comp = []
+            while True:
+                w = stack.pop()
+                on.discard(w)
+                comp.append(w)
+                if w == v:
+                    break
+            if len(comp) > 1:
+                out.append(sorted(comp))
+
+    for v in sorted(graph):
+        if v not in index:
+            visit(v)
+    return out
+
+
+def test_no_import_circles():
+    """Modules of one layer may import each other, but never in a circle (lazy imports count): a circle means
+    two modules share pieces that belong in a third one below both."""
+    circles = import_circles(import_graph())
+    assert not circles, "\n".join(" <-> ".join(c) for c in circles)
+
+
+def test_circle_check_catches_a_lazy_import_circle(tmp_path):
+    a, b = tmp_path / "a.py", tmp_path / "b.py"
+    a.write_text("from eosp.search.b import f\n")
+    b.write_text("import numpy\n\ndef g():\n    from eosp.search import a\n")
+    known = {"eosp.search", "eosp.search.a", "eosp.search.b"}
+    graph = {"eosp.search.a": import_edges(a, "eosp.search.a", known), "eosp.search.b": set()}
+    assert graph["eosp.search.a"] == {"eosp.search.b"} and not import_circles(graph)
+    graph["eosp.search.b"] = import_edges(b, "eosp.search.b", known)
+    assert graph["eosp.search.b"] == {"eosp.search.a"}
+    assert import_circles(graph) == [["eosp.search.a", "eosp.search.b"]]
+
+
 def test_no_sys_path_edits_outside_tests():
     offenders = []
     for f in ROOT.rglob("*.py"):
