@@ -450,6 +450,8 @@ def solve(f: OneraFleet, cfg: OneraConfig | None = None, greedy_only: bool = Fal
     bound, source = None, cfg.bound
     if cfg.bound == "conflict-free":
         bound = float(search.best.sum())
+    elif cfg.bound == "lp" and value >= float(search.best.sum()) - 1e-9:  # the plan meets the conflict-free bound
+        bound, source = float(search.best.sum()), "conflict-free"
     elif cfg.bound == "lp":
         from eosp.solvers.onera_bound import lp_bound
 

@@ -377,7 +377,9 @@ def lp_bound(f: OneraFleet, rounds: int = 40, time_limit: float = 60.0, info: di
     n_rounds = 0
     for n_rounds in range(1, rounds + 1):
         A, b = m.matrix()
-        res = linprog(-m.c, A_ub=A, b_ub=b, bounds=(0, 1), method="highs")
+        left = time_limit - (time.perf_counter() - t0)
+        res = linprog(-m.c, A_ub=A, b_ub=b, bounds=(0, 1), method="highs",
+                      options={"time_limit": max(5.0, left)})  # a solve cut short keeps the last round's bound
         if res.status != 0:
             break
         y = -np.asarray(res.ineqlin.marginals)
