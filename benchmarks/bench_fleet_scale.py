@@ -75,6 +75,8 @@ def main() -> None:
     ap.add_argument("--hours", type=float, default=24.0)
     ap.add_argument("--time-limit", type=float, default=600.0)
     ap.add_argument("--workers", type=int, nargs="+", default=[1, 2])
+    ap.add_argument("--rounds", type=int, default=0, help="a fixed number of price rounds instead of the time limit "
+                                                          "(deterministic: the runs must give the same schedule)")
     args = ap.parse_args()
     args.out.mkdir(parents=True, exist_ok=True)
     gen_s = gen_gb = 0.0
@@ -86,9 +88,11 @@ def main() -> None:
                "opportunities": meta["opportunities"], "passes": meta["passes"], "generate_s": round(gen_s, 1),
                "generate_peak_gb": round(gen_gb, 2), "runs": []}
     for w in args.workers:
-        run_dir = args.out / f"run-w{w}-{args.time_limit:g}s-{time.strftime('%H%M%S')}"
+        tag = f"{args.rounds}r" if args.rounds else f"{args.time_limit:g}s"
+        run_dir = args.out / f"run-w{w}-{tag}-{time.strftime('%H%M%S')}"
         cmd = [sys.executable, str(ROOT / "jobs/solve_fleet.py"), "--fleet-dir", str(fleet), "--run-dir", str(run_dir),
                "--fleet.workers", str(w), "--fleet.time-limit", str(args.time_limit), "--ray.num-cpus", str(max(w, 2)),
+               *(["--fleet.rounds", str(args.rounds)] if args.rounds else []),
                "--mlflow-uri", f"sqlite:///{(args.out / 'mlflow.db').resolve()}"]
         before = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss
         t0 = time.perf_counter()

@@ -73,13 +73,41 @@ class PassWorker:
         los = LineOfSight(fleet, Geometry(fleet))
         off = opps.pass_offsets()
         self.cfg = cfg
+        self.weight = fleet.tasks.weight.astype(np.float64)
         self.graphs = {p: build_pass(fleet, opps, los, p, off) for p in passes}
+        if self.graphs:  # compile the solver's kernels now, not in the first round (numba, per process)
+            from eosp.solvers.fleet import solve_pass_graph
+
+            pg = max(self.graphs.values(), key=lambda g: len(g.rows))
+            solve_pass_graph(pg, self.weight[pg.tasks], cfg)
 
     def ready(self) -> str:
         """The Ray node this actor runs on (once its graphs are built)."""
         import ray
 
         return ray.get_runtime_context().get_node_id()
+
+    def solve_priced(self, passes: np.ndarray, lam: np.ndarray) -> tuple:
+        """Every pass of `passes` under task prices `lam` (utility weight - price), packed in a few arrays
+        (a round of thousands of passes costs thousands of small objects otherwise): pass ids, values, bounds
+        (NaN: none), CSR offsets and nodes of the paths, seconds per pass."""
+        from eosp.solvers.fleet import solve_pass_graph
+
+        n = len(passes)
+        value, bound, secs = np.zeros(n), np.full(n, np.nan), np.zeros(n)
+        paths = []
+        for i, p in enumerate(passes.tolist()):
+            pg = self.graphs[p]
+            t = time.perf_counter()
+            res = solve_pass_graph(pg, self.weight[pg.tasks] - lam[pg.tasks], self.cfg)
+            secs[i] = time.perf_counter() - t
+            value[i] = res.value
+            if res.bound is not None:
+                bound[i] = res.bound
+            paths.append(res.nodes)
+        offsets = np.r_[0, np.cumsum([len(x) for x in paths])].astype(np.int64)
+        nodes = np.concatenate(paths).astype(np.int64) if paths else np.zeros(0, np.int64)
+        return passes, value, bound, offsets, nodes, secs
 
     def solve(self, passes: list[int], utils: list[np.ndarray]) -> list[tuple]:
         """(result, seconds) of each pass."""
@@ -156,6 +184,47 @@ class RayPassPool:
             else:
                 self.times += [(p, s, k) for p, (_, s) in zip(ids, results)]
             out.update({p: r for p, (r, _) in zip(ids, results)})
+        return out
+
+    def solve_priced(self, passes: list[int], lam: np.ndarray, deadline: float | None) -> dict | None:
+        """Every pass of `passes` under task prices `lam`: the prices go to the object store once, each actor
+        solves its own passes and sends them back packed (:meth:`PassWorker.solve_priced`)."""
+        import ray
+        from ray.exceptions import RayActorError
+
+        from eosp.solvers.fleet import PassResult, solve_pass
+
+        self.calls += 1
+        ids = np.asarray(passes, dtype=np.int64)
+        owner = self.owner[ids]
+        lam_ref = ray.put(np.asarray(lam, dtype=np.float64))
+        refs, parts = [], []
+        for k in range(len(self.actors)):
+            mine = ids[owner == k]
+            if len(mine):
+                refs.append(self.actors[k].solve_priced.remote(mine, lam_ref))
+                parts.append((k, mine))
+        if self.calls == self.kill_round and self.actors:
+            ray.kill(self.actors[0], no_restart=False)  # a worker lost mid-round (tests)
+        timeout = None if deadline is None else max(0.0, deadline - time.perf_counter())
+        ready, _ = ray.wait(refs, num_returns=len(refs), timeout=timeout)
+        if len(ready) < len(refs):
+            return None  # the deadline came first
+        out = {}
+        w = self.prob.weight
+        for ref, (k, mine) in zip(refs, parts):
+            try:
+                got, value, bound, offsets, nodes, secs = ray.get(ref)
+            except RayActorError:
+                self.faults += 1
+                for p in mine.tolist():
+                    tasks = self.prob.passes[p].tasks
+                    out[p] = solve_pass(self.prob, p, w[tasks] - lam[tasks], self.cfg)
+                continue
+            for i, p in enumerate(got.tolist()):
+                b = float(bound[i])
+                out[p] = PassResult(nodes[offsets[i]:offsets[i + 1]], float(value[i]), None if b != b else b)
+            self.times += list(zip(got.tolist(), secs.tolist(), [k] * len(got)))
         return out
 
     def close(self) -> None:

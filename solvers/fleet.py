@@ -314,8 +314,11 @@ class Coordinator:
         todo = np.flatnonzero(~self.frozen).tolist()
         solved = None
         if self.pool is not None:
-            solved = self.pool.solve(todo, [w[self.prob.passes[p].tasks] - self.lam[self.prob.passes[p].tasks]
-                                            for p in todo], deadline)
+            if hasattr(self.pool, "solve_priced"):  # workers that hold the weights take the prices alone
+                solved = self.pool.solve_priced(todo, self.lam, deadline)
+            else:
+                solved = self.pool.solve(todo, [w[self.prob.passes[p].tasks] - self.lam[self.prob.passes[p].tasks]
+                                                for p in todo], deadline)
             if solved is None:
                 return None  # cut by the deadline
             self.pass_solves += len(todo)
