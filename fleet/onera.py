@@ -119,11 +119,11 @@ class OneraFleet:
 
 @dataclass(frozen=True, eq=False)
 class OneraSchedule:
-    """A plan: one row per scheduled activity (observation or download), starts in integer seconds."""
+    """A plan: one row per scheduled activity (observation or download), starts in seconds since 0 h."""
 
     satellite: np.ndarray  # int64 satellite id
     activity: np.ndarray  # int64 observation or download id
-    start: np.ndarray  # int64
+    start: np.ndarray  # float64 (the solver's are whole milliseconds)
 
     def __len__(self) -> int:
         return len(self.activity)
@@ -454,7 +454,8 @@ def write_schedule(s: OneraSchedule, f: OneraFleet, path, overwrite: bool = Fals
     path = check_output(path, "onera-schedule", overwrite=overwrite, suffixes=(".parquet",))
     end = s.start + activity_durations(f, s.activity)
     table = pa.table({"satellite": pa.array(s.satellite, pa.int64()), "activity": pa.array(s.activity, pa.int64()),
-                      "start": pa.array(s.start, pa.int64()), "end": pa.array(end, pa.float64())})
+                      "start": pa.array(np.asarray(s.start, np.float64), pa.float64()),
+                      "end": pa.array(end, pa.float64())})
     md = {b"kind": SCHEDULE_KIND, b"fleet_fingerprint": fingerprint(f).encode(), **parquet_mark("onera-schedule")}
     for k, v in (info or {}).items():
         md[k.encode()] = json.dumps(v).encode()
@@ -495,7 +496,7 @@ def read_schedule(path, f: OneraFleet) -> tuple[OneraSchedule, dict]:
             raise InputError(path, "missing column", column=c)
         if table.column(c).null_count:
             raise InputError(path, "null value", column=c)
-        cols[c] = table.column(c).to_numpy().astype(np.int64)
+        cols[c] = table.column(c).to_numpy().astype(np.float64 if c == "start" else np.int64)
     info = {k.decode(): v.decode() for k, v in md.items()}
     return OneraSchedule(cols["satellite"], cols["activity"], cols["start"]), info
 
@@ -505,7 +506,7 @@ PLAN_HEADER = "satellite activity start end"
 
 def write_plan(s: OneraSchedule, f: OneraFleet, path, overwrite: bool = False) -> Path:
     """The text plan: a mark line, a header, then ``SATELLITE ACTIVITY START END`` per activity, sorted by
-    satellite then start (seconds since 0 h; END may be fractional for a short download window)."""
+    satellite then start (seconds since 0 h, to the millisecond)."""
     from eosp.atomic import atomic_path
     from eosp.ownership import check_output, comment_mark
 
@@ -513,11 +514,16 @@ def write_plan(s: OneraSchedule, f: OneraFleet, path, overwrite: bool = False) -
     end = s.start + activity_durations(f, s.activity)
     order = np.lexsort((s.start, s.satellite))
     out = [comment_mark("onera-plan"), PLAN_HEADER]
-    out += [f"{a} {b} {c} {e:g}" for a, b, c, e in zip(s.satellite[order].tolist(), s.activity[order].tolist(),
-                                                        s.start[order].tolist(), end[order].tolist())]
+    out += [f"{a} {b} {_sec(c)} {_sec(e)}" for a, b, c, e in zip(s.satellite[order].tolist(), s.activity[order].tolist(),
+                                                                  s.start[order].tolist(), end[order].tolist())]
     with atomic_path(path, suffix=".txt") as tmp:
         tmp.write_text("\n".join(out) + "\n")
     return path
+
+
+def _sec(t: float) -> str:
+    """Seconds to the millisecond, without trailing zeros (a solver's starts are whole milliseconds)."""
+    return f"{t:.3f}".rstrip("0").rstrip(".")
 
 
 def read_plan(path) -> OneraSchedule:
@@ -537,8 +543,8 @@ def read_plan(path) -> OneraSchedule:
         if len(parts) not in (3, 4):
             raise InputError(path, f"line {k}: expected SATELLITE ACTIVITY START END")
         try:
-            rows.append((int(parts[0]), int(parts[1]), int(parts[2])))
+            rows.append((int(parts[0]), int(parts[1]), float(parts[2])))
         except ValueError:
-            raise InputError(path, f"line {k}: satellite, activity and start must be integers") from None
-    a = np.array(rows, dtype=np.int64).reshape(-1, 3)
-    return OneraSchedule(a[:, 0].copy(), a[:, 1].copy(), a[:, 2].copy())
+            raise InputError(path, f"line {k}: satellite and activity must be integers, start a number") from None
+    a = np.array(rows, dtype=np.float64).reshape(-1, 3)
+    return OneraSchedule(a[:, 0].astype(np.int64), a[:, 1].astype(np.int64), a[:, 2].copy())

@@ -115,7 +115,7 @@ def validate(f: OneraFleet, s: OneraSchedule) -> Result:
     bad = np.flatnonzero((start < ws) | (start + dur > we + EPS))
     if len(bad):
         k = bad[0]
-        return Result(False, f"activity {act[k]} starts at {s.start[k]}: outside [{ws[k]:g}, {we[k] - dur[k]:g}] "
+        return Result(False, f"activity {act[k]} starts at {start[k]:g}: outside [{ws[k]:g}, {we[k] - dur[k]:g}] "
                              f"(window [{ws[k]:g}, {we[k]:g}], duration {dur[k]:g})")
     missing = np.setdiff1d(np.arange(len(d)), drow)
     if len(missing):
@@ -132,7 +132,7 @@ def validate(f: OneraFleet, s: OneraSchedule) -> Result:
     bad = np.flatnonzero(same_sat & (gap < -EPS))
     if len(bad):
         i, j = a[bad[0]], b[bad[0]]
-        return Result(False, f"satellite {sat[i]}: activity {act[j]} starts at {s.start[j]}, before the end of "
+        return Result(False, f"satellite {sat[i]}: activity {act[j]} starts at {start[j]:g}, before the end of "
                              f"activity {act[i]} ({start[i] + dur[i]:g}) plus the transition {tau[bad[0]]:.3f} s")
     why, val = request_values(f, orow)
     if why is not None:

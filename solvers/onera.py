@@ -13,7 +13,7 @@ sequence from the start (they are mandatory) and float inside their windows like
   requests and the unserved ones that have opportunities there, in a noisy greedy order; a move that
   lowers the value is undone.  Stops at the time limit.
 
-Times are integer seconds: earliest starts are rounded up and latest starts down, so every plan is
+Times are integer milliseconds: earliest starts are rounded up and latest starts down, so every plan is
 valid for :mod:`eosp.fleet.onera_check`.  The bound comes from :mod:`eosp.solvers.onera_bound`.
 """
 
@@ -32,6 +32,7 @@ from eosp.fleet.onera import PERIODIC, STEREO, TAU_MAX_S, OneraFleet, OneraSched
 from eosp.fleet.onera_check import best_values, periodic_value
 
 
+MS = 1000  # plan times are integer milliseconds
 MAX_EXTRA = 60  # requests not freed by a move that may take the freed time (a random sample beyond)
 DENSITY_TAU_S = 3.0  # a typical transition between two targets of one pass (s), for the greedy order
 
@@ -69,10 +70,12 @@ class Plan:
         o, d = f.observations, f.downloads
         self.f = f
         self.n_obs = n_obs = len(o)
-        dur = np.concatenate([o.duration.astype(np.float64), d.duration])
-        ws = np.concatenate([o.start, d.start]).astype(np.float64)
-        ls = np.floor(np.concatenate([o.end, d.end]) - dur + 1e-9)
-        self.WS, self.LS, self.DUR = ws.astype(np.int64).tolist(), ls.astype(np.int64).tolist(), dur.tolist()
+        # times in integer milliseconds (windows are whole seconds; rounding a start up to a whole second would
+        # cost up to a second per transition, much of a pass of 1-2 s observations)
+        dur = np.round(np.concatenate([o.duration.astype(np.float64), d.duration]) * MS).astype(np.int64)
+        ws = np.concatenate([o.start, d.start]).astype(np.int64) * MS
+        ls = np.concatenate([o.end, d.end]).astype(np.int64) * MS - dur
+        self.WS, self.LS, self.DUR = ws.tolist(), ls.tolist(), dur.tolist()
         self.LAT = np.concatenate([o.lat, d.lat]).tolist()
         self.LON = np.concatenate([o.lon, d.lon]).tolist()
         self.REQ = np.concatenate([o.request, np.full(len(d), -1)]).tolist()
@@ -100,11 +103,12 @@ class Plan:
 
     # ---------------------------------------------------------------- timing
     def tau(self, a: int, b: int) -> float:
+        """The transition from activity `a` to `b`, in milliseconds."""
         ra = self.REQ[a]
         if ra >= 0 and ra == self.REQ[b]:
             return 0.0
         t = math.hypot(self.LAT[a] - self.LAT[b], self.LON[a] - self.LON[b])
-        return t if t < TAU_MAX_S else TAU_MAX_S
+        return MS * (t if t < TAU_MAX_S else TAU_MAX_S)
 
     def find(self, s: int, g: int) -> int | None:
         """The position of satellite `s`'s sequence where activity `g` fits at the least added transition time
@@ -260,7 +264,7 @@ class Plan:
             act += self.seq[s]
             start += self.est[s]
         return OneraSchedule(np.asarray(sat, np.int64), ids[np.asarray(act, np.int64)] if act else np.zeros(0, np.int64),
-                             np.asarray(start, np.int64))
+                             np.asarray(start, np.int64) / MS)
 
 
 class Search:
@@ -391,7 +395,7 @@ class Search:
             hi = lo + span_s
             mark = len(pl.journal)
             seq, est = pl.seq[s], pl.est[s]
-            a, b = bisect_left(est, lo), bisect_right(est, hi)
+            a, b = bisect_left(est, lo * MS), bisect_right(est, hi * MS)
             touched = {pl.REQ[g] for g in seq[a:b] if g < pl.n_obs}
             i0, i1 = np.searchsorted(self.sat_starts[s], [lo - 300, hi])
             span_rows = rows[i0:i1].tolist()
@@ -405,7 +409,7 @@ class Search:
             for k in touched:  # free the whole request (a stereo pair goes as a whole), a periodic request
                 keep = []      # only its observations in the span
                 for g in pl.assigned[k]:
-                    if pl.KIND[k] != PERIODIC or (pl.SAT[g] == s and lo <= pl.est[s][pl.seq[s].index(g)] <= hi):
+                    if pl.KIND[k] != PERIODIC or (pl.SAT[g] == s and lo * MS <= pl.est[s][pl.seq[s].index(g)] <= hi * MS):
                         pl.remove(pl.SAT[g], g)
                     else:
                         keep.append(g)

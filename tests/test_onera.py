@@ -111,11 +111,11 @@ def tau(a, b):
 
 
 def sequence(acts):
-    """Integer starts of `acts` on one satellite in some order, or None when no order fits."""
+    """Starts of `acts` on one satellite in some order (each as early as it can), or None when no order fits."""
     for perm in itertools.permutations(acts):
         starts, t, prev = [], None, None
         for a in perm:
-            s = a["ws"] if prev is None else max(a["ws"], math.ceil(t + tau(prev, a) - 1e-9))
+            s = a["ws"] if prev is None else max(a["ws"], t + tau(prev, a))
             if s + a["d"] > a["we"] + 1e-9:
                 break
             starts.append(s)
@@ -177,8 +177,8 @@ def write(tmp_path, text, name="t.pb"):
 
 
 def plan_of(rows):
-    a = np.array(rows, dtype=np.int64).reshape(-1, 3)
-    return OneraSchedule(a[:, 0].copy(), a[:, 1].copy(), a[:, 2].copy())
+    a = np.array(rows, dtype=np.float64).reshape(-1, 3)
+    return OneraSchedule(a[:, 0].astype(np.int64), a[:, 1].astype(np.int64), a[:, 2].copy())
 
 
 @pytest.mark.parametrize("text", [TINY] + [random_instance(s) for s in range(6)], ids=["tiny"] + [f"r{s}" for s in range(6)])
