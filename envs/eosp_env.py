@@ -56,10 +56,12 @@ from eosp.envs.observation import (LABEL_PLANS, N_EDGE_FEATURES, N_NODE_FEATURES
                                    build_observation, plan_completion,
                                    step_and_observe_fields)
 from eosp.envs.sources import FixedSource, PreparedInstance, ShardSource, expand_shards, owned_shards, prepare_instance
-from eosp.config import CLASS_UTILITIES, N_CLASSES, EnvConfig, from_dict
+from eosp.config import EnvConfig, from_dict
 from eosp.instances.instance import Instance
+from eosp.reward import reward
 
-REWARDS = ("normalized", "utility", "unitary", "lexicographic")
+# the plan features' kernel codes (envs/observation.PLAN_ORDERS) per objective: Greedy's two orders, the label sweep
+PLANS = {"unitary": ("start+deadline", "label:count"), "utility": ("utility+class", "label:utility")}
 
 
 class InvalidAction(ValueError):
@@ -115,15 +117,14 @@ class EOSPEnv(gym.Env):
         else:
             names = {f.name for f in fields(EnvConfig)}
             cfg = from_dict(EnvConfig, {k: v for k, v in dict(config).items() if k in names})
-        if cfg.reward not in REWARDS:
-            raise ValueError(f"unknown reward {cfg.reward!r}; one of {', '.join(REWARDS)}")
+        self.reward = reward(cfg.reward)  # a ValueError for an unknown name
         if cfg.obs_edges not in ("earliest", "full"):
             raise ValueError(f"unknown obs_edges {cfg.obs_edges!r} (earliest, full)")
         self.cfg = cfg
-        # the plan features' kernel code (envs/observation.PLAN_ORDERS): Greedy's order for this reward
-        order = "start+deadline" if cfg.reward == "unitary" else "utility+class"
+        # the plan features' kernel code (envs/observation.PLAN_ORDERS): Greedy's order for this reward's objective
+        order, label = PLANS[self.reward.objective]
         if cfg.plan == "label":
-            self._plan = PLAN_ORDERS.index("label:count" if cfg.reward == "unitary" else "label:utility")
+            self._plan = PLAN_ORDERS.index(label)
         else:
             self._plan = 0 if not cfg.plan else PLAN_ORDERS.index(order if cfg.plan == "greedy2"
                                                                   else order.split("+")[0])
@@ -213,7 +214,7 @@ class EOSPEnv(gym.Env):
         self._publish_mask()
         terminated = not ep.mask.any()
         info = {"value": s.value, "n_scheduled": int(ep.n_scheduled[0]), "start": float(eg.node_time[w])}
-        r = self._reward(a, u, info)
+        r = self.reward.step(u, a, s.prepared, info)
         return self._observation(bufs, m), r, terminated, False, info
 
     # ------------------------------------------------------------------ search support
@@ -272,20 +273,6 @@ class EOSPEnv(gym.Env):
         self._mask_padded = np.zeros(self.n_max, dtype=np.int8)
         self._mask_padded[: mask.shape[0]] = mask
         self.action_space.current_mask = self._mask_padded
-
-    def _reward(self, a: int, u: float, info: dict) -> float:
-        mode = self.cfg.reward
-        if mode == "unitary":
-            return 1.0
-        if mode == "utility":
-            return u
-        r = u / self.state.prepared.mean_utility
-        if mode == "lexicographic":
-            vec = np.zeros(N_CLASSES, dtype=np.float32)
-            c = int(self.state.prepared.priority[a])
-            vec[min(c, N_CLASSES - 1)] = u / CLASS_UTILITIES[min(c, N_CLASSES - 1)]
-            info["reward_vector"] = vec
-        return r
 
     def _buffers(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Zeroed x, edge_index, edge_attr of an observation (the kernels fill them)."""

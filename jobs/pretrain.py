@@ -26,6 +26,7 @@ os.environ.setdefault("OMP_NUM_THREADS", "1")
 from eosp.args import Parser, add_config_args, config_from_args, run_job  # noqa: E402
 from eosp.config import MODEL_PRESETS, ModelConfig, PretrainConfig, flatten, from_dict, to_dict  # noqa: E402
 from eosp.errors import InputError  # noqa: E402
+from eosp.reward import reward  # noqa: E402
 
 
 def parse(argv: list[str] | None) -> PretrainConfig:
@@ -37,8 +38,9 @@ def parse(argv: list[str] | None) -> PretrainConfig:
     if preset not in MODEL_PRESETS:
         p.error(f"--imitation.preset: unknown preset {preset!r}; one of {', '.join(MODEL_PRESETS)}")
     cfg = config_from_args(PretrainConfig, ns, base=PretrainConfig(model=from_dict(ModelConfig, MODEL_PRESETS[preset])))
-    if cfg.env.reward == "lexicographic":
-        cfg.model.n_values = max(cfg.model.n_values, 7)
+    need = reward(cfg.env.reward).n_values  # the value heads the reward needs (lexicographic: one per class)
+    if need > 1:
+        cfg.model.n_values = max(cfg.model.n_values, need)
     if not cfg.imitation.run_name:
         cfg.imitation.run_name = "imitation-" + time.strftime("%Y%m%d-%H%M%S")
     return cfg

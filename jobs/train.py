@@ -37,6 +37,7 @@ os.environ.setdefault("OMP_NUM_THREADS", "1")
 from eosp.args import Parser, add_config_args, config_from_args, run_job  # noqa: E402
 from eosp.config import MODEL_PRESETS, DatasetConfig, ModelConfig, RunConfig, flatten, from_dict, to_dict  # noqa: E402
 from eosp.errors import InputError  # noqa: E402
+from eosp.reward import objective_mode, reward  # noqa: E402
 
 DEMO = {
     "train.train_data": "data/demo/train", "train.val_data": "data/demo/val", "train.iterations": 6,
@@ -90,8 +91,9 @@ def parse(argv: list[str] | None) -> tuple[RunConfig, argparse.Namespace]:
     else:
         base = RunConfig(model=from_dict(ModelConfig, MODEL_PRESETS[preset]))
     cfg = config_from_args(RunConfig, ns, base=base)
-    if cfg.env.reward == "lexicographic":
-        cfg.model.n_values = max(cfg.model.n_values, 7)
+    need = reward(cfg.env.reward).n_values  # the value heads the reward needs (lexicographic: one per class)
+    if need > 1:
+        cfg.model.n_values = max(cfg.model.n_values, need)
     if not cfg.train.run_name:
         cfg.train.run_name = time.strftime("%Y%m%d-%H%M%S")
     return cfg, ns
@@ -144,7 +146,7 @@ def _main(argv: list[str] | None) -> int:
     from eosp.training.loop import Trainer
     from eosp.training.plots import learning_curve
     from eosp.training.ppo import estimate_value_scale
-    from eosp.training.validation import Validator, objective_mode, selection_score
+    from eosp.training.validation import Validator, selection_score
 
     torch.set_num_threads(1)
     init_ray(cfg.ray.address, cfg.ray.num_cpus)
@@ -280,7 +282,7 @@ def show_shipped(cfg: RunConfig, wall: float) -> None:
     from eosp.evaluation.shipped import compare, reading
     from eosp.instances.generator import generate
 
-    mode = "unitary" if cfg.env.reward == "unitary" else "utility"
+    mode = objective_mode(cfg.env)
     print(f"[train] what this means: policy/X is the mean over the validation instances of the trained policy's value "
           f"over X's (1.0 = as good); wins/ties/losses count the instances where it is above / equal / below. "
           f"{wall:.0f} s of PPO from scratch rarely beats Greedy; imitation of the exact solver does. The shipped "

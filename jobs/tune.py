@@ -29,6 +29,7 @@ os.environ.setdefault("OMP_NUM_THREADS", "1")
 
 from eosp.args import Parser, add_config_args, config_from_args, prefixed_config, run_job  # noqa: E402
 from eosp.config import MODEL_PRESETS, ModelConfig, RunConfig, TuneConfig, from_dict, to_dict  # noqa: E402
+from eosp.reward import objective_mode, reward  # noqa: E402
 
 
 def trial(config: dict) -> None:
@@ -82,7 +83,7 @@ def run(cfg: RunConfig, tc: TuneConfig) -> dict:
     from ray.tune.schedulers import ASHAScheduler
 
     from eosp.jobs.ray_init import init_ray
-    from eosp.training.validation import baseline_values, objective_mode
+    from eosp.training.validation import baseline_values
 
     init_ray(cfg.ray.address, cfg.ray.num_cpus)
     from eosp.config import default_mlflow_uri
@@ -186,8 +187,9 @@ def _main(argv: list[str] | None) -> int:
         p.error(f"--train.preset: unknown preset {preset!r}; one of {', '.join(MODEL_PRESETS)}")
     cfg = config_from_args(RunConfig, ns, base=RunConfig(model=from_dict(ModelConfig, MODEL_PRESETS[preset])))
     tc = prefixed_config(TuneConfig, ns, "tune.")
-    if cfg.env.reward == "lexicographic":
-        cfg.model.n_values = max(cfg.model.n_values, 7)
+    need = reward(cfg.env.reward).n_values  # the value heads the reward needs (lexicographic: one per class)
+    if need > 1:
+        cfg.model.n_values = max(cfg.model.n_values, need)
     from eosp.errors import InputError
     from eosp.jobs.preflight import check_mlflow, require_data, require_findable
     from eosp.ownership import check_output

@@ -29,8 +29,9 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from eosp.config import CLASS_UTILITIES, N_CLASSES, EnvConfig
+from eosp.config import EnvConfig
 from eosp.models.agent import EOSPAgent, batch_from_padded
+from eosp.reward import objective_mode, reward
 
 
 @dataclass
@@ -45,33 +46,6 @@ class Sample:
     value: np.ndarray  # float32 [n_values]: remaining return (NaN: unknown)
     allowed: np.ndarray | None = None  # int32: actions with a known value (None: unknown)
     regret: np.ndarray | None = None  # float32: their regret, (Q* - Q(a)) / the instance's optimum
-
-
-def objective_mode(env_cfg: EnvConfig) -> str:
-    return "unitary" if env_cfg.reward == "unitary" else "utility"
-
-
-def reward_units(prepared, actions: np.ndarray, env_cfg: EnvConfig, n_values: int) -> np.ndarray:
-    """Remaining return from each step of `actions`, in the environment's reward units: [T, n_values]."""
-    inst = prepared.inst
-    u = inst.acqs.utility[actions]
-    if env_cfg.reward == "lexicographic":
-        c = np.minimum(prepared.priority[actions].astype(np.int64), N_CLASSES - 1)
-        per = np.zeros((actions.shape[0], N_CLASSES))
-        per[np.arange(actions.shape[0]), c] = u / np.asarray(CLASS_UTILITIES)[c]
-        per = per[:, :n_values] if n_values <= N_CLASSES else per
-    else:
-        r = {"unitary": np.ones_like(u), "utility": u}.get(env_cfg.reward, u / prepared.mean_utility)
-        per = r[:, None]
-    return np.cumsum(per[::-1], axis=0)[::-1]
-
-
-def to_units(v_objective: float, prepared, env_cfg: EnvConfig, n_values: int) -> np.ndarray:
-    """A remaining objective value (count or utility) in reward units; NaN where it cannot be split by class."""
-    if env_cfg.reward == "lexicographic":
-        return np.full(n_values, np.nan, np.float32)
-    scale = prepared.mean_utility if env_cfg.reward == "normalized" else 1.0
-    return np.array([v_objective / scale], np.float32)
 
 
 def samples_along(env, prepared, actions: np.ndarray, optimal: list[np.ndarray], values: np.ndarray,
@@ -193,6 +167,7 @@ class DemoData:
 
         self.env_cfg, self.n_values = env_cfg, n_values
         self.mode = objective_mode(env_cfg)
+        self.reward = reward(env_cfg.reward)
         self.instances: list[tuple[Path, int, object]] = []  # (shard, index, prepared)
         self.samples: list[Sample] = []
         self.start_values: list[float] = []
@@ -211,7 +186,7 @@ class DemoData:
         n_max = max(p.inst.n_acq for _, _, p in self.instances)
         self.env = EOSPEnv(replace(env_cfg, max_acquisitions=n_max, shards=()), source=FixedSource(self.instances[0][2]))
         for (_, _, p), d in zip(self.instances, demos):
-            targets = reward_units(p, d.actions, env_cfg, n_values)
+            targets = self.reward.returns_to_go(p, d.actions, n_values)
             self.start_values.append(float(targets[0].max()) if len(targets) else 0.0)
             q = [(al, qv) for al, qv in zip(d.allowed, d.q)]
             self.samples += samples_along(self.env, p, d.actions, d.optimal, targets, q, d.value, set_tolerance)
@@ -240,7 +215,7 @@ class DemoData:
         added, regret = 0, []
         for (i, acts), (sets, best) in zip(trajectories, labels):
             p = self.instances[i][2]
-            values = np.stack([to_units(v, p, self.env_cfg, self.n_values) for v in best]) if best else []
+            values = np.stack([self.reward.to_units(v, p, self.n_values) for v in best]) if best else []
             self.samples += samples_along(self.env, p, acts, sets, values)
             added += len(acts)
             w = np.ones(p.inst.n_acq) if self.mode == "unitary" else p.inst.acqs.utility

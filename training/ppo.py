@@ -5,6 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from eosp.config import RunConfig, to_dict
+from eosp.reward import reward
 
 
 def estimate_value_scale(cfg: RunConfig, episodes: int = 8) -> float:
@@ -24,8 +25,7 @@ def estimate_value_scale(cfg: RunConfig, episodes: int = 8) -> float:
             _, r, done, _, info = env.step(env.action_space.sample())
             total += r
             per_class = per_class + info.get("reward_vector", 0.0)
-        # lexicographic: the heads learn per-class counts, scaled by the largest one
-        returns.append(float(np.max(per_class)) if cfg.env.reward == "lexicographic" else total)
+        returns.append(env.reward.episode_return(total, per_class))
     return float(max(1.0, np.mean(returns)))
 
 
@@ -47,7 +47,7 @@ def ppo_config(cfg: RunConfig):
     from eosp.training.learner import EOSPPPOLearner
 
     learner = {"learner_class": EOSPPPOLearner}
-    if cfg.env.reward == "lexicographic":
+    if reward(cfg.env.reward).per_class:
         from eosp.training.lexicographic import LexicographicPPOLearner
 
         learner = {"learner_class": LexicographicPPOLearner}

@@ -16,12 +16,9 @@ import numpy as np
 
 from eosp.atomic import atomic_path
 from eosp.config import EnvConfig
+from eosp.reward import objective_mode
 
 BASELINES = ("greedy", "ramp")
-
-
-def objective_mode(env_cfg: EnvConfig) -> str:
-    return "unitary" if env_cfg.reward == "unitary" else "utility"
 
 
 def _solve_task(shard: str, index: int, solver: str, mode: str, time_limit: float) -> tuple[str, float, float]:
