@@ -73,11 +73,12 @@ class SolverConfig:
         """Every field of the right type and within its limits (:func:`eosp.config.check_value`); a
         one-shot solver given a time limit is refused.  A one-line ValueError otherwise."""
         cls = type(self)
-        hints = _type_hints(cls)
-        for f in fields(self):
-            value = getattr(self, f.name)
-            _check_type(cls.__name__, f.name, hints[f.name], value)
-            check_value(cls, f.name, value)
+        # the type is part of the key: True == 1 == 1.0 as dictionary keys, yet only one of them is an int
+        values = tuple((f.name, type(v), v) for f in fields(self) for v in (getattr(self, f.name),))
+        try:
+            _check_fields(cls, values)  # the same values were checked before: a fleet solves 100,000s of passes
+        except TypeError:  # an unhashable value (a wrong type): checked directly, for its message
+            _check_fields.__wrapped__(cls, values)
         if self.ONE_SHOT and self.time_limit is not None:
             raise ValueError(f"solver {self.NAME!r} takes no time_limit: it builds its schedule in one pass and "
                              f"always finishes (got {self.time_limit!r}; leave it unset)")
@@ -127,6 +128,16 @@ def _type_hints(cls: type) -> dict[str, Any]:
     """A config class's resolved annotations, once per class: resolving them is most of a small solve's cost
     (the fleet solver solves hundreds of small passes a round)."""
     return typing.get_type_hints(cls)
+
+
+@functools.lru_cache(maxsize=4096)
+def _check_fields(cls: type, values: tuple) -> None:
+    """Type and range of each (field, value) of a config (cached: identical configs are checked once; a
+    failing one raises every time, as lru_cache keeps no exception)."""
+    hints = _type_hints(cls)
+    for name, _, value in values:
+        _check_type(cls.__name__, name, hints[name], value)
+        check_value(cls, name, value)
 
 
 def _check_type(owner: str, name: str, hint: Any, value: Any) -> None:
