@@ -377,9 +377,11 @@ def lp_bound(f: OneraFleet, rounds: int = 40, time_limit: float = 60.0, info: di
     n_rounds = 0
     for n_rounds in range(1, rounds + 1):
         A, b = m.matrix()
+        # the first solve runs to its end (it gives the first bound); a later one cut short by the time
+        # limit keeps the last round's bound
         left = time_limit - (time.perf_counter() - t0)
-        res = linprog(-m.c, A_ub=A, b_ub=b, bounds=(0, 1), method="highs",
-                      options={"time_limit": max(5.0, left)})  # a solve cut short keeps the last round's bound
+        options = {} if n_rounds == 1 else {"time_limit": max(5.0, left)}
+        res = linprog(-m.c, A_ub=A, b_ub=b, bounds=(0, 1), method="highs", options=options)
         if res.status != 0:
             break
         y = -np.asarray(res.ineqlin.marginals)
