@@ -12,7 +12,9 @@ from __future__ import annotations
 
 from typing import NamedTuple
 
+import numba
 import numpy as np
+
 from eosp.fleet.geometry import Geometry, epochs, sunlit
 from eosp.fleet.model import Fleet
 
@@ -145,13 +147,16 @@ class SunCache:
         return lit
 
 
-def _run(load: list, charge: list, dur: list, initial: float, capacity: float) -> tuple[int, float, float]:
-    """The charge recurrence, segment by segment (sequential by nature, and cheap: plain floats,
-    the benchmark's operations in its order)."""
+@numba.njit(cache=True)
+def _run(load: np.ndarray, charge: np.ndarray, dur: np.ndarray, initial: float,
+         capacity: float) -> tuple[int, float, float]:
+    """The charge recurrence, segment by segment (sequential by nature): the benchmark's float64 operations in
+    its order, compiled without fast-math, so every rounding is the benchmark's."""
     battery = initial
     gross = 0.0
     low = initial
-    for k, (ld, ch, dt) in enumerate(zip(load, charge, dur)):
+    for k in range(len(load)):
+        ld, ch, dt = load[k], charge[k], dur[k]
         gross += (ld * dt) / 3600.0
         battery += ((ch - ld) * dt) / 3600.0
         if battery < -1.0e-9:
@@ -175,8 +180,8 @@ def simulate(fleet: Fleet, sun: SunCache, sat: int, obs: Intervals, man: Interva
     load = load + np.where(a_man >= 0, b.slew_w[sat], 0.0)
     charge = np.where(sun.sunlit(sat, mid), b.sunlit_w[sat], 0.0)
     dur = d.astype(np.float64) / 1e6
-    k, gross, low = _run(load.tolist(), charge.tolist(), dur.tolist(), float(b.initial_wh[sat]),
-                         float(b.capacity_wh[sat]))
+    k, gross, low = _run(np.ascontiguousarray(load, dtype=np.float64), np.ascontiguousarray(charge, dtype=np.float64),
+                         dur, float(b.initial_wh[sat]), float(b.capacity_wh[sat]))
     if k < 0:
         return BatteryRun(True, float(gross), -1, -1, float(low))
     return BatteryRun(False, float(gross), int(mid[k]), int(a_obs[k]), float(low))
