@@ -14,9 +14,24 @@ infeasible.
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numba
+import numpy as np
 
 from eosp.graphs.discrete import arc_to_acq
+
+
+class GraphArrays(NamedTuple):
+    """The arrays of a discrete graph the kernels read, as one argument (numba passes a NamedTuple of arrays into
+    njit functions as it passes the arrays): CSR arcs (indptr [N+1], dst), the nodes of each acquisition
+    (acq_ptr [n_acq+1]), each node's acquisition and time."""
+
+    indptr: np.ndarray
+    dst: np.ndarray
+    acq_ptr: np.ndarray
+    node_acq: np.ndarray
+    node_time: np.ndarray
 
 
 @numba.njit(cache=True)

@@ -37,11 +37,13 @@ utility, or 1 per acquisition), so a polished schedule is never worse than its i
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numba
 import numpy as np
 
 from eosp.graphs.discrete import arc_to_acq
-from eosp.search.chain import apply_insert, remove, try_put
+from eosp.search.chain import GraphArrays, apply_insert, remove, try_put
 from eosp.search.repair import FIRST_WORK, LONG_BEAM, MAX_WORK, replan_windows, scratch
 
 
@@ -79,12 +81,34 @@ def _insert_pass(indptr, dst, acq_ptr, node_acq, node_time, order, first_t, last
     return n
 
 
+class Candidates(NamedTuple):
+    """What the moves know of the acquisitions they may insert: objective weights [n_acq], the order in which
+    they are tried (int64), each one's first and last node time [n_acq] and the longest window (`span`)."""
+
+    weight: np.ndarray
+    order: np.ndarray
+    first_t: np.ndarray
+    last_t: np.ndarray
+    span: float
+
+
+class Inserted(NamedTuple):
+    """The moves' bookkeeping: which acquisitions are in the schedule being built (bool [n_acq]), a buffer of
+    re-chained nodes (:func:`eosp.search.chain.try_put`'s `tmp`) and the list of the acquisitions inserted."""
+
+    in_path: np.ndarray
+    tmp: np.ndarray
+    ins: np.ndarray
+
+
 @numba.njit(cache=True)
-def _fill(indptr, dst, acq_ptr, node_acq, node_time, weight, order, first_t, last_t, span, in_path, work, wn, lo,
-          hi, skip, tmp, ins, n_ins):
-    """Insert unscheduled acquisitions (not `skip`) at positions lo..hi of work[:wn], first fit in `order`, the
-    window growing with each insertion; marks them in `in_path` and lists them in `ins`.  Returns (wn, weight
-    gained, n_ins)."""
+def _fill(g, c, mv, work, wn, lo, hi, skip, n_ins):
+    """Insert unscheduled acquisitions (not `skip`) of candidates `c` at positions lo..hi of work[:wn] (a path of
+    graph `g`), first fit in `c.order`, the window growing with each insertion; marks them in `mv.in_path` and
+    lists them in `mv.ins` from position `n_ins`.  Returns (wn, weight gained, n_ins)."""
+    indptr, dst, acq_ptr, node_acq, node_time = g
+    weight, order, first_t, last_t, span = c
+    in_path, tmp, ins = mv
     gain = 0.0
     t_lo = node_time[work[lo - 1]] if lo > 0 else -np.inf
     for j in order:
@@ -110,6 +134,9 @@ def _swap_pass(indptr, dst, acq_ptr, node_acq, node_time, weight, order, first_t
                tmp, work, ins, tol, max_replace):
     """At every position, drop its acquisition (or replace it by an unscheduled one) and insert others around
     it; kept when the weight gained exceeds the weight dropped.  Returns the new length."""
+    g = GraphArrays(indptr, dst, acq_ptr, node_acq, node_time)
+    c = Candidates(weight, order, first_t, last_t, span)
+    mv = Inserted(in_path, tmp, ins)
     k = 0
     while k < n:
         a = node_acq[path[k]]
@@ -120,8 +147,7 @@ def _swap_pass(indptr, dst, acq_ptr, node_acq, node_time, weight, order, first_t
         wn = remove(indptr, dst, acq_ptr, node_acq, work, n, k, tmp)
         n_ins = 0
         if wn >= 0:
-            wn, gain, n_ins = _fill(indptr, dst, acq_ptr, node_acq, node_time, weight, order, first_t, last_t, span,
-                                    in_path, work, wn, max(k - 2, 0), min(k + 2, wn), a, tmp, ins, 0)
+            wn, gain, n_ins = _fill(g, c, mv, work, wn, max(k - 2, 0), min(k + 2, wn), a, 0)
             kept = gain - weight[a] > tol
         # (2) replace position k by an unscheduled acquisition, then fill around it
         t_k = node_time[path[k]]
@@ -145,8 +171,7 @@ def _swap_pass(indptr, dst, acq_ptr, node_acq, node_time, weight, order, first_t
             wn = n
             in_path[j] = True
             ins[0] = j
-            wn, gain, n_ins = _fill(indptr, dst, acq_ptr, node_acq, node_time, weight, order, first_t, last_t, span,
-                                    in_path, work, wn, max(k - 2, 0), min(k + 3, wn), a, tmp, ins, 1)
+            wn, gain, n_ins = _fill(g, c, mv, work, wn, max(k - 2, 0), min(k + 3, wn), a, 1)
             kept = weight[j] + gain - weight[a] > tol
         if kept:
             in_path[a] = False
@@ -206,6 +231,8 @@ def _ruin_recreate(indptr, dst, acq_ptr, node_acq, node_time, weight, first_t, l
     in_work = in_cur.copy()
     tmp = np.empty(n_acq + 2, dtype=path.dtype)
     ins = np.empty(n_acq + 1, dtype=np.int64)
+    g = GraphArrays(indptr, dst, acq_ptr, node_acq, node_time)
+    mv = Inserted(in_work, tmp, ins)
     cand = np.empty(n_acq, dtype=np.int64)
     key = np.empty(n_acq, dtype=np.float64)
     cn, bn = n, n
@@ -240,8 +267,7 @@ def _ruin_recreate(indptr, dst, acq_ptr, node_acq, node_time, weight, first_t, l
                 key[nc] = -weight[j] * np.exp(noise * np.random.random())
                 nc += 1
         order = cand[:nc][np.argsort(key[:nc])]
-        wn, gain, _n = _fill(indptr, dst, acq_ptr, node_acq, node_time, weight, order, first_t, last_t, span,
-                             in_work, work, wn, lo, hi, -1, tmp, ins, 0)
+        wn, gain, _n = _fill(g, Candidates(weight, order, first_t, last_t, span), mv, work, wn, lo, hi, -1, 0)
         val = cval - lost + gain
         if val >= cval - tol:
             for i in range(wn):

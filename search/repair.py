@@ -36,11 +36,13 @@ acquisitions.
 """
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numba
 import numpy as np
 
 from eosp.graphs.discrete import arc_to_acq
-from eosp.search.chain import rechain
+from eosp.search.chain import GraphArrays, rechain
 
 MAX_WORK = 100_000_000  # arcs a window may look at (~1 s; the refinement also caps it by the time left)
 FIRST_WORK = 3_000_000  # arcs of a refinement's first round of windows, before their rate is known (~10 ms)
@@ -232,14 +234,51 @@ def _splice(indptr, dst, acq_ptr, node_acq, path, n, s, r, seg, m, tmp, work):
     return j
 
 
+class Sweep(NamedTuple):
+    """What every window of one :func:`replan_windows` call reads: objective weights [n_acq], the random 64-bit
+    key of each acquisition, the longest window (`span`), the nodes by time (`by_time`) and their times
+    (`sorted_t`), the gain below which a gain is none (`tol`) and the arcs a window may look at (`max_work`)."""
+
+    weight: np.ndarray
+    key: np.ndarray
+    span: float
+    by_time: np.ndarray
+    sorted_t: np.ndarray
+    tol: float
+    max_work: int
+
+
+class Scratch(NamedTuple):
+    """The working arrays of the windows of one graph (:func:`scratch`)."""
+
+    slot: np.ndarray
+    cnt: np.ndarray
+    wval: np.ndarray
+    mval: np.ndarray
+    stamp: np.ndarray
+    lab_node: np.ndarray
+    lab_par: np.ndarray
+    lab_val: np.ndarray
+    lab_key: np.ndarray
+    seg: np.ndarray
+    tmp: np.ndarray
+    work: np.ndarray
+    blocked: np.ndarray
+    calls: np.ndarray
+
+
 @numba.njit(cache=True)
-def _try(indptr, dst, w_indptr, w_dst, acq_ptr, node_acq, node_time, weight, key, span, by_time, sorted_t, path, n,
-         s, r, plateau, beam, blocked, lab_node, lab_par, lab_val, lab_key, slot, cnt, wval, mval, stamp, call, seg,
-         tmp, work, tol, max_work, tally):
-    """Re-plan positions s..s+r-1 of path[:n]; applied in place when it gains (or, with `plateau`, when it
-    does not lose).  The window is planned over the arcs (w_indptr, w_dst), a subset of (indptr, dst) on the
-    same nodes (e.g. the pruned graph's), the rest of the path re-chained over (indptr, dst).  Returns (new
-    length, gained, aborted: the window was too costly to plan)."""
+def _try(g, wg, sw, sc, path, n, s, r, beam, tally):
+    """Re-plan positions s..s+r-1 of path[:n] with `beam` labels per node; applied in place when it does not
+    lose (plateaus are walked).  The window is planned over the arcs of `wg`, a subset of `g`'s on the same
+    nodes (e.g. the pruned graph's), the rest of the path re-chained over `g`'s; `sc.calls[0]` is this window's
+    id in the scratch `sc`, tally[0] grows by the arcs looked at.  Returns (new length, gained, aborted: the
+    window was too costly to plan)."""
+    indptr, dst, acq_ptr, node_acq, node_time = g
+    w_indptr, w_dst = wg.indptr, wg.dst
+    weight, key, span, by_time, sorted_t, tol, max_work = sw
+    slot, cnt, wval, mval, stamp, lab_node, lab_par, lab_val, lab_key, seg, tmp, work, blocked, calls = sc
+    call = calls[0]
     old = 0.0
     for i in range(s, s + r):
         blocked[node_acq[path[i]]] = False
@@ -251,7 +290,7 @@ def _try(indptr, dst, w_indptr, w_dst, acq_ptr, node_acq, node_time, weight, key
                      max_work, tally)
     wn = -1
     aborted = m < 0
-    if m >= 0 and (val > old + tol or (plateau and val >= old - tol)):
+    if m >= 0 and val >= old - tol:  # a gain, or a plateau (tol >= 0)
         wn = _splice(indptr, dst, acq_ptr, node_acq, path, n, s, r, seg, m, tmp, work)
     if wn < 0:
         for i in range(s, s + r):
@@ -264,7 +303,7 @@ def _try(indptr, dst, w_indptr, w_dst, acq_ptr, node_acq, node_time, weight, key
     return wn, val > old + tol, False
 
 
-def scratch(graph, beam: int, max_work: int = MAX_WORK) -> tuple:
+def scratch(graph, beam: int, max_work: int = MAX_WORK) -> Scratch:
     """The working arrays of :func:`replan_windows` for one graph, allocated once (a search's refinement runs
     thousands of rounds; fresh arrays each round cost ~1 ms of page faults at 100 acquisitions): slot
     [N, beam] (`beam`: the most labels per node any window keeps), cnt [N], wval [N], mval [N], stamp [N] (stamp == a
@@ -272,11 +311,11 @@ def scratch(graph, beam: int, max_work: int = MAX_WORK) -> tuple:
     per arc looked at, and at most MAX_LABELS), the path buffers, the blocked flags and the window counter."""
     n_nodes, n_acq = graph.node_acq.shape[0], graph.acq_ptr.shape[0] - 1
     cap = min(max_work, MAX_LABELS) + int(np.max(np.diff(graph.indptr), initial=0)) + 2
-    return (np.empty((n_nodes, beam), dtype=np.int32), np.zeros(n_nodes, dtype=np.int32), np.empty(n_nodes),
-            np.empty(n_nodes), np.full(n_nodes, -1, dtype=np.int64), np.empty(cap, dtype=np.int32),
-            np.empty(cap, dtype=np.int32), np.empty(cap, dtype=np.float64), np.empty(cap, dtype=np.uint64),
-            np.empty(n_acq + 1, dtype=np.int32), np.empty(n_acq + 2, dtype=np.int32),
-            np.empty(n_acq + 1, dtype=np.int32), np.zeros(n_acq, dtype=np.bool_), np.zeros(1, dtype=np.int64))
+    return Scratch(np.empty((n_nodes, beam), dtype=np.int32), np.zeros(n_nodes, dtype=np.int32), np.empty(n_nodes),
+                   np.empty(n_nodes), np.full(n_nodes, -1, dtype=np.int64), np.empty(cap, dtype=np.int32),
+                   np.empty(cap, dtype=np.int32), np.empty(cap, dtype=np.float64), np.empty(cap, dtype=np.uint64),
+                   np.empty(n_acq + 1, dtype=np.int32), np.empty(n_acq + 2, dtype=np.int32),
+                   np.empty(n_acq + 1, dtype=np.int32), np.zeros(n_acq, dtype=np.bool_), np.zeros(1, dtype=np.int64))
 
 
 @numba.njit(cache=True)
@@ -300,6 +339,9 @@ def replan_windows(indptr, dst, w_indptr, w_dst, acq_ptr, node_acq, node_time, w
         blocked[node_acq[path[i]]] = True
     aborted = tried = long_aborted = long_tried = 0
     tally = np.zeros(1, dtype=np.int64)
+    g = GraphArrays(indptr, dst, acq_ptr, node_acq, node_time)
+    wg = GraphArrays(w_indptr, w_dst, acq_ptr, node_acq, node_time)
+    sw = Sweep(weight, key, span, by_time, sorted_t, tol, max_work)
     for _ in range(iters):
         if n == 0 or tally[0] >= budget:
             break
@@ -313,9 +355,7 @@ def replan_windows(indptr, dst, w_indptr, w_dst, acq_ptr, node_acq, node_time, w
         else:
             r = min(1 + np.random.randint(0, window), n)
         s = np.random.randint(0, n - r + 1)
-        n, _g, a = _try(indptr, dst, w_indptr, w_dst, acq_ptr, node_acq, node_time, weight, key, span, by_time,
-                        sorted_t, path, n, s, r, True, b, blocked, lab_node, lab_par, lab_val, lab_key, slot, cnt,
-                        wval, mval, stamp, calls[0], seg, tmp, work, tol, max_work, tally)
+        n, _g, a = _try(g, wg, sw, scratch, path, n, s, r, b, tally)
         aborted += a
         if a and is_long:
             long_aborted += 1
