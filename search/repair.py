@@ -319,8 +319,8 @@ def scratch(graph, beam: int, max_work: int = MAX_WORK) -> Scratch:
 
 
 @numba.njit(cache=True)
-def replan_windows(indptr, dst, w_indptr, w_dst, acq_ptr, node_acq, node_time, weight, key, span, by_time, sorted_t, path,
-            n, window, beam, long_window, long_beam, iters, seed, tol, max_work, budget, scratch):
+def replan_windows(indptr, dst, w_indptr, w_dst, acq_ptr, node_acq, node_time, weight, key, span, by_time, sorted_t,
+                   path, n, window, beam, long_window, long_beam, iters, seed, tol, max_work, budget, scratch):
     """Re-plan up to `iters` windows of path[:n] (int32) in place, each 1..window consecutive positions at
     random with `beam` labels per node, or (every other window on average, when `long_window` > window)
     1..long_window positions with `long_beam` labels per node: a long stretch swept like RAMP's sweep, which
