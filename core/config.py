@@ -361,7 +361,7 @@ class RayConfig:
 class EnvConfig:
     """The EOSP environment (envs/eosp_env.py)."""
 
-    reward: str = "normalized"
+    reward: str = choice("normalized", "normalized", "utility", "unitary", "lexicographic")
     """'normalized' (utility / mean utility of the instance's candidates), 'unitary' (1 per
     acquisition), 'lexicographic' (per-class vector in info['reward_vector']) or 'utility' (raw)."""
     max_acquisitions: int = 128

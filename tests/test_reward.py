@@ -52,3 +52,14 @@ def test_returns_to_go_are_the_environments_rewards_summed_from_each_step(name):
     else:
         assert units[0] == pytest.approx(togo[0, 0], rel=1e-6)
         assert rew.episode_return(sum(scalars), None) == sum(scalars)
+
+
+def test_the_config_offers_exactly_the_rewards_there_are():
+    """An unknown reward is refused by the command line in one line: EnvConfig.reward's choices are the rewards."""
+    from dataclasses import fields
+
+    from eosp.config import EnvConfig
+    from eosp.reward import REWARDS
+
+    (f,) = [f for f in fields(EnvConfig) if f.name == "reward"]
+    assert set(f.metadata["choices"]) == set(REWARDS)
