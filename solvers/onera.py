@@ -6,9 +6,11 @@ earliest start (forward) and latest start (backward) given its neighbours, and a
 two neighbours when its own earliest start is at most its latest start there.  Downloads are in every
 sequence from the start (they are mandatory) and float inside their windows like observations do.
 
-* ``greedy``: requests in decreasing order of their best value (fewest opportunities first on ties),
-  each at the best observation(s) that fit: one-shot and video one observation, stereo both images of
-  the best pair that fits (on one satellite), periodic the best fitting observation of every slot.
+* ``greedy``: requests in decreasing order of value per second of satellite time (fewest opportunities
+  first on ties), each at the best observation(s) that fit, at the position adding the least transition
+  time: one-shot and video one observation, stereo both images of the best pair that fits (on one
+  satellite), periodic one observation in its earliest slot that fits, then (after every request had
+  its turn) the best fitting observation of each other slot.
 * ``lns``: from the greedy plan, repeatedly free a time span of one satellite and re-insert the freed
   requests and the unserved ones that have opportunities there, in a noisy greedy order; a move that
   lowers the value is undone.  Stops at the time limit.
