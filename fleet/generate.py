@@ -225,7 +225,10 @@ def generate(cfg: FleetGenConfig) -> Fleet:
         raise ValueError("FleetGenConfig.window_min_h: must not exceed window_max_h")
     if cfg.window_min_h * 3600.0 < 5.0:
         raise ValueError("FleetGenConfig.window_min_h: windows must hold at least one 5 s action")
-    start = parse_utc(cfg.start)
+    try:
+        start = parse_utc(cfg.start)
+    except ValueError as exc:
+        raise ValueError(f"FleetGenConfig.start: not an ISO 8601 UTC time ({exc})") from None
     end = start + timedelta(seconds=round(cfg.hours * 3600.0 / 5.0) * 5)
     horizon = Horizon(start, end, action_step_s=5, geometry_step_s=5, resource_step_s=10)
     rng = np.random.default_rng(cfg.seed)

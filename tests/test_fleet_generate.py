@@ -89,6 +89,7 @@ def test_generate_cli_writes_a_fleet_and_refuses_bad_requests(tmp_path, capsys):
         (["--satellites", "1000", "--tasks", "1000000", "--hours", "168"], "too large for the memory available"),
         (["--placement", "moon"], "--placement: must be one of land, cities, clusters"),
         (["--window-min-h", "3", "--window-max-h", "1"], "--window-min-h: must not exceed window_max_h"),
+        (["--start", "yesterday"], "--start: not an ISO 8601 UTC time"),
     ]
     for extra, message in cases:
         with pytest.raises(SystemExit) as exc:
