@@ -167,8 +167,20 @@ def _run(load: np.ndarray, charge: np.ndarray, dur: np.ndarray, initial: float,
     return -1, gross, low
 
 
-def simulate(fleet: Fleet, sun: SunCache, sat: int, obs: Intervals, man: Intervals) -> BatteryRun:
-    """Simulate satellite `sat` over the horizon with observations `obs` and maneuvers `man`."""
+class Segments(NamedTuple):
+    """The simulation's segments of one satellite's horizon: midpoints and ends (µs), load and charging power
+    (W), durations (s), and the observation active at each midpoint (-1: none)."""
+
+    mid: np.ndarray
+    end: np.ndarray
+    load: np.ndarray
+    charge: np.ndarray
+    dur: np.ndarray
+    obs: np.ndarray
+
+
+def segments(fleet: Fleet, sun: SunCache, sat: int, obs: Intervals, man: Intervals) -> Segments:
+    """Cut the horizon at the resource grid and every action bound; load and charging at each midpoint."""
     b = fleet.satellites.battery
     pts = cut_points(fleet, obs, man)
     d = np.diff(pts)
@@ -179,7 +191,13 @@ def simulate(fleet: Fleet, sun: SunCache, sat: int, obs: Intervals, man: Interva
     load = b.idle_w[sat] + np.where(a_obs >= 0, b.imaging_w[sat], 0.0)
     load = load + np.where(a_man >= 0, b.slew_w[sat], 0.0)
     charge = np.where(sun.sunlit(sat, mid), b.sunlit_w[sat], 0.0)
-    dur = d.astype(np.float64) / 1e6
+    return Segments(mid, seg_start + d, load, charge, d.astype(np.float64) / 1e6, a_obs)
+
+
+def simulate(fleet: Fleet, sun: SunCache, sat: int, obs: Intervals, man: Intervals) -> BatteryRun:
+    """Simulate satellite `sat` over the horizon with observations `obs` and maneuvers `man`."""
+    b = fleet.satellites.battery
+    mid, _, load, charge, dur, a_obs = segments(fleet, sun, sat, obs, man)
     k, gross, low = _run(np.ascontiguousarray(load, dtype=np.float64), np.ascontiguousarray(charge, dtype=np.float64),
                          dur, float(b.initial_wh[sat]), float(b.capacity_wh[sat]))
     if k < 0:

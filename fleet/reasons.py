@@ -38,7 +38,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from eosp.fleet.battery import Intervals, SunCache, active, cut_points, half_even_div2, simulate
+from eosp.fleet.battery import Intervals, SunCache, segments, simulate
 from eosp.fleet.geometry import Geometry
 from eosp.fleet.greedy import Timeline, _feasible, _intervals
 from eosp.fleet.model import US, Fleet, Schedule, iso_z
@@ -119,21 +119,14 @@ def levels(fleet: Fleet, sun: SunCache, sat: int, obs: Intervals, man: Intervals
     """The battery charge (Wh) at the end of every simulation segment and those ends (µs): the recurrence
     of :func:`eosp.fleet.battery.simulate`, kept whole (used for the bound here and the report's curve)."""
     b = fleet.satellites.battery
-    pts = cut_points(fleet, obs, man)
-    d = np.diff(pts)
-    keep = d > 0
-    seg_start, d = pts[:-1][keep], d[keep]
-    mid = seg_start + half_even_div2(d)
-    load = b.idle_w[sat] + np.where(active(obs, mid) >= 0, b.imaging_w[sat], 0.0)
-    load = load + np.where(active(man, mid) >= 0, b.slew_w[sat], 0.0)
-    charge = np.where(sun.sunlit(sat, mid), b.sunlit_w[sat], 0.0)
-    dt = d.astype(np.float64) / 1e6
-    out = np.empty(len(d))
+    seg = segments(fleet, sun, sat, obs, man)
+    load, charge, dt = seg.load, seg.charge, seg.dur
+    out = np.empty(len(dt))
     level, cap = float(b.initial_wh[sat]), float(b.capacity_wh[sat])
     for k, (ld, ch, s) in enumerate(zip(load.tolist(), charge.tolist(), dt.tolist())):
         level = min(cap, level + ((ch - ld) * s) / 3600.0)
         out[k] = level
-    return seg_start + d, out
+    return seg.end, out
 
 
 class _Sat:
