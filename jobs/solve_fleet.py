@@ -109,17 +109,6 @@ class PassWorker:
         nodes = np.concatenate(paths).astype(np.int64) if paths else np.zeros(0, np.int64)
         return passes, value, bound, offsets, nodes, secs
 
-    def solve(self, passes: list[int], utils: list[np.ndarray]) -> list[tuple]:
-        """(result, seconds) of each pass."""
-        from eosp.solvers.fleet import solve_pass_graph
-
-        out = []
-        for p, u in zip(passes, utils):
-            t = time.perf_counter()
-            res = solve_pass_graph(self.graphs[p], u, self.cfg)
-            out.append((res, time.perf_counter() - t))
-        return out
-
 
 def assign(prob, workers: int) -> np.ndarray:
     """Worker of every pass: whole satellites per worker (an actor then propagates only its satellites), the
@@ -137,7 +126,8 @@ def assign(prob, workers: int) -> np.ndarray:
 
 
 class RayPassPool:
-    """The passes of a price round solved by Ray actors (the interface of :class:`eosp.solvers.fleet.PassPool`)."""
+    """The passes of a price round solved by Ray actors (:meth:`solve_priced`, which the coordinator prefers to
+    :class:`eosp.solvers.fleet.PassPool`'s ``solve`` when a pool has it)."""
 
     def __init__(self, prob, cfg: FleetConfig):
         import ray
@@ -152,39 +142,6 @@ class RayPassPool:
         self.faults = 0  # actor calls lost to a dead actor (their passes solved by the driver)
         self.times: list[tuple[int, float, int]] = []  # (pass, seconds, worker) of every pass an actor solved
         self.kill_round = int(os.environ.get("EOSP_FAULT_KILL_ACTOR_ROUND", "0") or 0)
-
-    def solve(self, passes: list[int], utils: list[np.ndarray], deadline: float | None) -> dict | None:
-        import ray
-        from ray.exceptions import RayActorError
-
-        from eosp.solvers.fleet import solve_pass
-
-        self.calls += 1
-        owner = self.owner[np.asarray(passes, dtype=np.int64)] if passes else np.zeros(0, np.int64)
-        refs, parts = [], []
-        for k in range(len(self.actors)):
-            idx = np.flatnonzero(owner == k).tolist()
-            if idx:
-                ids = [passes[i] for i in idx]
-                refs.append(self.actors[k].solve.remote(ids, [utils[i] for i in idx]))
-                parts.append((k, ids, [utils[i] for i in idx]))
-        if self.calls == self.kill_round and self.actors:
-            ray.kill(self.actors[0], no_restart=False)  # a worker lost mid-round (tests)
-        timeout = None if deadline is None else max(0.0, deadline - time.perf_counter())
-        ready, _ = ray.wait(refs, num_returns=len(refs), timeout=timeout)
-        if len(ready) < len(refs):
-            return None  # the deadline came first
-        out = {}
-        for ref, (k, ids, us) in zip(refs, parts):
-            try:
-                results = ray.get(ref)
-            except RayActorError:
-                self.faults += 1
-                results = [(solve_pass(self.prob, p, u, self.cfg), 0.0) for p, u in zip(ids, us)]
-            else:
-                self.times += [(p, s, k) for p, (_, s) in zip(ids, results)]
-            out.update({p: r for p, (r, _) in zip(ids, results)})
-        return out
 
     def solve_priced(self, passes: list[int], lam: np.ndarray, deadline: float | None) -> dict | None:
         """Every pass of `passes` under task prices `lam`: the prices go to the object store once, each actor

@@ -588,8 +588,8 @@ def solve(fleet: Fleet, opps: Opportunities, cfg: FleetConfig | None = None, pro
 
     `initial`: a schedule to start from; `freeze_until_s`: the passes starting before this time (seconds from
     the horizon start) keep the initial schedule's actions as they are (so every action before it is kept).
-    `pool`: what solves the passes of a price round (anything with PassPool's ``solve`` and ``close``, e.g. Ray
-    actors; default: forked processes when ``cfg.workers > 1``); `on_round`: called after every round;
+    `pool`: what solves the passes of a price round (anything with PassPool's ``solve``, or ``solve_priced(passes,
+    prices, deadline)``, and ``close``, e.g. Ray actors; default: forked processes when ``cfg.workers > 1``); `on_round`: called after every round;
     `resume`: prices and bound of a stopped run (its best schedule as `initial`)."""
     from eosp.fleet.check import validate
 
