@@ -123,3 +123,23 @@ def test_bad_run_dirs_and_addresses_are_refused_in_one_line(fleet_dir, tmp_path,
         err = capsys.readouterr().err.strip().splitlines()
         assert rc == 2 and len(err) == 1 and message in err[0], (extra, err)
     assert (stranger / "notes.txt").read_text() == "mine" and not (tmp_path / "new").exists()
+
+
+def test_generated_fleet_sets_resume_and_refuse_other_settings(two_nodes, tmp_path, capsys):
+    from eosp.jobs import generate_fleets
+
+    out = tmp_path / "fleets"
+    small = ["--gen.satellites", "2", "--gen.tasks", "40", "--gen.hours", "1", "--out", str(out)]
+    assert generate_fleets.main([*small, "--count", "2"]) == 0
+    manifest = json.loads((out / "manifest.json").read_text())
+    assert [f["fleet"] for f in manifest["fleets"]] == ["fleet-00000", "fleet-00001"]
+    assert manifest["fleets"][0]["fingerprint"] != manifest["fleets"][1]["fingerprint"]  # seeds 0 and 1
+    fleet, opps = read_fleet(out / "fleet-00001")
+    assert len(fleet.satellites) == 2 and len(fleet.tasks) == 40 and len(opps) == manifest["fleets"][1]["opportunities"]
+    capsys.readouterr()
+    assert generate_fleets.main([*small, "--count", "3"]) == 0
+    printed = capsys.readouterr().out
+    assert "resuming: 2 of 3 fleets already complete" in printed and printed.count("[generate_fleets] fleet ") == 1
+    rc = generate_fleets.main([*small[:-2], "--gen.seed", "7", "--out", str(out), "--count", "3"])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert rc == 2 and len(err) == 1 and "a fleet of other settings" in err[0]
