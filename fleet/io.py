@@ -163,18 +163,25 @@ def _unique(path: Path, ids: np.ndarray, column: str) -> None:
         seen[v] = r
 
 
-def read_meta(root: Path) -> dict:
+def read_meta_json(root: Path, kind: str, version: int, what: str) -> dict:
+    """The meta.json of a directory eosp wrote (`what`: "a fleet directory"), its kind and schema version checked."""
     path = root / "meta.json"
     try:
         meta = json.loads(path.read_text())
     except FileNotFoundError:
-        raise InputError(path, "file not found (not a fleet directory)") from None
+        raise InputError(path, f"file not found (not {what})") from None
     except (OSError, ValueError) as exc:
         raise InputError(path, f"not valid JSON: {exc}") from None
-    if not isinstance(meta, dict) or meta.get("kind") != KIND:
-        raise InputError(path, f"not a fleet directory's meta.json (kind must be {KIND!r})")
-    if meta.get("schema_version") != SCHEMA_VERSION:
-        raise InputError(path, f"schema_version {meta.get('schema_version')!r} is not supported (expected {SCHEMA_VERSION})")
+    if not isinstance(meta, dict) or meta.get("kind") != kind:
+        raise InputError(path, f"not {what}'s meta.json (kind must be {kind!r})")
+    if meta.get("schema_version") != version:
+        raise InputError(path, f"schema_version {meta.get('schema_version')!r} is not supported (expected {version})")
+    return meta
+
+
+def read_meta(root: Path) -> dict:
+    path = root / "meta.json"
+    meta = read_meta_json(root, KIND, SCHEMA_VERSION, "a fleet directory")
     need = ("horizon_start", "horizon_end", "action_step_s", "geometry_step_s", "resource_step_s", "fingerprint")
     for k in need:
         if k not in meta:

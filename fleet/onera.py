@@ -401,20 +401,10 @@ def write_onera(f: OneraFleet, out, overwrite: bool = False, source: str = "") -
 
 def read_onera(path) -> OneraFleet:
     """An ONERA fleet directory, its columns checked (kinds, ranges) and its fingerprint verified."""
-    from eosp.fleet.io import _read_parquet
+    from eosp.fleet.io import _read_parquet, read_meta_json
 
     root = Path(path)
-    mp = root / "meta.json"
-    try:
-        meta = json.loads(mp.read_text())
-    except FileNotFoundError:
-        raise InputError(mp, "file not found (not an ONERA fleet directory)") from None
-    except (OSError, ValueError) as exc:
-        raise InputError(mp, f"not valid JSON: {exc}") from None
-    if not isinstance(meta, dict) or meta.get("kind") != KIND:
-        raise InputError(mp, f"not an ONERA fleet directory's meta.json (kind must be {KIND!r})")
-    if meta.get("schema_version") != SCHEMA_VERSION:
-        raise InputError(mp, f"schema_version {meta.get('schema_version')!r} is not supported")
+    meta = read_meta_json(root, KIND, SCHEMA_VERSION, "an ONERA fleet directory")
     s = _read_parquet(root / "satellites.parquet", SAT_COLUMNS)
     r = _read_parquet(root / "requests.parquet", REQ_COLUMNS)
     o = _read_parquet(root / "observations.parquet", OBS_COLUMNS)
@@ -437,7 +427,7 @@ def read_onera(path) -> OneraFleet:
                   d["latitude_deg"], d["longitude_deg"], d["altitude"]),
         name=str(meta.get("name", "")))
     if fingerprint(f) != meta.get("fingerprint"):
-        raise InputError(mp, "fingerprint does not match the fleet's content (files edited or mixed)")
+        raise InputError(root / "meta.json", "fingerprint does not match the fleet's content (files edited or mixed)")
     return f
 
 
