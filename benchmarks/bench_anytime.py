@@ -50,7 +50,7 @@ def main() -> None:
     p.add_argument("--window-graph", choices=("pruned", "unpruned"), default="pruned",
                    help="the arcs the refinement's windows sweep (learned searches and lns)")
     p.add_argument("--no-windows", dest="windows", action="store_false",
-                   help="refinement (learned searches and lns) without window re-planning (search.repair)")
+                   help="refinement (learned searches and lns) without window re-planning (planning.windows)")
     p.add_argument("--out", default="runs/anytime")
     p.add_argument("--mlflow-uri", default="")
     p.add_argument("--report", default="", metavar="DIR",

@@ -391,7 +391,7 @@ class EnvConfig:
     it (envs/observation.py).  'greedy2': the better of two insertion orders each time (utility: also by class
     then window start; unitary: also by latest start), at up to twice the insertion work.  Needs the
     instances' unpruned arcs.  'label': the same six features from one backward label sweep per step over the
-    environment's graph (one label per node; envs/observation.label_togo) instead of Greedy: each allowed action's
+    environment's graph (one label per node; planning/labels.label_togo) instead of Greedy: each allowed action's
     value is the best chain found from the node it would start at, the plan the best of them; counts in
     'unitary', utilities otherwise; no unpruned arcs needed.  Empty: zeros, no work.  Recorded in checkpoints
     with the other env settings."""
@@ -533,7 +533,7 @@ class EvalConfig:
     refine: float = ranged(0.75, 0.0, 1.0)
     """Learned searches with a time limit: the share of it spent refining the best schedule (ruin and recreate)."""
     windows: bool = True
-    """Learned searches, while refining: also re-plan windows of consecutive acquisitions (eosp.search.repair)."""
+    """Learned searches, while refining: also re-plan windows of consecutive acquisitions (eosp.planning.windows)."""
     window_graph: str = choice("pruned", "pruned", "unpruned")
     """Learned searches: the arcs a window's label sweep looks at, the pruned graph's or the unpruned graph's."""
     checkpoint: str = ""

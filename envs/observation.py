@@ -35,7 +35,8 @@ import numpy as np
 from eosp.config import CLASS_UTILITIES, N_CLASSES
 from eosp.envs.core import EnvGraph, Episode, kill, step, sweep, sweep_horizon
 from eosp.graphs.discrete import arc_to_acq
-from eosp.graphs.insertion import greedy_insert, insertion_order
+from eosp.planning.insertion import greedy_insert, insertion_order
+from eosp.planning.labels import label_togo, togo_chain
 
 TIME_SCALE = 300.0
 NODE_FEATURES = (
@@ -68,7 +69,7 @@ PLAN = NODE_FEATURES.index("plan_member")  # the six plan features, last (checkp
 N_PLAN = 6
 # EnvConfig.plan's kernel code: 0 off; 1 Greedy by utility, 2 by window start (unitary); 3 and 4: the better of
 # that order and a second one (utility: by class, then window start; unitary: by latest start); 5 and 6: the
-# label sweep (:func:`label_togo`) counting acquisitions (unitary) or summing utilities
+# label sweep (:func:`eosp.planning.labels.label_togo`) counting acquisitions (unitary) or summing utilities
 PLAN_ORDERS = ("", "utility", "start", "utility+class", "start+deadline", "label:count", "label:utility")
 UNITARY_PLANS = (2, 4, 5)  # the codes whose worth is a count
 LABEL_PLANS = (5, 6)  # the codes that need no unpruned graph
@@ -360,48 +361,6 @@ def _completion(g, cand, plan, start, skip):
 
 
 @numba.njit(cache=True)
-def label_togo(g, ep, weight, togo, nxt):
-    """One label per node, swept backward in time over the environment's graph restricted to the alive nodes:
-    togo[v] = weight of v's acquisition + the largest togo[u] over the arcs v -> u whose chain (u, nxt[u], ...)
-    does not hold v's acquisition; nxt[v] = that u (-1: none).  Nodes not alive after the last scheduled one:
-    togo -1.  Every chain is a path of the environment's graph over alive nodes, each acquisition at most once,
-    so from an allowed action's node it is a completion the environment can play.
-
-    Why: in unitary mode Greedy's insertion is at 0.77-0.87 of the optimum, so its rollout values (the
-    'greedy' plan features) hardly tell apart the 3-10 allowed actions of which exactly one keeps the optimum,
-    the decisions where a unitary policy loses; a label sweep with one label per node (RAMP's sweep with a beam
-    of 1, backward so that one sweep values every action) tells the optimal action apart in such decisions.
-    Cost: one pass over the alive nodes' arcs; a candidate u is checked by walking its
-    chain only while the chain is inside v's acquisition's window (an acquisition appears nowhere else).
-    Ties go to the first arc."""
-    node_acq, node_time, indptr, dst, acq_ptr, order = g.node_acq, g.node_time, g.indptr, g.dst, g.acq_ptr, g.order
-    alive = ep.alive
-    for p in range(order.shape[0] - 1, ep.last_pos[0], -1):
-        v = order[p]
-        togo[v] = -1.0
-        nxt[v] = -1
-        if alive[v] == 0 or v == 0:
-            continue
-        a = node_acq[v]
-        end = node_time[acq_ptr[a + 1] - 1]
-        best, arg = 0.0, -1
-        for k in range(indptr[v], indptr[v + 1]):
-            u = dst[k]
-            if alive[u] == 0 or togo[u] <= best:
-                continue
-            c, ok = u, True
-            while c >= 0 and node_time[c] <= end:
-                if node_acq[c] == a:
-                    ok = False
-                    break
-                c = nxt[c]
-            if ok:
-                best, arg = togo[u], u
-        togo[v] = weight[a] + best
-        nxt[v] = arg
-
-
-@numba.njit(cache=True)
 def _label_plan(g, ep, cand, plan):
     """The label sweep of kernel code `plan` (5: count, 6: utilities): (togo, nxt, the allowed action's node of
     largest togo or -1)."""
@@ -409,7 +368,7 @@ def _label_plan(g, ep, cand, plan):
     togo = np.empty(n_nodes)
     nxt = np.empty(n_nodes, dtype=np.int64)
     weight = np.ones(cand.utility.shape[0]) if plan == 5 else cand.utility
-    label_togo(g, ep, weight, togo, nxt)
+    label_togo(g, ep.alive, ep.last_pos[0], weight, togo, nxt)
     last, best, start = ep.last[0], -1.0, -1
     for a in range(ep.mask.shape[0]):
         if ep.mask[a]:
@@ -420,31 +379,13 @@ def _label_plan(g, ep, cand, plan):
 
 
 @numba.njit(cache=True)
-def _chain(g, nxt, start, weight_of):
-    """The chain from node `start` (-1: empty): (acquisitions, nodes, worth)."""
-    m, c = 0, start
-    while c >= 0:
-        m += 1
-        c = nxt[c]
-    acqs = np.empty(m, dtype=np.int32)
-    nodes = np.empty(m, dtype=np.int32)
-    worth, c = 0.0, start
-    for i in range(m):
-        nodes[i] = c
-        acqs[i] = g.node_acq[c]
-        worth += weight_of[acqs[i]]
-        c = nxt[c]
-    return acqs, nodes, worth
-
-
-@numba.njit(cache=True)
 def plan_completion(g, ep, cand, plan):
     """The completion of the current partial schedule the plan :func:`plan_features` shows (kernel code
     `plan` > 0): (acquisitions, nodes, worth) after the last scheduled node: Greedy's, a path of the unpruned
     graph, or (codes 5, 6) the label sweep's best chain from an allowed action, a path of the environment's."""
     if plan == 5 or plan == 6:
         togo, nxt, start = _label_plan(g, ep, cand, plan)
-        return _chain(g, nxt, start, np.ones(cand.utility.shape[0]) if plan == 5 else cand.utility)
+        return togo_chain(g.node_acq, nxt, start, np.ones(cand.utility.shape[0]) if plan == 5 else cand.utility)
     n = cand.order_utility.shape[0]
     skip = np.zeros(n, dtype=np.uint8)
     for i in range(n):
@@ -457,11 +398,11 @@ def plan_completion(g, ep, cand, plan):
 def plan_features(g, ep, cand, plan, x, plan_out=None):
     """Fill the :data:`N_PLAN` columns from :data:`PLAN` of x with Greedy's completion of the current partial
     schedule, and of the state after each allowed action: the operational greedy insertion
-    (eosp.graphs.insertion) run over the acquisitions still in the graph, in Greedy's order (`plan` 1:
+    (eosp.planning.insertion) run over the acquisitions still in the graph, in Greedy's order (`plan` 1:
     decreasing utility, 2: window start, every acquisition worth 1; 0: zeros, no work).  Codes 5 and 6
-    (``--env.plan label``): the same columns from one backward label sweep (:func:`label_togo`, counting or
-    summing utilities) instead: V(a) is the sweep's value of the node the step would start a at, and the plan
-    the chain of the best action (a path of the environment's graph, starting with that action).  With
+    (``--env.plan label``): the same columns from one backward label sweep
+    (:func:`eosp.planning.labels.label_togo`, counting or summing utilities) instead: V(a) is the sweep's value
+    of the node the step would start a at, and the plan the chain of the best action (a path of the environment's graph, starting with that action).  With
     `plan_out` (int32 [n + 1]): plan_out[0] = the plan's length (-1 with `plan` 0), then its nodes, so that a
     decoder keeping the best completed state reads the plan instead of computing it again.
 
@@ -503,7 +444,7 @@ def plan_features(g, ep, cand, plan, x, plan_out=None):
     togo, nxt, start = np.empty(0), np.empty(0, dtype=np.int64), -1
     if label:  # one backward sweep values every action (label_togo)
         togo, nxt, start = _label_plan(g, ep, cand, plan)
-        acqs, nodes, _ = _chain(g, nxt, start, cand.utility)
+        acqs, nodes, _ = togo_chain(g.node_acq, nxt, start, cand.utility)
     else:
         acqs, nodes, _ = plan_completion(g, ep, cand, plan)
     t_now = g.node_finish[last]

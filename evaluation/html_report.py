@@ -157,10 +157,10 @@ def missed_reasons(inst: Instance, sched: Schedule) -> list[Missed] | str:
     as it is (some position takes it, the members after moved as needed: value left on the table); or it is
     blocked, and the schedule's members whose removal frees it are named (any one of up to three; else the
     smallest set of two or three among the MAX_NEARBY members nearest in time).  Insertion is the Greedy
-    kernel's test on the discrete graph (eosp.graphs.insertion), on the schedule's acquisitions in order, each
+    kernel's test on the discrete graph (eosp.planning.insertion), on the schedule's acquisitions in order, each
     at its earliest node.
     """
-    from eosp.graphs.insertion import earliest_path, first_insertion
+    from eosp.planning.insertion import earliest_path, first_insertion
 
     g = inst.unpruned_graph if inst.unpruned_graph is not None else inst.pruned()
     args = (g.indptr, g.dst, g.acq_ptr)

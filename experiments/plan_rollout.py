@@ -10,7 +10,7 @@
   played in the environment.
 * ``rollout``: take an action of largest V(a) (Greedy's completion after it), ties to the
   earliest start: the classic rollout of Greedy (``--plan label``: of the label sweep,
-  eosp.envs.observation.label_togo).
+  eosp.planning.labels.label_togo).
 
 Prints, per test set, the mean ratio to the recorded Greedy and exact values, the instances below
 Greedy, and the seconds per instance (the features' cost: no network is run).

@@ -1,3 +1,3 @@
 """Inference-time search (no Ray): MCTS with the learned policy and value."""
 
-from eosp.search.mcts import SearchStats, search, solve  # noqa: F401
+from eosp.search.mcts import SearchParams, SearchStats, search, solve  # noqa: F401

@@ -201,8 +201,22 @@ def _backup(path: list, leaf: Node, loss: float, minmax: MinMax, stats: SearchSt
     stats.simulations += 1
 
 
-def gumbel_search(env, root: Node, evaluate: EvaluateMany, *, num_simulations: int, c_puct: float = 1.25,
-                  max_considered: int = 16, c_visit: float = 50.0, c_scale: float = 1.0,
+@dataclass(frozen=True)
+class SearchParams:
+    """How one decision is searched (mctx's search arguments as one value): the simulations per decision, the PUCT
+    constant, the leaves evaluated per network call (PUCT), and whether the root is chosen by Gumbel-top-k with
+    sequential halving (:func:`gumbel_search`) over at most `max_considered` actions, with its sigma constants."""
+
+    num_simulations: int
+    c_puct: float = 1.25
+    batch: int = 8
+    gumbel: bool = False
+    max_considered: int = 16
+    c_visit: float = 50.0
+    c_scale: float = 1.0
+
+
+def gumbel_search(env, root: Node, evaluate: EvaluateMany, params: SearchParams, *,
                   rng: np.random.Generator | None = None, stats: SearchStats | None = None,
                   deadline: float | None = None) -> int:
     """Root selection by Gumbel-top-k and sequential halving (Danihelka et al., 2022).
@@ -216,6 +230,8 @@ def gumbel_search(env, root: Node, evaluate: EvaluateMany, *, num_simulations: i
     candidate.  With a few simulations this still improves on the policy: a candidate
     is only dropped for a worse simulated value.  Returns an index into ``root.actions``.
     """
+    num_simulations, c_puct, max_considered = params.num_simulations, params.c_puct, params.max_considered
+    c_visit, c_scale = params.c_visit, params.c_scale
     stats = stats or SearchStats()
     rng = rng or np.random.default_rng(0)
     evaluate_nodes([root], evaluate, stats)
@@ -260,17 +276,16 @@ def gumbel_search(env, root: Node, evaluate: EvaluateMany, *, num_simulations: i
     return int(cands[int(np.argmax(score(cands)))])
 
 
-def solve(env, evaluate: EvaluateMany, *, num_simulations: int, c_puct: float = 1.25, batch: int = 8,
-          reuse_tree: bool = True, seed: int = 0, time_limit: float | None = None,
-          gumbel: bool = False, max_considered: int = 16,
+def solve(env, evaluate: EvaluateMany, params: SearchParams, *, reuse_tree: bool = True, seed: int = 0,
+          time_limit: float | None = None,
           on_best: Callable[[list], None] | None = None) -> tuple[np.ndarray, float, SearchStats]:
-    """Play one episode from the env's reset state with MCTS before each decision.
+    """Play one episode from the env's reset state with MCTS before each decision (`params`: how each is searched).
 
     The greedy policy's episode is played first (one network call per decision): the answer is
     never worse than the policy's own, and it is the answer if time runs out.  With `time_limit`
     (seconds for the whole episode) the search is anytime: each decision gets an equal share of
     the time left over the decisions the greedy episode suggests remain (at most
-    `num_simulations` simulations each).
+    `params.num_simulations` simulations each).
     Returns the scheduled nodes, the episode's return in reward units, and search statistics.
     `on_best(actions)`: told of the greedy episode, then of each better complete episode met.
     """
@@ -298,12 +313,11 @@ def solve(env, evaluate: EvaluateMany, *, num_simulations: int, c_puct: float = 
         if time_limit is not None:
             left = time_limit - (time.perf_counter() - t0)
             deadline = time.perf_counter() + max(0.0, left) / max(1, expected_steps - len(stats.played))
-        if gumbel:
-            k = gumbel_search(env, root, evaluate, num_simulations=num_simulations, c_puct=c_puct,
-                              max_considered=max_considered, rng=rng, stats=stats, deadline=deadline)
+        if params.gumbel:
+            k = gumbel_search(env, root, evaluate, params, rng=rng, stats=stats, deadline=deadline)
         else:
-            k = search(env, root, evaluate, num_simulations=num_simulations, c_puct=c_puct, batch=batch,
-                       stats=stats, deadline=deadline)
+            k = search(env, root, evaluate, num_simulations=params.num_simulations, c_puct=params.c_puct,
+                       batch=params.batch, stats=stats, deadline=deadline)
         child = root.children.get(k) if reuse_tree else None
         obs, r, done, _, _ = env.step(int(root.actions[k]))
         if child is None:

@@ -28,8 +28,9 @@ weight, then by earliest window end):
   when the weight gained exceeds the weight dropped (in unitary mode: two for one).
 
 The refinement (:meth:`Polisher.refine`) alternates ruin and recreate with window re-planning
-(:mod:`eosp.search.repair`: a stretch of the schedule planned again by a label sweep, which finds
-the sequences a first-fit refill misses).
+(:mod:`eosp.planning.windows`: a stretch of the schedule planned again by a label sweep, which finds
+the sequences a first-fit refill misses).  The moves themselves are :mod:`eosp.planning.moves`'s; this
+module drives them.
 
 Weights are the objective's (:func:`eosp.solvers.base.objective_weights`: the
 utility, or 1 per acquisition), so a polished schedule is never worse than its input.
@@ -37,274 +38,13 @@ utility, or 1 per acquisition), so a polished schedule is never worse than its i
 
 from __future__ import annotations
 
-from typing import NamedTuple
-
-import numba
 import numpy as np
 
-from eosp.graphs.discrete import arc_to_acq
-from eosp.search.chain import GraphArrays, apply_insert, remove, try_put
-from eosp.search.repair import FIRST_WORK, LONG_BEAM, MAX_WORK, replan_windows, scratch
+from eosp.planning.chain import graph_arrays, walk
+from eosp.planning.moves import Candidates, Ruin, polish, ruin_recreate
+from eosp.planning.windows import FIRST_WORK, LONG_BEAM, MAX_WORK, Sweep, WindowPlan, replan_windows, scratch
 
-
-@numba.njit(cache=True)
-def _first_position(node_time, path, n, t):
-    """First position p with node_time[path[p]] >= t (n when none)."""
-    lo, hi = 0, n
-    while lo < hi:
-        mid = (lo + hi) >> 1
-        if node_time[path[mid]] < t:
-            lo = mid + 1
-        else:
-            hi = mid
-    return lo
-
-
-@numba.njit(cache=True)
-def _insert_pass(indptr, dst, acq_ptr, node_acq, node_time, order, first_t, last_t, span, in_path, path, n, tmp):
-    """Insert every unscheduled acquisition (in `order`) where it first fits; returns the new length."""
-    for j in order:
-        if in_path[j]:
-            continue
-        # inserted before position p: path[p] is pushed to after j's start >= first_t[j], and a node moves
-        # at most within its window, so path[p] started no earlier than first_t[j] - span
-        p = _first_position(node_time, path, n, first_t[j] - span)
-        while p <= n:
-            if p > 0 and node_time[path[p - 1]] > last_t[j]:
-                break
-            m = try_put(indptr, dst, acq_ptr, node_acq, path, n, p, j, tmp, 0)
-            if m > 0:
-                n = apply_insert(path, n, p, tmp, m)
-                in_path[j] = True
-                break
-            p += 1
-    return n
-
-
-class Candidates(NamedTuple):
-    """What the moves know of the acquisitions they may insert: objective weights [n_acq], the order in which
-    they are tried (int64), each one's first and last node time [n_acq] and the longest window (`span`)."""
-
-    weight: np.ndarray
-    order: np.ndarray
-    first_t: np.ndarray
-    last_t: np.ndarray
-    span: float
-
-
-class Inserted(NamedTuple):
-    """The moves' bookkeeping: which acquisitions are in the schedule being built (bool [n_acq]), a buffer of
-    re-chained nodes (:func:`eosp.search.chain.try_put`'s `tmp`) and the list of the acquisitions inserted."""
-
-    in_path: np.ndarray
-    tmp: np.ndarray
-    ins: np.ndarray
-
-
-@numba.njit(cache=True)
-def _fill(g, c, mv, work, wn, lo, hi, skip, n_ins):
-    """Insert unscheduled acquisitions (not `skip`) of candidates `c` at positions lo..hi of work[:wn] (a path of
-    graph `g`), first fit in `c.order`, the window growing with each insertion; marks them in `mv.in_path` and
-    lists them in `mv.ins` from position `n_ins`.  Returns (wn, weight gained, n_ins)."""
-    indptr, dst, acq_ptr, node_acq, node_time = g
-    weight, order, first_t, last_t, span = c
-    in_path, tmp, ins = mv
-    gain = 0.0
-    t_lo = node_time[work[lo - 1]] if lo > 0 else -np.inf
-    for j in order:
-        if in_path[j] or j == skip or last_t[j] < t_lo:
-            continue
-        if hi < wn and first_t[j] > node_time[work[hi]] + span:
-            continue
-        for p in range(lo, hi + 1):
-            m = try_put(indptr, dst, acq_ptr, node_acq, work, wn, p, j, tmp, 0)
-            if m > 0:
-                wn = apply_insert(work, wn, p, tmp, m)
-                in_path[j] = True
-                ins[n_ins] = j
-                n_ins += 1
-                gain += weight[j]
-                hi = min(hi + 1, wn)
-                break
-    return wn, gain, n_ins
-
-
-@numba.njit(cache=True)
-def _swap_pass(indptr, dst, acq_ptr, node_acq, node_time, weight, order, first_t, last_t, span, in_path, path, n,
-               tmp, work, ins, tol, max_replace):
-    """At every position, drop its acquisition (or replace it by an unscheduled one) and insert others around
-    it; kept when the weight gained exceeds the weight dropped.  Returns the new length."""
-    g = GraphArrays(indptr, dst, acq_ptr, node_acq, node_time)
-    c = Candidates(weight, order, first_t, last_t, span)
-    mv = Inserted(in_path, tmp, ins)
-    k = 0
-    while k < n:
-        a = node_acq[path[k]]
-        kept = False
-        # (1) drop position k, then fill the gap
-        for i in range(n):
-            work[i] = path[i]
-        wn = remove(indptr, dst, acq_ptr, node_acq, work, n, k, tmp)
-        n_ins = 0
-        if wn >= 0:
-            wn, gain, n_ins = _fill(g, c, mv, work, wn, max(k - 2, 0), min(k + 2, wn), a, 0)
-            kept = gain - weight[a] > tol
-        # (2) replace position k by an unscheduled acquisition, then fill around it
-        t_k = node_time[path[k]]
-        tries = 0
-        for j in order:
-            if kept or tries >= max_replace:
-                break
-            if in_path[j] or last_t[j] < (node_time[path[k - 1]] if k > 0 else -np.inf) or first_t[j] > t_k + span:
-                continue
-            for q in range(n_ins):  # undo the previous attempt
-                in_path[ins[q]] = False
-            n_ins = 0
-            m = try_put(indptr, dst, acq_ptr, node_acq, path, n, k, j, tmp, 1)
-            if m < 0:
-                continue
-            tries += 1
-            for i in range(n):
-                work[i] = path[i]
-            for i in range(m):
-                work[k + i] = tmp[i]
-            wn = n
-            in_path[j] = True
-            ins[0] = j
-            wn, gain, n_ins = _fill(g, c, mv, work, wn, max(k - 2, 0), min(k + 3, wn), a, 1)
-            kept = weight[j] + gain - weight[a] > tol
-        if kept:
-            in_path[a] = False
-            for i in range(wn):
-                path[i] = work[i]
-            n = wn
-            k = max(k - 2, 0)  # the neighbourhood changed: look again from just before it
-        else:
-            for q in range(n_ins):
-                in_path[ins[q]] = False
-            k += 1
-    return n
-
-
-@numba.njit(cache=True)
-def _polish(indptr, dst, acq_ptr, node_acq, node_time, weight, order, first_t, last_t, span, path, n, max_rounds,
-            tol, max_replace):
-    n_acq = acq_ptr.shape[0] - 1
-    in_path = np.zeros(n_acq, dtype=np.bool_)
-    for i in range(n):
-        in_path[node_acq[path[i]]] = True
-    tmp = np.empty(n_acq + 2, dtype=path.dtype)
-    work = np.empty(n_acq + 1, dtype=path.dtype)
-    ins = np.empty(n_acq + 1, dtype=np.int64)
-    for _ in range(max_rounds):
-        value0 = 0.0
-        for i in range(n):
-            value0 += weight[node_acq[path[i]]]
-        n = _insert_pass(indptr, dst, acq_ptr, node_acq, node_time, order, first_t, last_t, span, in_path, path, n,
-                         tmp)
-        n = _swap_pass(indptr, dst, acq_ptr, node_acq, node_time, weight, order, first_t, last_t, span, in_path,
-                       path, n, tmp, work, ins, tol, max_replace)
-        value = 0.0
-        for i in range(n):
-            value += weight[node_acq[path[i]]]
-        if value <= value0 + tol:
-            break
-    return n
-
-
-@numba.njit(cache=True)
-def _ruin_recreate(indptr, dst, acq_ptr, node_acq, node_time, weight, first_t, last_t, span, path, n, iters,
-                   max_ruin, noise, seed, tol):
-    """`iters` rounds of: drop 1..max_ruin consecutive positions of the current schedule at random, refill the
-    gap (two positions either side) with unscheduled acquisitions in a random order (weights times
-    exp(noise * U[0, 1)): in unitary mode a uniformly random order), and keep the result as the current
-    schedule when it is not worse (plateaus are walked: equal-value schedules lead elsewhere).  path[:n] is
-    the start on entry and the best met on exit; returns its length."""
-    np.random.seed(seed)
-    n_acq = acq_ptr.shape[0] - 1
-    cur = path.copy()
-    work = path.copy()
-    best = path.copy()
-    in_cur = np.zeros(n_acq, dtype=np.bool_)
-    for i in range(n):
-        in_cur[node_acq[path[i]]] = True
-    in_work = in_cur.copy()
-    tmp = np.empty(n_acq + 2, dtype=path.dtype)
-    ins = np.empty(n_acq + 1, dtype=np.int64)
-    g = GraphArrays(indptr, dst, acq_ptr, node_acq, node_time)
-    mv = Inserted(in_work, tmp, ins)
-    cand = np.empty(n_acq, dtype=np.int64)
-    key = np.empty(n_acq, dtype=np.float64)
-    cn, bn = n, n
-    cval = 0.0
-    for i in range(n):
-        cval += weight[node_acq[path[i]]]
-    bval = cval
-    for _ in range(iters):
-        for i in range(cn):
-            work[i] = cur[i]
-        in_work[:] = in_cur
-        wn = cn
-        s = np.random.randint(0, wn) if wn > 0 else 0
-        r = min(1 + np.random.randint(0, max_ruin), wn - s)
-        lost = 0.0
-        for _q in range(r):
-            a = node_acq[work[s]]
-            m = remove(indptr, dst, acq_ptr, node_acq, work, wn, s, tmp)
-            if m < 0:
-                break
-            wn = m
-            in_work[a] = False
-            lost += weight[a]
-        lo = max(s - 2, 0)
-        hi = min(s + 2, wn)
-        t_lo = node_time[work[lo - 1]] if lo > 0 else -np.inf
-        t_hi = node_time[work[hi]] + span if hi < wn else np.inf
-        nc = 0
-        for j in range(n_acq):
-            if not in_work[j] and last_t[j] >= t_lo and first_t[j] <= t_hi:
-                cand[nc] = j
-                key[nc] = -weight[j] * np.exp(noise * np.random.random())
-                nc += 1
-        order = cand[:nc][np.argsort(key[:nc])]
-        wn, gain, _n = _fill(g, Candidates(weight, order, first_t, last_t, span), mv, work, wn, lo, hi, -1, 0)
-        val = cval - lost + gain
-        if val >= cval - tol:
-            for i in range(wn):
-                cur[i] = work[i]
-            cn = wn
-            in_cur[:] = in_work
-            cval = val
-            if val > bval + tol:
-                for i in range(wn):
-                    best[i] = work[i]
-                bn = wn
-                bval = val
-    for i in range(bn):
-        path[i] = best[i]
-    return bn
-
-
-@numba.njit(cache=True)
-def _walk(indptr, dst, acq_ptr, actions, out):
-    """out[i] = the node playing actions[i] reaches from out[i - 1] (the source first); returns the index of
-    the first action with no arc, or -1 when all have one."""
-    cur = 0
-    for i in range(actions.shape[0]):
-        cur = arc_to_acq(indptr, dst, acq_ptr, cur, actions[i])
-        if cur < 0:
-            return i
-        out[i] = cur
-    return -1
-
-
-def walk(graph, actions) -> np.ndarray | int:
-    """The path (node indices of `graph`) that playing acquisitions `actions` from the source follows, each one's
-    arc; the position of the first action without an arc from the previous node otherwise."""
-    actions = np.asarray(actions, dtype=np.int64)
-    out = np.empty(actions.shape[0], dtype=np.int32)
-    bad = _walk(graph.indptr, graph.dst, graph.acq_ptr, actions, out)
-    return int(bad) if bad >= 0 else out
+__all__ = ["Polisher", "walk"]
 
 
 class Polisher:
@@ -344,12 +84,12 @@ class Polisher:
         # compile (or load from numba's cache) the kernels for these array types now, with empty schedules, so
         # that a search's time limit, which starts after the set-up, never pays for the compilation
         empty = np.zeros(1, dtype=np.int32)
-        _polish(eg.indptr, eg.dst, eg.acq_ptr, eg.node_acq, eg.node_time, self.weight, self.order, self.first_t,
-                self.last_t, self.span, empty, 0, 0, self.tol, 1)
-        _walk(eg.indptr, eg.dst, eg.acq_ptr, np.zeros(0, dtype=np.int64), empty)
-        _ruin_recreate(eg.indptr, eg.dst, eg.acq_ptr, eg.node_acq, eg.node_time, self.weight, self.first_t,
-                       self.last_t, self.span, empty, 0, 0, 1, 1.0, 0, self.tol)
-        # window re-planning (search/repair.py): nodes by time, and a random 64-bit key per acquisition whose
+        self.g, self.w_arrays = graph_arrays(eg), graph_arrays(wg)
+        self.cand = Candidates(self.weight, self.order, self.first_t, self.last_t, self.span)
+        polish(self.g, self.cand, empty, 0, 0, self.tol, 1)
+        walk(eg, np.zeros(0, dtype=np.int64))
+        ruin_recreate(self.g, self.cand, empty, 0, Ruin(0, 1, 1.0, 0), self.tol)
+        # window re-planning (planning/windows.py): nodes by time, and a random 64-bit key per acquisition whose
         # XOR over a label's acquisitions tells equal sets apart
         self._repair, self._max_work, self._first_work = replan_windows, MAX_WORK, FIRST_WORK
         self.window_time = 0.5  # the share of the time left one window may take at most
@@ -369,8 +109,7 @@ class Polisher:
         path = np.zeros(n_acq + 1, dtype=np.int32)
         nodes = np.asarray(nodes, dtype=np.int32)
         path[: nodes.size] = nodes
-        n = _polish(eg.indptr, eg.dst, eg.acq_ptr, eg.node_acq, eg.node_time, self.weight, self.order, self.first_t,
-                    self.last_t, self.span, path, nodes.size, self.max_rounds, self.tol, self.max_replace)
+        n = polish(self.g, self.cand, path, nodes.size, self.max_rounds, self.tol, self.max_replace)
         self._tell(path[:n])
         return path[:n].copy()
 
@@ -381,10 +120,10 @@ class Polisher:
 
     def refine(self, nodes, *, deadline: float | None = None, iterations: int = 2000, seed: int = 0,
                max_ruin: int = 6, noise: float = 1.0, windows: bool = True) -> np.ndarray:
-        """Ruin-and-recreate from `nodes` (see :func:`_ruin_recreate`) until `deadline` (time.perf_counter())
-        or for `iterations`, then one polish; the best schedule met (never worse than `nodes`).
+        """Ruin-and-recreate from `nodes` (see :func:`eosp.planning.moves.ruin_recreate`) until `deadline`
+        (time.perf_counter()) or for `iterations`, then one polish; the best schedule met (never worse than `nodes`).
 
-        With `windows`, rounds of window re-planning (:mod:`eosp.search.repair`) alternate with the ruin
+        With `windows`, rounds of window re-planning (:mod:`eosp.planning.windows`) alternate with the ruin
         and recreate, a round after each of its rounds until the windows took `window_ratio` (3) times its
         time (16 windows a round when there is no deadline); half of the windows are long ones (up to the whole
         schedule, with 1 label per node, then twice as many after each round of them, up to `long_beam`); when
@@ -409,8 +148,7 @@ class Polisher:
         self.window_rounds = 0
         while (deadline is None and done < iterations) or (deadline is not None and time.perf_counter() < deadline):
             t0 = time.perf_counter()
-            n = _ruin_recreate(eg.indptr, eg.dst, eg.acq_ptr, eg.node_acq, eg.node_time, self.weight, self.first_t,
-                               self.last_t, self.span, path, n, chunk, max_ruin, noise, seed + done, self.tol)
+            n = ruin_recreate(self.g, self.cand, path, n, Ruin(chunk, max_ruin, noise, seed + done), self.tol)
             t1 = time.perf_counter()
             t_rr += t1 - t0
             # without a deadline: 16 windows per round (deterministic); with one: a round of windows after each
@@ -463,13 +201,12 @@ class Polisher:
 
     def _run_windows(self, path, n, count, budget, seed, span=1, long_span=0, max_work=None, long_beam=1):
         """`count` windows of 1..span positions at most (or, half of them, 1..long_span with `long_beam` labels
-        per node: :func:`eosp.search.repair.replan_windows`), until `budget` arcs: (length, tried, aborted, arcs, long
-        tried, long aborted)."""
-        eg, wg = self.eg, self.wg
-        return self._repair(eg.indptr, eg.dst, wg.indptr, wg.dst, eg.acq_ptr, eg.node_acq, eg.node_time, self.weight,
-                            self.key, self.span, self.by_time, self.sorted_t, path, n, span, self.window_beam,
-                            long_span, long_beam, count, seed, self.tol,
-                            self._max_work if max_work is None else max_work, budget, self._scratch)
+        per node: :func:`eosp.planning.windows.replan_windows`), until `budget` arcs: (length, tried, aborted, arcs,
+        long tried, long aborted)."""
+        sw = Sweep(self.weight, self.key, self.span, self.by_time, self.sorted_t, self.tol,
+                   self._max_work if max_work is None else max_work)
+        plan = WindowPlan(span, self.window_beam, long_span, long_beam, count, seed, budget)
+        return self._repair(self.g, self.w_arrays, sw, path, n, plan, self._scratch)
 
     def nodes_of(self, actions) -> np.ndarray:
         """The path that playing acquisitions `actions` from the source follows (each one's arc)."""

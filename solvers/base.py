@@ -114,7 +114,7 @@ class SearchConfig(LearnedConfig):
     the limit.  0.75: at 1000-1500 acquisitions the windows need 3-4 s to reach RAMP's value (0.5 was short)."""
     windows: bool = True
     """While refining, also re-plan windows of consecutive acquisitions by a label sweep over the time between
-    their neighbours (eosp.search.repair: up to 16 with 4 labels per node, or up to the whole schedule with 1,
+    their neighbours (eosp.planning.windows: up to 16 with 4 labels per node, or up to the whole schedule with 1,
     2, 4, ... 16 labels per node, doubled after each round), for up to three times as long as the ruin and recreate."""
     window_graph: str = choice("pruned", "pruned", "unpruned")
     """The arcs a window's label sweep looks at: the pruned graph's (RAMP's: 6-170 arcs per node against 50-770

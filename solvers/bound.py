@@ -43,19 +43,8 @@ import numpy as np
 
 from eosp.graphs.discrete import DiscreteGraph
 from eosp.instances.instance import Instance
+from eosp.planning.labels import acq_last_time, topological_order
 from eosp.solvers.base import objective_weights
-
-
-def topological_order(graph: DiscreteGraph) -> np.ndarray:
-    """Nodes by increasing time, the source first: a topological order, since t_dst > t_src on every arc."""
-    t = graph.node_time.copy()
-    t[0] = -np.inf
-    return np.argsort(t, kind="stable").astype(np.int32)
-
-
-def acq_last_time(graph: DiscreteGraph) -> np.ndarray:
-    """Time of the last node of every acquisition: after it the acquisition can no longer be visited."""
-    return graph.node_time[graph.acq_ptr[1:] - 1].astype(np.float64)
 
 
 @numba.njit(cache=True)

@@ -13,7 +13,7 @@ structure that makes the problem easy instead is that windows are short (at
 most ~2.5 minutes in a ~97 minute orbit): an acquisition can only be repeated
 while its window is open, so the state of a partial schedule is its last node
 plus the few acquisitions it used whose window is still open.  The DP over these
-states, with dominance, is exact (:func:`solvers.ramp.label_search` with no
+states, with dominance, is exact (:func:`eosp.planning.labels.label_search` with no
 beam); it needs no LP at all.
 
 Steps:
@@ -49,7 +49,8 @@ from eosp.solvers.base import INCUMBENT, Solution, SolverConfig, objective_weigh
 from eosp.solvers.bound import completion_bound, lagrangian
 from eosp.solvers.greedy import GreedyConfig
 from eosp.solvers.greedy import solve as greedy
-from eosp.solvers.ramp import RampConfig, label_search
+from eosp.planning.labels import Bounds, label_search
+from eosp.solvers.ramp import RampConfig
 from eosp.solvers.ramp import solve as ramp
 
 
@@ -97,8 +98,8 @@ def solve(inst: Instance, cfg: ExactConfig | None = None) -> Solution:
     if bound <= value + (0.0 if unitary else 1e-12 * abs(value)):
         return _done(nodes, value, value, "optimal", info, t0)
 
-    res = label_search(g, w, beam=0, incumbent=value, lam=lb.lam, cbound=completion_bound(lb, pg),
-                       unitary=unitary, time_limit=left(), max_labels=max_labels, on_limit="stop")
+    res = label_search(g, w, beam=0, bounds=Bounds(value, lb.lam, completion_bound(lb, pg), unitary),
+                       time_limit=left(), max_labels=max_labels, on_limit="stop")
     info.update(labels=res.labels, pruned=res.pruned, dominated=res.dominated)
     if res.nodes.size and res.value > value:
         nodes, value = res.nodes, res.value

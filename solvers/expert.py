@@ -37,9 +37,9 @@ import numpy as np
 
 from eosp.envs.core import EnvGraph
 from eosp.graphs.discrete import DiscreteGraph, acq_ptr_from_node_acq
+from eosp.planning.labels import Bounds, label_search
 from eosp.solvers.base import objective_weights
 from eosp.solvers.bound import completion_bound, lagrangian
-from eosp.solvers.ramp import label_search
 
 
 @dataclass
@@ -114,7 +114,7 @@ def optimal_path(res: Residual, weights: np.ndarray, *, unitary: bool, time_limi
     bound = math.floor(lb.bound + 1e-6) if unitary else lb.bound
     if bound <= value + (0.0 if unitary else 1e-12 * abs(value)):
         return done(nodes, value, value, "optimal")
-    r = label_search(g, w, beam=0, incumbent=value, lam=lb.lam, cbound=completion_bound(lb, g), unitary=unitary,
+    r = label_search(g, w, beam=0, bounds=Bounds(value, lb.lam, completion_bound(lb, g), unitary),
                      time_limit=left(), on_limit="stop")
     if r.nodes.size and r.value > value:
         nodes, value = r.nodes, r.value

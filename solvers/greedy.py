@@ -14,7 +14,7 @@ a sequence is feasible iff every one of these arcs exists, and the schedule is a
 path of the graph.  Inserting j at position p changes the starts of the
 acquisitions after p only until one of them lands on its old node; from there
 the rest is unchanged, which keeps the check short.  The kernel is
-eosp.graphs.insertion.greedy_insert (the environment also runs it, from a
+eosp.planning.insertion.greedy_insert (the environment also runs it, from a
 mid-episode state, for its ``plan`` features).
 
 Order of the acquisitions:
@@ -40,8 +40,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from eosp.graphs.insertion import ORDERS, greedy_insert
-from eosp.graphs.insertion import insertion_order as graph_order
+from eosp.planning.insertion import ORDERS, greedy_insert
+from eosp.planning.insertion import insertion_order as graph_order
 from eosp.instances.instance import Instance
 from eosp.config import choice
 from eosp.solvers.base import Solution, SolverConfig, objective_weights

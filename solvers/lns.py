@@ -27,7 +27,7 @@ class LnsConfig(SolverConfig):
     iterations: int = ranged(20_000, 1)
     """Ruin-and-recreate rounds when no time limit is given."""
     windows: bool = True
-    """Alternate window re-planning with the ruin and recreate (eosp.search.repair), as the learned searches do."""
+    """Alternate window re-planning with the ruin and recreate (eosp.planning.windows), as the learned searches do."""
     window_graph: str = choice("pruned", "pruned", "unpruned")
     """The arcs a window's label sweep looks at: the pruned graph's (RAMP's: 6-170 arcs per node against 50-770
     unpruned from 100 to 1500 acquisitions, so many more windows per second where schedules are long) or the

@@ -7,6 +7,7 @@ from dataclasses import dataclass
 
 from eosp.envs.sources import prepare_instance
 from eosp.instances.instance import Instance
+from eosp.search.mcts import SearchParams
 from eosp.search.mcts import solve as mcts_solve
 from eosp.config import ranged
 from eosp.solvers.base import INCUMBENT, SearchConfig, Solution
@@ -47,10 +48,9 @@ def solve(inst: Instance, cfg: MctsConfig | None = None, *, agent: tuple | None 
     t0 = time.perf_counter()
     if budget is None:  # with a time limit, bounded by it only
         budget = 1_000_000 if time_limit is not None else 100
-    nodes, ret, stats = mcts_solve(env, lambda obss: evaluate_batch(model, obss, vw, cfg.guard),
-                                   num_simulations=int(budget or 0),
-                                   c_puct=c_puct, batch=batch, seed=seed, time_limit=search_time(cfg),
-                                   gumbel=gumbel, on_best=incumbent_reporter(prepared, mode))
+    params = SearchParams(int(budget or 0), c_puct=c_puct, batch=batch, gumbel=gumbel)
+    nodes, ret, stats = mcts_solve(env, lambda obss: evaluate_batch(model, obss, vw, cfg.guard), params, seed=seed,
+                                   time_limit=search_time(cfg), on_best=incumbent_reporter(prepared, mode))
     if polisher is not None:  # the played episode and the best one met, both polished: the better
         options = [polisher.actions(prepared.eg.node_acq[nodes])]
         if stats.best_actions:

@@ -184,7 +184,7 @@ def polisher_for(prepared: PreparedInstance, cfg: SearchConfig):
 def incumbent_reporter(prepared: PreparedInstance, mode: str):
     """`on_best(actions)` for the searches: a complete episode's path in the environment's graph, reported to the
     solvers' :data:`eosp.solvers.base.INCUMBENT` with its objective value (what Ctrl-C writes)."""
-    from eosp.search.polish import walk
+    from eosp.planning.chain import walk
 
     eg, weights = prepared.eg, objective_weights(prepared.inst, mode)
 

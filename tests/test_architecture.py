@@ -16,6 +16,7 @@ LAYERS = [
     {"eosp", "eosp.config", "eosp.errors", "eosp.atomic", "eosp.args", "eosp.memory", "eosp.ownership", "eosp.reward"},
     {"eosp.sim"},
     {"eosp.graphs"},
+    {"eosp.planning"},
     {"eosp.instances"},
     {"eosp.shards"},
     {"eosp.fleet"},
@@ -96,7 +97,7 @@ def test_layer_check_catches_an_upward_import(tmp_path):
 
 def import_edges(path: Path, module: str, known: set[str]) -> set[str]:
     """The modules of `known` that `path` (module `module`) imports, lazy imports inside functions included:
-    ``from eosp.search import repair`` is an edge to eosp.search.repair only (the package's __init__ runs first,
+    ``from eosp.search import polish`` is an edge to eosp.search.polish only (the package's __init__ runs first,
     but every submodule import runs it: counted, each package that re-exports a module would be a circle)."""
     out = set()
     for node in ast.walk(ast.parse(path.read_text())):
@@ -166,6 +167,53 @@ def test_circle_check_catches_a_lazy_import_circle(tmp_path):
     graph["eosp.search.b"] = import_edges(b, "eosp.search.b", known)
     assert graph["eosp.search.b"] == {"eosp.search.a"}
     assert import_circles(graph) == [["eosp.search.a", "eosp.search.b"]]
+
+
+MAX_PARAMETERS = 10
+KERNEL_FOLDERS = ("planning", "search", "solvers")
+
+
+def parameter_counts(path: Path) -> list[tuple[str, int, int]]:
+    """(name, line, parameters) of every function and method of `path`, `self`, *args and **kwargs counted."""
+    out = []
+    for node in ast.walk(ast.parse(path.read_text())):
+        if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
+            a = node.args
+            n = len(a.posonlyargs) + len(a.args) + len(a.kwonlyargs) + (a.vararg is not None) + (a.kwarg is not None)
+            out.append((node.name, node.lineno, n))
+    return out
+
+
+def test_schedule_algorithms_take_few_parameters():
+    """Kernels take a graph's arrays and their other inputs as typed bundles (NamedTuples, dataclasses), not dozens
+    of positional arrays: no function of planning/, search/ or solvers/ takes more than MAX_PARAMETERS."""
+    bad = [f"{folder}/{f.name}:{line} {name} takes {n}" for folder in KERNEL_FOLDERS
+           for f in sorted((ROOT / folder).glob("*.py")) for name, line, n in parameter_counts(f) if n > MAX_PARAMETERS]
+    assert not bad, "\n".join(bad)
+
+
+def test_parameter_count_sees_every_kind_of_parameter(tmp_path):
+    f = tmp_path / "m.py"
+    f.write_text("def f(a, /, b, *c, d, e=1, **g):\n    pass\n\nclass K:\n    def m(self, x):\n        pass\n")
+    assert parameter_counts(f) == [("f", 1, 6), ("m", 5, 2)]
+
+
+def test_planning_imports_only_numpy_numba_and_graphs():
+    """planning/ sits directly above eosp.graphs: its kernels know nothing of instances, environments or solvers,
+    so that a single pass and a constellation's passes are planned with the same code."""
+    allowed = {"numpy", "numba", "eosp.graphs", "eosp.planning"}
+    bad = []
+    for f in sorted((ROOT / "planning").glob("*.py")):
+        for node in ast.walk(ast.parse(f.read_text())):
+            names = [a.name for a in node.names] if isinstance(node, ast.Import) else \
+                [node.module or ""] if isinstance(node, ast.ImportFrom) and not node.level else []
+            for name in names:
+                top = name.split(".")[0]
+                if top in sys.stdlib_module_names:
+                    continue
+                if not any(name == a or name.startswith(a + ".") for a in allowed):
+                    bad.append(f"planning/{f.name} imports {name}")
+    assert not bad, "\n".join(bad)
 
 
 def test_no_sys_path_edits_outside_tests():

@@ -345,7 +345,7 @@ def test_observation_horizon_keeps_the_selectable_and_drops_the_far_future():
 def greedy_plan_at_start(inst, mode, plan):
     """The acquisitions of the Greedy solver's schedule; with 'greedy2', of the better of it and Greedy in the
     second order (utility: by class then window start; unitary: by latest start), ties to the first."""
-    from eosp.graphs.insertion import greedy_insert
+    from eosp.planning.insertion import greedy_insert
     from eosp.solvers.base import run_solver
 
     first = inst.node_acq[run_solver("greedy", inst, mode=mode).nodes]

@@ -11,7 +11,7 @@ import pytest
 from eosp.errors import InputError
 from eosp.evaluation.html_report import (build_report, coastlines, exact, ground_track, lon_origin, map_extent,
                                           missed_reasons, wrap_lon, write_report)
-from eosp.graphs.insertion import earliest_path, first_insertion
+from eosp.planning.insertion import earliest_path, first_insertion
 from eosp.instances.interchange import write_instance
 from eosp.instances.schedule import Schedule, check, from_internal_nodes, write_schedule
 from eosp.solvers.greedy import solve as greedy

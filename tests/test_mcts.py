@@ -7,6 +7,7 @@ import torch
 from eosp.envs.sources import prepare_instance
 from eosp.config import EnvConfig, ModelConfig
 from eosp.models.agent import EOSPAgent
+from eosp.search.mcts import SearchParams
 from eosp.search.mcts import solve as mcts_solve
 from eosp.solvers.policy import evaluate_batch, make_env_for, rollout
 from tests.conftest import generated
@@ -24,7 +25,7 @@ def agent():
 def run(agent, inst, budget, reward="utility", seed=0, batch=8):
     cfg = EnvConfig(reward=reward)
     env = make_env_for(prepare_instance(inst), cfg)
-    return mcts_solve(env, lambda obss: evaluate_batch(agent, obss), num_simulations=budget, seed=seed, batch=batch)
+    return mcts_solve(env, lambda obss: evaluate_batch(agent, obss), SearchParams(budget, batch=batch), seed=seed)
 
 
 def test_budget_zero_is_the_policy_argmax(agent):

@@ -1,4 +1,4 @@
-"""Window re-planning (search/repair.py): exact over a whole small horizon, feasible and never worse elsewhere."""
+"""Window re-planning (planning/windows.py, its sweep planning/labels.window_sweep): exact over a whole small horizon, feasible and never worse elsewhere."""
 
 from __future__ import annotations
 
@@ -10,7 +10,9 @@ from hypothesis import strategies as st
 from eosp.envs.sources import prepare_instance
 from eosp.instances.schedule import check, from_internal_nodes
 from eosp.search.polish import Polisher
-from eosp.search.repair import _window, scratch
+from eosp.planning.chain import graph_arrays
+from eosp.planning.labels import Sweep, scratch, window_sweep
+from eosp.planning.windows import WindowPlan
 from eosp.solvers.base import objective_weights, run_solver
 from tests.conftest import generated
 from tests.test_polish import _random_episode
@@ -18,15 +20,12 @@ from tests.test_polish import _random_episode
 
 def _plan(pol: Polisher, u: int, e: int, blocked: np.ndarray, beam: int, max_work: int = 10**9):
     g = pol.eg
-    n_nodes, n_acq = g.node_acq.shape[0], g.acq_ptr.shape[0] - 1
-    out = np.empty(n_acq + 1, dtype=np.int32)
-    m, value = _window(g.indptr, g.dst, g.acq_ptr, g.node_acq, g.node_time, pol.weight, pol.key, pol.span,
-                       pol.by_time, pol.sorted_t, blocked, u, e, beam, np.empty(1 << 22, np.int32),
-                       np.empty(1 << 22, np.int32), np.empty(1 << 22, np.float64), np.empty(1 << 22, np.uint64),
-                       np.empty((n_nodes, beam), np.int32), np.zeros(n_nodes, np.int32), np.empty(n_nodes),
-                       np.empty(n_nodes), np.full(n_nodes, -1, np.int64), 1, out, pol.tol, max_work,
-                       np.zeros(1, np.int64))
-    return out[:m], value
+    sc = scratch(g, beam, max_work)
+    sc.blocked[:] = blocked
+    sc.calls[0] = 1
+    sw = Sweep(pol.weight, pol.key, pol.span, pol.by_time, pol.sorted_t, pol.tol, max_work)
+    m, value = window_sweep(graph_arrays(g), sw, sc, u, e, beam, np.zeros(1, np.int64))
+    return sc.seg[:m].copy(), value
 
 
 @pytest.mark.parametrize("family,seed,mode", [("uniform", 0, "unitary"), ("conflict", 1, "utility"),
@@ -82,11 +81,11 @@ def test_window_rounds_keep_random_schedules_feasible_and_never_worse(family, se
     nodes = _random_episode(prepared, np.random.default_rng(walk))
     path = np.zeros(inst.n_acq + 1, dtype=np.int32)
     path[: nodes.size] = nodes
-    g, w = pol.eg, pol.wg
+    sw = Sweep(pol.weight, pol.key, pol.span, pol.by_time, pol.sorted_t, pol.tol, max_work)
+    plan = WindowPlan(span, beam, long_span, long_beam, 200, walk, budget)
     n, tried, aborted, arcs, long_tried, long_aborted = pol._repair(
-        g.indptr, g.dst, w.indptr, w.dst, g.acq_ptr, g.node_acq, g.node_time, pol.weight, pol.key, pol.span,
-        pol.by_time, pol.sorted_t, path, nodes.size, span, beam, long_span, long_beam, 200, walk, pol.tol, max_work,
-        budget, scratch(w, max(beam, long_beam), max_work))
+        graph_arrays(pol.eg), graph_arrays(pol.wg), sw, path, nodes.size, plan,
+        scratch(pol.wg, max(beam, long_beam), max_work))
     out = path[:n]
     assert 0 <= aborted <= tried <= 200 and arcs >= 0
     assert 0 <= long_aborted <= long_tried <= tried and long_aborted <= aborted

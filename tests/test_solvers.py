@@ -10,8 +10,8 @@ from eosp.cli import main as cli_main
 from eosp.instances.interchange import write_instance
 from eosp.instances.schedule import check, from_internal_nodes, read_schedule
 from eosp.solvers.base import objective_weights, run_solver
-from eosp.solvers.bound import completion_bound, lagrangian, togo_pass, topological_order, upper_bound
-from eosp.solvers.ramp import label_search
+from eosp.planning.labels import Bounds, label_search, topological_order
+from eosp.solvers.bound import completion_bound, lagrangian, togo_pass, upper_bound
 from tests.conftest import generated
 from tests.synthetic import all_paths, synthetic_instance
 
@@ -184,7 +184,8 @@ def test_interrupted_label_search_bounds_the_optimum(n, seed):
         cb = completion_bound(lb, inst.pruned())
         stopped = 0
         for cap in (12, 16, 20, 24):
-            res = label_search(inst.unpruned(), w, beam=0, lam=lb.lam, cbound=cb, max_labels=cap, on_limit="stop")
+            res = label_search(inst.unpruned(), w, beam=0, bounds=Bounds(lam=lb.lam, cbound=cb), max_labels=cap,
+                               on_limit="stop")
             stopped += not res.complete
             assert max(res.value, res.frontier_bound) >= best * (1 - 1e-12)
         assert stopped

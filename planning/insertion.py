@@ -5,8 +5,9 @@ current sequence, or skipped when no position is feasible; one already in the se
 postponed, never removed (the algorithm and its choices are documented in eosp.solvers.greedy, which
 runs it from the source node on the whole instance).  The environment runs the same kernel from the
 last scheduled node over the acquisitions still in the graph, to show the agent Greedy's completion of
-the current partial schedule (eosp.envs.observation, ``EnvConfig.plan``): the kernel lives here, below
-both, so that there is one implementation.
+the current partial schedule (eosp.envs.observation, ``EnvConfig.plan``), and the HTML report uses its
+feasibility test to say why an acquisition was missed: the kernel lives here, below all three, so that
+there is one implementation.
 """
 
 from __future__ import annotations

@@ -1,9 +1,8 @@
 """Edits of a schedule path that keep it a path of its graph (numba): insert, replace or drop one position.
 
-Why a module of its own: the moves of :mod:`eosp.search.polish` and the window re-planning of
-:mod:`eosp.search.repair` both change a stretch of a schedule and must then re-reach the nodes after it
-(:func:`rechain`); kept here, below both, so that each imports it and neither imports the other's internals
-(polish drives repair's windows, so repair must not import polish).
+Why a module of its own: the moves (:mod:`eosp.planning.moves`) and the window re-planning
+(:mod:`eosp.planning.windows`) both change a stretch of a schedule and must then re-reach the nodes after it
+(:func:`rechain`); kept here, below both, so that each imports it and neither imports the other's internals.
 
 A schedule is a path source -> n_1 -> ... -> n_L of a discrete graph whose arcs go from a node to the one
 node of the target acquisition it reaches (:func:`eosp.graphs.discrete.arc_to_acq`), so a path is fixed by
@@ -86,3 +85,31 @@ def remove(indptr, dst, acq_ptr, node_acq, path, n, k, tmp):
     for i in range(m):
         path[k + i] = tmp[i]
     return n - 1
+
+
+@numba.njit(cache=True)
+def _walk(indptr, dst, acq_ptr, actions, out):
+    """out[i] = the node playing actions[i] reaches from out[i - 1] (the source first); returns the index of
+    the first action with no arc, or -1 when all have one."""
+    cur = 0
+    for i in range(actions.shape[0]):
+        cur = arc_to_acq(indptr, dst, acq_ptr, cur, actions[i])
+        if cur < 0:
+            return i
+        out[i] = cur
+    return -1
+
+
+def walk(graph, actions) -> np.ndarray | int:
+    """The path (node indices of `graph`) that playing acquisitions `actions` from the source follows, each one's
+    arc; the position of the first action without an arc from the previous node otherwise."""
+    actions = np.asarray(actions, dtype=np.int64)
+    out = np.empty(actions.shape[0], dtype=np.int32)
+    bad = _walk(graph.indptr, graph.dst, graph.acq_ptr, actions, out)
+    return int(bad) if bad >= 0 else out
+
+
+def graph_arrays(graph) -> GraphArrays:
+    """The :class:`GraphArrays` of a discrete graph (anything with indptr, dst, acq_ptr, node_acq, node_time: an
+    eosp.graphs.discrete.DiscreteGraph or the environment's graph)."""
+    return GraphArrays(graph.indptr, graph.dst, graph.acq_ptr, graph.node_acq, graph.node_time)
