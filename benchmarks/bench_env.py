@@ -20,12 +20,12 @@ from eosp.config import EnvConfig, family_config
 from eosp.instances.generator import generate
 
 
-def run(n: int, family: str, episodes: int, obs_edges: str, snapshot: bool) -> dict:
+def run(n: int, family: str, episodes: int, obs_edges: str, snapshot: bool, plan: str = "") -> dict:
     inst = generate(family_config(family, n, 1))
     t0 = time.perf_counter()
     src = FixedSource(inst)
     t_prep = time.perf_counter() - t0
-    env = EOSPEnv(EnvConfig(max_acquisitions=0, obs_edges=obs_edges, max_edges=n * 200), source=src)
+    env = EOSPEnv(EnvConfig(max_acquisitions=0, obs_edges=obs_edges, max_edges=n * 200, plan=plan), source=src)
     rng = np.random.default_rng(0)
     env.reset(seed=0)
     ep_times, steps = [], 0
@@ -57,15 +57,17 @@ def main() -> None:
     p.add_argument("--families", nargs="+", default=["uniform", "clusters"])
     p.add_argument("--episodes", type=int, default=20)
     p.add_argument("--obs-edges", default="earliest", choices=["earliest", "full"])
+    p.add_argument("--plan", default="", choices=["", "greedy", "greedy2", "label"],
+                   help="the plan features each step computes (EnvConfig.plan; the shipped unitary model: label)")
     a = p.parse_args()
-    run(20, "uniform", 2, a.obs_edges, True)  # JIT warm-up
-    print(f"obs_edges={a.obs_edges}\n")
+    run(20, "uniform", 2, a.obs_edges, True, a.plan)  # JIT warm-up
+    print(f"obs_edges={a.obs_edges} plan={a.plan or 'none'}\n")
     print("| family | acq | nodes | pruned arcs | prepare (s) | steps/episode | episode (ms, mean / max) "
           "| steps/s | snapshot+restore (us) |")
     print("|---|---|---|---|---|---|---|---|---|")
     for fam in a.families:
         for n in a.sizes:
-            r = run(n, fam, a.episodes, a.obs_edges, True)
+            r = run(n, fam, a.episodes, a.obs_edges, True, a.plan)
             print(f"| {fam} | {n} | {r['nodes']:,} | {r['pruned_arcs']:,} | {r['prep']:.2f} | "
                   f"{r['steps_per_ep']:.1f} | {r['episode_ms']:.1f} / {r['episode_ms_max']:.1f} | "
                   f"{r['steps_per_s']:,.0f} | {r['snap_us']:.1f} |", flush=True)
