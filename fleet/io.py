@@ -277,6 +277,23 @@ def write_schedule(schedule: Schedule, fleet: Fleet, path: str | os.PathLike, ov
     return path
 
 
+def read_schedule_table(path: Path, kind: bytes, fleet_fingerprint: str, columns, what: str):
+    """The Parquet table of a schedule eosp wrote (`what`: "a fleet schedule"), checked: its `kind` mark, the
+    fingerprint of the fleet it was written for, and `columns` present without nulls; with its metadata as text."""
+    table = read_parquet(path)
+    md = table.schema.metadata or {}
+    if md.get(b"kind") != kind:
+        raise InputError(path, f"not {what} (no {kind.decode()} metadata)")
+    if md.get(b"fleet_fingerprint", b"").decode() != fleet_fingerprint:
+        raise InputError(path, "written for another fleet (fingerprint differs)")
+    for c in columns:
+        if c not in table.column_names:
+            raise InputError(path, "missing column", column=c)
+        if table.column(c).null_count:
+            raise InputError(path, "null value", column=c)
+    return table, {k.decode(): v.decode() for k, v in md.items()}
+
+
 def read_schedule(path: str | os.PathLike, fleet: Fleet) -> tuple[Schedule, dict]:
     """A schedule from a fleet schedule (Parquet, checked against the fleet's fingerprint) or an aeossp
     ``solution.json``; returns it with its metadata."""
@@ -287,21 +304,10 @@ def read_schedule(path: str | os.PathLike, fleet: Fleet) -> tuple[Schedule, dict
         return read_solution(path, fleet.horizon), {}
     if path.suffix.lower() != ".parquet":
         raise InputError(path, "unknown extension: a schedule is a .parquet (fleet schedule) or .json (aeossp solution)")
-    table = read_parquet(path)
-    md = table.schema.metadata or {}
-    if md.get(b"kind") != SCHEDULE_KIND:
-        raise InputError(path, "not a fleet schedule (no eosp-fleet-schedule metadata)")
-    if md.get(b"fleet_fingerprint", b"").decode() != fingerprint(fleet):
-        raise InputError(path, "written for another fleet (fingerprint differs)")
-    for c in SCHEDULE_COLUMNS:
-        if c not in table.column_names:
-            raise InputError(path, "missing column", column=c)
-        if table.column(c).null_count:
-            raise InputError(path, "null value", column=c)
+    table, info = read_schedule_table(path, SCHEDULE_KIND, fingerprint(fleet), SCHEDULE_COLUMNS, "a fleet schedule")
     start = np.datetime64(fleet.horizon.start.replace(tzinfo=None), "us")
     st = (table.column("start_utc").to_numpy().astype("datetime64[us]") - start).astype(np.int64)
     en = (table.column("end_utc").to_numpy().astype("datetime64[us]") - start).astype(np.int64)
-    info = {k.decode(): v.decode() for k, v in md.items()}
     return Schedule(strings(table.column("satellite").to_pylist()), strings(table.column("task").to_pylist()),
                     st, en), info
 

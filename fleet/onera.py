@@ -469,25 +469,14 @@ def activity_durations(f: OneraFleet, activity: np.ndarray) -> np.ndarray:
 
 def read_schedule(path, f: OneraFleet) -> tuple[OneraSchedule, dict]:
     """A plan from a Parquet schedule of this fleet or from a text plan (docs/formats.md, "ONERA plan")."""
-    from eosp.instances.interchange import read_parquet
+    from eosp.fleet.io import read_schedule_table
 
     path = Path(path)
     if path.suffix.lower() != ".parquet":
         return read_plan(path), {}
-    table = read_parquet(path)
-    md = table.schema.metadata or {}
-    if md.get(b"kind") != SCHEDULE_KIND:
-        raise InputError(path, "not an ONERA schedule (no eosp-onera-schedule metadata)")
-    if md.get(b"fleet_fingerprint", b"").decode() != fingerprint(f):
-        raise InputError(path, "written for another fleet (fingerprint differs)")
-    cols = {}
-    for c in ("satellite", "activity", "start"):
-        if c not in table.column_names:
-            raise InputError(path, "missing column", column=c)
-        if table.column(c).null_count:
-            raise InputError(path, "null value", column=c)
-        cols[c] = table.column(c).to_numpy().astype(np.float64 if c == "start" else np.int64)
-    info = {k.decode(): v.decode() for k, v in md.items()}
+    columns = ("satellite", "activity", "start")
+    table, info = read_schedule_table(path, SCHEDULE_KIND, fingerprint(f), columns, "an ONERA schedule")
+    cols = {c: table.column(c).to_numpy().astype(np.float64 if c == "start" else np.int64) for c in columns}
     return OneraSchedule(cols["satellite"], cols["activity"], cols["start"]), info
 
 

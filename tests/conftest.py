@@ -45,3 +45,15 @@ def pytest_collection_modifyitems(config, items):
     for item in items:
         if item.module.__name__.rpartition(".")[2] in RAY_MODULES or item.originalname in RAY_TESTS:
             item.add_marker(pytest.mark.ray)
+
+
+@pytest.fixture(scope="session")
+def chromium():
+    """The path of a headless Chromium for the page tests (tests/browser.py finds or installs one); the test is
+    skipped, with the reason, where none can be had."""
+    from tests.browser import ensure_chromium
+
+    path, why = ensure_chromium()
+    if path is None:
+        pytest.skip(why)
+    return path

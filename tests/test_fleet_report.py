@@ -84,16 +84,6 @@ def test_cli_report_and_another_fleets_schedule(tmp_path, capsys):
 
 # --------------------------------------------------------------------------- real browser
 
-@pytest.fixture(scope="session")
-def chromium():
-    from tests.browser import ensure_chromium
-
-    path, why = ensure_chromium()
-    if path is None:
-        pytest.skip(why)
-    return path
-
-
 PROBE_JS = """(async () => {
   const p = window.fleetPage;
   const out = {ready: p.ready, drawn: p.drawn, ms: p.renderMs};

@@ -243,16 +243,6 @@ def test_cli_report_and_foreign_schedule(tmp_path):
 
 # --------------------------------------------------------------------------- real browser
 
-@pytest.fixture(scope="session")
-def chromium():
-    from tests.browser import ensure_chromium
-
-    path, why = ensure_chromium()
-    if path is None:
-        pytest.skip(why)
-    return path
-
-
 COUNT_JS = """(async () => {
   await new Promise(r => setTimeout(r, 300));
   const out = {};
