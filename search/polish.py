@@ -1,4 +1,4 @@
-"""Local improvement of a complete schedule by insert and swap moves (numba; no torch, no Ray).
+"""Local improvement of a complete schedule: the driver of planning's moves and windows (no torch, no Ray).
 
 Why: what a learned policy typically loses is one or two decisions per episode, each
 costing one acquisition in unitary mode or one low-priority acquisition in utility
@@ -7,30 +7,14 @@ swap repairs, and checking a move costs a few binary searches, so every complete
 schedule a learned search meets can be polished for milliseconds before the search
 compares it with the others (``--polish``, on by default for sample, beam and mcts).
 
-A schedule is a path source -> n_1 -> ... -> n_L of the environment's discrete graph.
-Each arc goes from a node to the one node of the target acquisition it can reach
-(:func:`eosp.graphs.discrete.arc_to_acq`), so a path is fixed by its sequence of
-acquisitions.  Inserting acquisition j before position k re-reaches the nodes after
-it, one arc at a time, until a re-reached node equals the old one: from there on the
-path is unchanged.  A missing arc makes the move infeasible.  The result is a path of
-the same graph, so on the environment's graph it replays in the environment action by
-action (each acquisition at most once, every node reached by an arc of the graph); on
-the unpruned graph (what the searches use when the instance has it) it is a feasible
-schedule that may use arcs the pruning removed.
-
-Moves, repeated until none improves (first improvement; candidates by decreasing
-weight, then by earliest window end):
-
-* insert: an acquisition not scheduled, at the first position where it fits;
-* swap: drop the acquisition at one position, or replace it by an unscheduled one
-  (the first `max_replace` that fit), and insert unscheduled ones in the positions
-  around it (two before to two or three after, growing with each insertion); kept
-  when the weight gained exceeds the weight dropped (in unitary mode: two for one).
-
-The refinement (:meth:`Polisher.refine`) alternates ruin and recreate with window re-planning
-(:mod:`eosp.planning.windows`: a stretch of the schedule planned again by a label sweep, which finds
-the sequences a first-fit refill misses).  The moves themselves are :mod:`eosp.planning.moves`'s; this
-module drives them.
+The moves (insert, swap, ruin and recreate: :mod:`eosp.planning.moves`) and window re-planning (a
+stretch of the schedule planned again by a label sweep, which finds the sequences a first-fit refill
+misses: :mod:`eosp.planning.windows`) are planning's kernels; every result is a path of the same graph
+(:mod:`eosp.planning.chain`), so on the environment's graph it replays action by action and on the
+unpruned graph it is a feasible schedule that may use arcs the pruning removed.  This module drives
+them: :class:`Polisher` compiles them once per instance, polishes (insert and swap until none
+improves) and refines (:meth:`Polisher.refine`: ruin and recreate alternating with rounds of windows,
+their sizes and labels per node adapted to what the time allows).
 
 Weights are the objective's (:func:`eosp.solvers.base.objective_weights`: the
 utility, or 1 per acquisition), so a polished schedule is never worse than its input.
