@@ -89,11 +89,11 @@ def run(argv: list[str]) -> int:
             return 2
     if extra:
         parser.error(f"unrecognized arguments: {' '.join(extra)}")
-    from eosp.memory import set_max_memory_gb
+    from eosp.memory import memory_ceiling
 
-    set_max_memory_gb(getattr(ns, "max_memory_gb", None))
     try:
-        return ns.func(ns)
+        with memory_ceiling(getattr(ns, "max_memory_gb", None)):
+            return ns.func(ns)
     except (InputError, FileExistsError, ValueError, IndexError) as exc:
         print(f"eosp {ns.command}: error: {exc}", file=sys.stderr)
         return 2

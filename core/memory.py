@@ -8,6 +8,7 @@ out-of-memory killer half-way.
 
 from __future__ import annotations
 
+import contextlib
 import os
 import resource
 from pathlib import Path
@@ -63,6 +64,19 @@ def set_max_memory_gb(gb: float | None) -> None:
     """Set (or clear, with None or 0) the ceiling every :func:`require_memory` also applies (--max-memory-gb)."""
     global MAX_BYTES
     MAX_BYTES = int(gb * GiB) if gb else None
+
+
+@contextlib.contextmanager
+def memory_ceiling(gb: float | None):
+    """The ceiling for one command (``with memory_ceiling(ns.max_memory_gb): ...``), the previous one restored
+    afterwards: a command called in-process (tests, notebooks) leaves no limit behind for the next caller."""
+    global MAX_BYTES
+    before = MAX_BYTES
+    set_max_memory_gb(gb)
+    try:
+        yield
+    finally:
+        MAX_BYTES = before
 
 
 def require_memory(file: object, need: int, what: str) -> None:

@@ -16,6 +16,7 @@ environment variable ``EOSP_FAULT_KILL_AFTER=N``.)
 
 from __future__ import annotations
 
+import argparse
 import json
 import os
 import signal
@@ -158,9 +159,13 @@ def _main(argv: list[str] | None) -> int:
     add_config_args(p, RayConfig, prefix="ray.")
     add_memory_arg(p)
     ns = p.parse_args(argv)
-    from eosp.memory import set_max_memory_gb
+    from eosp.memory import memory_ceiling
 
-    set_max_memory_gb(ns.max_memory_gb)
+    with memory_ceiling(ns.max_memory_gb):
+        return _build(ns)
+
+
+def _build(ns: argparse.Namespace) -> int:
     cfg = config_from_args(DatasetConfig, ns)
     ray_cfg = prefixed_config(RayConfig, ns, "ray.")
     from eosp.jobs.preflight import require_findable

@@ -656,8 +656,11 @@ def fresh(base: Path, tmp: Path) -> Path:
 
 @pytest.mark.parametrize("case", CASES, ids=[c.name for c in CASES])
 def test_bad_input(case, base, tmp_path):
+    from eosp import memory
+
     ok, why = clean_error(case, fresh(base, tmp_path))
     assert ok, why
+    assert memory.MAX_BYTES is None, "the command left its --max-memory-gb behind for the next caller"
 
 
 def test_good_inputs_still_work(base, tmp_path):
