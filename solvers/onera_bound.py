@@ -211,7 +211,7 @@ class _Model:
                 order = np.argsort(w_sel)
                 cum = np.r_[0.0, np.cumsum(l_sel[order])]
                 dem = cum[np.searchsorted(w_sel[order], bs, side="right")]
-                viol = dem + self.download_load(s, a, bs) - (bs - a) - 90.0 * 0  # extra ignored: checked exactly below
+                viol = dem + self.download_load(s, a, bs) - (bs - a)  # a candidate: its cut is checked exactly below
                 k = int(np.argmax(viol))
                 if viol[k] > 1e-6:
                     found.append((viol[k], a, float(bs[k])))
