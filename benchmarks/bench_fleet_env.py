@@ -6,6 +6,10 @@ directories (``--fleets``), or generated ones (``--generate SATELLITES TASKS HOU
 ``--seed``, tasks in cities for at most 40 satellites as the aeossp cases, on land above).  One warm-up episode
 compiles the kernels; then ``--episodes`` random episodes are timed.  Prints one Markdown row per fleet.
 
+``--replay SCHEDULE`` (one fleet; a fleet schedule .parquet or an aeossp solution.json, e.g. the fleet solver's
+from bench_fleet.py) plays that schedule through the environment (:class:`eosp.envs.constellation.ScheduleFollower`)
+and prints how many of its observations could not be played, the return and the schedule's WCR.
+
     python benchmarks/bench_fleet_env.py --astro ASTRO --cases test/case_0001 --generate 20 2000 12 --generate 200 20000 24
 """
 
@@ -51,7 +55,29 @@ def fleets(args):
         yield fleet.case_id, fleet, opps, geo, time.perf_counter() - t0
 
 
-def measure(name, fleet, opps, geo, cfg: FleetEnvConfig, episodes: int, seed: int) -> dict:
+def replay(pf, cfg: FleetEnvConfig, path: str) -> str:
+    """Play the schedule at `path` through the environment: one line of figures."""
+    from eosp.envs.constellation import ConstellationEnv, ScheduleFollower
+    from eosp.fleet.check import validate
+    from eosp.fleet.io import read_schedule
+
+    sched, _ = read_schedule(path, pf.fleet)
+    given = validate(pf.fleet, sched, pf.geo)
+    env = ConstellationEnv(cfg, source=pf)
+    follower = ScheduleFollower(pf, sched)
+    env.reset(seed=0)
+    while True:
+        _, _, term, _, _ = env.step({env.acting_agent: follower.action(env)})
+        if term["__all__"]:
+            break
+    played = validate(pf.fleet, env.schedule(), pf.geo)
+    return (f"replay of {path}: {len(sched)} observations (valid {given.valid}, WCR {given.metrics['WCR']:.6f}); "
+            f"{follower.dropped} not playable; the environment's schedule: {len(env.schedule())} observations, "
+            f"return {env.value:.6f}, valid {played.valid}, WCR {played.metrics['WCR']:.6f}")
+
+
+def measure(name, fleet, opps, geo, cfg: FleetEnvConfig, episodes: int, seed: int):
+    """(the row of figures, the prepared fleet)."""
     from eosp.envs.constellation import ConstellationEnv
     from eosp.envs.constellation_data import prepare_fleet
     from eosp.fleet.passgraph import build_passes
@@ -88,7 +114,7 @@ def measure(name, fleet, opps, geo, cfg: FleetEnvConfig, episodes: int, seed: in
             "fifo_violations": pf.fifo_violations, "pass_graphs_s": round(t_graphs, 2),
             "prepare_s": round(pf.prepare_s, 2), "reset_ms": round(1e3 * float(np.median(resets)), 2),
             "agent_steps": steps, "steps_per_s": round(steps / step_s), "random_wcr": round(float(np.mean(served)), 4),
-            "battery_refusals_last": info["battery_refusals"]}
+            "battery_refusals_last": info["battery_refusals"]}, pf
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -100,19 +126,24 @@ def main(argv: list[str] | None = None) -> int:
                    help="a generated fleet (repeatable)")
     p.add_argument("--episodes", type=int, default=3, help="timed episodes per fleet (after one warm-up)")
     p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--replay", default="", help="a schedule of the one fleet given, played through the environment")
     add_config_args(p, FleetEnvConfig, prefix="env.")
     args = p.parse_args(argv)
     if args.cases and not args.astro:
         p.error("--cases: needs --astro")
     cfg = prefixed_config(FleetEnvConfig, args, "env.")
+    if args.replay and len(args.cases) + len(args.fleets) + len(args.generate) != 1:
+        p.error("--replay: give exactly one fleet (--cases, --fleets or --generate)")
     print("| fleet | satellites / tasks | opportunities / passes | max tasks a pass | pass graphs s | prepare s | "
           "reset ms | agent steps/s | random WCR |")
     print("|---|---|---|---|---|---|---|---|---|")
     for name, fleet, opps, geo, _ in fleets(args):
-        row = measure(name, fleet, opps, geo, cfg, args.episodes, args.seed)
+        row, pf = measure(name, fleet, opps, geo, cfg, args.episodes, args.seed)
         print(f"| {row['fleet']} | {row['satellites']} / {row['tasks']:,} | {row['opportunities']:,} / "
               f"{row['passes']:,} | {row['max_pass_tasks']} | {row['pass_graphs_s']} | {row['prepare_s']} | "
               f"{row['reset_ms']} | {row['steps_per_s']:,} | {row['random_wcr']} |", flush=True)
+        if args.replay:
+            print(replay(pf, cfg, args.replay), flush=True)
     return 0
 
 

@@ -138,6 +138,9 @@ class FixedFleets:
     def max_satellites(self) -> int:
         return max(f.n_satellites for f in self.fleets)
 
+    def sizes(self) -> dict[str, int]:
+        return {f.name: f.n_satellites for f in self.fleets}
+
     def sample(self, rng: np.random.Generator) -> PreparedFleet:
         return self.fleets[int(rng.integers(len(self.fleets)))]
 
@@ -153,14 +156,18 @@ class FleetDirs:
         self.cache: OrderedDict[int, PreparedFleet] = OrderedDict()
         self._sizes: list[int] | None = None
 
-    def max_satellites(self) -> int:
+    def sizes(self) -> dict[str, int]:
+        """Satellites of each fleet (read once, without opportunities)."""
         if self._sizes is None:
             from eosp.fleet.aeossp import is_case_dir, read_case
             from eosp.fleet.io import read_fleet
 
-            self._sizes = [len((read_case(p) if is_case_dir(p) else read_fleet(p, with_opportunities=False)[0])
-                               .satellites) for p in self.paths]
-        return max(self._sizes)
+            self._sizes = {str(p): len((read_case(p) if is_case_dir(p) else read_fleet(p, with_opportunities=False)[0])
+                                       .satellites) for p in self.paths}
+        return self._sizes
+
+    def max_satellites(self) -> int:
+        return max(self.sizes().values())
 
     def get(self, i: int) -> PreparedFleet:
         if i in self.cache:
@@ -272,6 +279,9 @@ class ConstellationEnv:
             source = FixedFleets(source)
         self.source = source
         self.k_slots = cfg.max_satellites or source.max_satellites()
+        for name, n in source.sizes().items():
+            if n > self.k_slots:
+                raise InputError(name, f"{n} satellites, more than the {self.k_slots} agent slots (max_satellites)")
         for f in source.all():
             self._check(f)
         self.n_max = cfg.max_nodes

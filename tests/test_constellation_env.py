@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import json
 import subprocess
 import sys
 from pathlib import Path
@@ -14,7 +15,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from eosp.config import FleetEnvConfig
+from eosp.config import FleetEnvConfig, to_dict
 from eosp.envs import constellation_core as core
 from eosp.envs.constellation import ConstellationEnv, InvalidAction, ScheduleFollower, load_fleet
 from eosp.envs.constellation_data import prepare_fleet
@@ -79,10 +80,11 @@ def random_episode(env: ConstellationEnv, rng: np.random.Generator, skip_p: floa
     return total
 
 
-def check_conformance(seed: int, hours=(1.0, 2.0), tasks=(100, 400)) -> dict:
+def check_conformance(seed: int, hours=(1.0, 2.0), tasks=(100, 400)) -> str:
+    """One random episode of random_case(seed), checked; its figures as JSON."""
     pf, cfg = random_case(seed, hours, tasks)
     if pf is None:
-        return {}
+        return "{}"
     env = ConstellationEnv(cfg, source=pf)
     total = random_episode(env, np.random.default_rng(seed))
     res = validate(pf.fleet, env.schedule(), pf.geo)
@@ -91,19 +93,22 @@ def check_conformance(seed: int, hours=(1.0, 2.0), tasks=(100, 400)) -> dict:
     if cfg.team_reward == 0.0:
         assert total == pytest.approx(res.metrics[metric], abs=1e-9), seed
     assert env.value == pytest.approx(res.metrics[metric], abs=1e-9), seed
-    return env.episode_info()
+    return json.dumps({**env.episode_info(), "config": to_dict(cfg), "metric": metric,
+                       "checker": float(res.metrics[metric]), "tasks": len(pf.fleet.tasks),
+                       "opportunities": len(pf.opps)})
 
 
 @pytest.mark.parametrize("seed", range(20))
-def test_random_valid_actions_give_checker_valid_schedules_whose_wcr_is_the_return(seed):
-    check_conformance(seed)
+def test_random_valid_actions_give_checker_valid_schedules_whose_wcr_is_the_return(seed, record_property):
+    record_property("episode", check_conformance(seed))
 
 
 @pytest.mark.slow
 @pytest.mark.parametrize("seed", range(1000, 1200))
-def test_conformance_on_200_more_fleets(seed):
-    """The issue's conformance target: 200 more random fleets, longer horizons and more tasks."""
-    check_conformance(seed, hours=(1.0, 6.0), tasks=(100, 1500))
+def test_conformance_on_200_more_fleets(seed, record_property):
+    """The issue's conformance target: 200 more random fleets, longer horizons and more tasks (each episode's
+    figures in the JUnit report: --junitxml)."""
+    record_property("episode", check_conformance(seed, hours=(1.0, 6.0), tasks=(100, 1500)))
 
 
 @functools.lru_cache(maxsize=None)
