@@ -2,15 +2,17 @@
 alone, default features, one process) and the time to prepare and reset a fleet after its pass graphs are built.
 
 Fleets: aeossp cases (``--astro``: a checkout of astro-reason, ``--cases`` split/case names), fleet or case
-directories (``--fleets``), or generated ones (``--generate SATELLITES TASKS HOURS``, repeatable; seed
-``--seed``, tasks in cities for at most 40 satellites as the aeossp cases, on land above).  One warm-up episode
+directories (``--env.fleets``, the environment's own option), or generated ones (``--generate SATELLITES TASKS
+HOURS``, repeatable; seed ``--seed``, tasks in cities for at most 40 satellites as the aeossp cases, on land
+above).  One warm-up episode
 compiles the kernels; then ``--episodes`` random episodes are timed.  Prints one Markdown row per fleet.
 
 ``--replay SCHEDULE`` (one fleet; a fleet schedule .parquet or an aeossp solution.json, e.g. the fleet solver's
 from bench_fleet.py) plays that schedule through the environment (:class:`eosp.envs.constellation.ScheduleFollower`)
 and prints how many of its observations could not be played, the return and the schedule's WCR.
 
-    python benchmarks/bench_fleet_env.py --astro ASTRO --cases test/case_0001 --generate 20 2000 12 --generate 200 20000 24
+    python benchmarks/bench_fleet_env.py --astro ASTRO --cases test/case_0001 test_hard/case_0001 \
+        --generate 20 2000 12 --generate 200 20000 24
 """
 
 from __future__ import annotations
@@ -25,7 +27,7 @@ from eosp.args import Parser, add_config_args, prefixed_config, run_job
 from eosp.config import FleetEnvConfig
 
 
-def fleets(args):
+def fleets(args, cfg: FleetEnvConfig):
     """(name, fleet, opportunities, geometry, seconds to read and compute opportunities) of every fleet asked."""
     from eosp.envs.constellation import expand_fleets
     from eosp.fleet.aeossp import is_case_dir, read_case
@@ -34,7 +36,7 @@ def fleets(args):
     from eosp.fleet.opportunities import compute
 
     paths = [Path(args.astro) / "benchmarks" / "aeossp_standard" / "dataset" / "cases" / c for c in args.cases]
-    for p in paths + (expand_fleets(args.fleets) if args.fleets else []):
+    for p in paths + (expand_fleets(cfg.fleets) if cfg.fleets else []):
         t0 = time.perf_counter()
         if is_case_dir(p):
             fleet = read_case(p)
@@ -121,7 +123,6 @@ def main(argv: list[str] | None = None) -> int:
     p = Parser(prog="bench_fleet_env.py", description=__doc__.splitlines()[0])
     p.add_argument("--astro", default="", help="a checkout of astro-reason (its aeossp_standard cases)")
     p.add_argument("--cases", nargs="*", default=[], help="aeossp cases under --astro, e.g. test/case_0001")
-    p.add_argument("--fleets", nargs="*", default=[], help="fleet or aeossp case directories (or folders of them)")
     p.add_argument("--generate", nargs=3, action="append", default=[], metavar=("SATELLITES", "TASKS", "HOURS"),
                    help="a generated fleet (repeatable)")
     p.add_argument("--episodes", type=int, default=3, help="timed episodes per fleet (after one warm-up)")
@@ -132,12 +133,12 @@ def main(argv: list[str] | None = None) -> int:
     if args.cases and not args.astro:
         p.error("--cases: needs --astro")
     cfg = prefixed_config(FleetEnvConfig, args, "env.")
-    if args.replay and len(args.cases) + len(args.fleets) + len(args.generate) != 1:
-        p.error("--replay: give exactly one fleet (--cases, --fleets or --generate)")
+    if args.replay and len(args.cases) + len(cfg.fleets) + len(args.generate) != 1:
+        p.error("--replay: give exactly one fleet (--cases, --env.fleets or --generate)")
     print("| fleet | satellites / tasks | opportunities / passes | max tasks a pass | pass graphs s | prepare s | "
           "reset ms | agent steps/s | random WCR |")
     print("|---|---|---|---|---|---|---|---|---|")
-    for name, fleet, opps, geo, _ in fleets(args):
+    for name, fleet, opps, geo, _ in fleets(args, cfg):
         row, pf = measure(name, fleet, opps, geo, cfg, args.episodes, args.seed)
         print(f"| {row['fleet']} | {row['satellites']} / {row['tasks']:,} | {row['opportunities']:,} / "
               f"{row['passes']:,} | {row['max_pass_tasks']} | {row['pass_graphs_s']} | {row['prepare_s']} | "

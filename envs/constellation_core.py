@@ -70,7 +70,8 @@ def new_episode(fa, max_pass_tasks: int, max_nodes: int) -> Episode:
     m = max(1, max_pass_tasks)
     i64 = np.int64
     return Episode(np.full(n_tasks, -1, i64), np.full(k_sats, -1, i64), np.zeros(k_sats, i64),
-                   np.full(k_sats, -1, i64), np.full(k_sats, NEVER, i64), np.zeros(k_sats, i64), np.zeros(k_sats), np.zeros(n_nodes, i64),
+                   np.full(k_sats, -1, i64), np.full(k_sats, NEVER, i64), np.zeros(k_sats, i64), np.zeros(k_sats),
+                   np.zeros(n_nodes, i64),
                    np.zeros(4, i64), np.full(m, -1, i64), np.zeros(m, np.int8), np.zeros(m), np.zeros(m),
                    np.full(m, -1, i64), np.full(max_nodes, -1, i64), np.full(m, -1, i64))
 

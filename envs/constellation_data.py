@@ -190,7 +190,8 @@ def prepare_fleet(fleet: Fleet, opps: Opportunities, passes: list[PassGraph] | N
         nadir[sel] = los.nadir(k, node_time[sel])
     sat_pass_ptr = np.searchsorted(pass_sat, np.arange(len(sats) + 1)).astype(np.int64)
     pass_first_us = np.minimum.reduceat(np.where(src, np.iinfo(np.int64).max, node_start_us), node_off[:-1])
-    sep_us = np.ceil((slew_time_s(180.0, att.max_rate_deg_s, att.max_acc_deg_s2) + att.settling_s) * US).astype(np.int64)
+    sep_s = slew_time_s(180.0, att.max_rate_deg_s, att.max_acc_deg_s2) + att.settling_s  # the longest maneuver
+    sep_us = np.ceil(sep_s * US).astype(np.int64)
     pass_entry_us = np.maximum(0, (pass_first_us - sep_us[pass_sat]) // res_us * res_us)
     order = np.lexsort((node_start_us[acq_lo], acq_task))
     task_acq_ptr = np.searchsorted(acq_task[order], np.arange(len(tasks) + 1)).astype(np.int64)

@@ -160,7 +160,8 @@ def test_battery_mask_is_the_checkers_battery():
         obs, _ = env.reset(seed=int(rng.integers(100)))
         while obs:
             k, ep = env.actor, env.ep
-            done = [int(w) for w in ep.actions[:ep.counts[core.N_ACTIONS]] if fa.pass_sat[fa.acq_pass[fa.node_acq[w]]] == k]
+            done = [int(w) for w in ep.actions[:ep.counts[core.N_ACTIONS]]
+                    if fa.pass_sat[fa.acq_pass[fa.node_acq[w]]] == k]
             prev = done[-1] if done else -1
             p, u = ep.sat_pass[k], ep.sat_last[k]
             direct = {int(fa.node_acq[v]): int(v) for v in fa.dst[fa.indptr[u]:fa.indptr[u + 1]]}
@@ -386,7 +387,7 @@ def test_same_seed_same_episode():
 
 
 def test_bridges_off_never_observes_a_task_twice_all_does_and_stays_valid():
-    pf, cfg = None, None
+    pf = None
     for seed in range(40):  # a fleet where satellites share tasks within passes
         pf, _ = random_case(seed)
         if pf is not None and pf.n_satellites >= 8:
@@ -456,7 +457,7 @@ def test_fleet_directories_are_read_and_shared_out(fleet_dir, tmp_path):
     (["--env.max-satellites", "2"], "3 satellites, more than the 2 agent slots"),
 ])
 def test_benchmark_refuses_bad_input_in_one_line(fleet_dir, args, message):
-    r = subprocess.run([sys.executable, str(ROOT / "benchmarks" / "bench_fleet_env.py"), "--fleets", str(fleet_dir),
+    r = subprocess.run([sys.executable, str(ROOT / "benchmarks" / "bench_fleet_env.py"), "--env.fleets", str(fleet_dir),
                         "--episodes", "1", *args], capture_output=True, text=True, cwd=ROOT)
     assert r.returncode == 2, r.stderr
     lines = r.stderr.strip().splitlines()
