@@ -2,6 +2,11 @@
 
 Contract
 --------
+Fleets
+    Injected (``ConstellationEnv(cfg, source=prepared_fleet_or_list)``, see
+    :func:`eosp.envs.constellation_data.prepare_fleet`); from ``fleets`` (fleet or aeossp case directories, each
+    RLlib env runner owning every num_workers-th); or one small generated fleet.  ``reset(options={"fleet":
+    prepared})`` forces one.  :class:`ScheduleFollower` gives the actions that replay a schedule.
 Agents
     A fixed pool of slots ``sat_0 .. sat_{K-1}`` (``possible_agents``), K = ``max_satellites`` or the largest
     fleet of the source; satellite i of the current fleet is ``sat_i``; the slots of a smaller fleet never act.
@@ -19,12 +24,13 @@ Action
     1e-6 s), or, when the battery refuses that one, the first later opportunity of the task whose slew and
     battery both pass.  A masked or out-of-range action raises :class:`InvalidAction` (state unchanged).
 Masks
-    ``action_mask[s] = 1`` iff slot s is admissible: slot 0 always while the agent acts; a task's slot when it
-    has a candidate, its task is not served yet (a task taken by one satellite is masked for every other and for
-    itself), or it is served and offered as a bridge at zero reward (``bridges``: 'useful' when from its node
-    some task nobody served starts earlier than directly; 'all'; 'off'), and the battery admits it: with it
-    and only the idle draw afterwards, the checker's charge recurrence stays >= 1e-6 Wh at every segment end
-    to the horizon (:mod:`eosp.envs.constellation_core`).
+    ``action_mask[s] = 1`` iff slot s is admissible: slot 0 always while the agent acts; a task's slot when the
+    task has a candidate start (its slew and the battery admit it) and either nobody served the task yet (a task
+    taken by one satellite is masked for every other, and for itself) or it is offered as a bridge at zero
+    reward (``bridges``: 'useful' when from its node some task nobody served starts earlier than it can
+    directly; 'all'; 'off').  The battery admits an observation iff, with it and only the idle draw afterwards,
+    the checker's charge recurrence stays >= 1e-6 Wh at every segment end to the horizon
+    (:mod:`eosp.envs.constellation_core`).
 Observation (per agent, float32 / int32 / int8, padded, the single-pass layout that RLlib batches as is)
 
     ==================  ===========================  =======  ============================================

@@ -41,13 +41,14 @@ def low_battery(f, pf, rng, extra=20.0):
 
 
 @functools.lru_cache(maxsize=None)
-def random_case(seed: int, hours: tuple[float, float] = (1.0, 2.0), tasks: tuple[int, int] = (100, 400)):
+def random_case(seed: int, hours: tuple[float, float] = (1.0, 2.0), tasks: tuple[int, int] = (100, 400),
+                placements: tuple[str, ...] = ("cities",)):
     """A random generated fleet of 2-30 satellites (a third with binding batteries) and a random environment
     configuration: (prepared fleet, config)."""
     rng = np.random.default_rng(seed)
     f = generate(FleetGenConfig(satellites=int(rng.integers(2, 31)), tasks=int(rng.integers(*tasks)),
                                 hours=float(rng.uniform(*hours)), window_min_h=0.5, window_max_h=3.0,
-                                placement=str(rng.choice(["land", "cities", "clusters"])), seed=seed))
+                                placement=str(rng.choice(placements)), seed=seed))
     geo = Geometry(f)
     opps = compute(f, geo)
     if len(opps) == 0:
@@ -80,9 +81,9 @@ def random_episode(env: ConstellationEnv, rng: np.random.Generator, skip_p: floa
     return total
 
 
-def check_conformance(seed: int, hours=(1.0, 2.0), tasks=(100, 400)) -> str:
+def check_conformance(seed: int, hours=(1.0, 2.0), tasks=(100, 400), placements=("cities",)) -> str:
     """One random episode of random_case(seed), checked; its figures as JSON."""
-    pf, cfg = random_case(seed, hours, tasks)
+    pf, cfg = random_case(seed, hours, tasks, placements)
     if pf is None:
         return "{}"
     env = ConstellationEnv(cfg, source=pf)
@@ -106,9 +107,10 @@ def test_random_valid_actions_give_checker_valid_schedules_whose_wcr_is_the_retu
 @pytest.mark.slow
 @pytest.mark.parametrize("seed", range(1000, 1200))
 def test_conformance_on_200_more_fleets(seed, record_property):
-    """The issue's conformance target: 200 more random fleets, longer horizons and more tasks (each episode's
-    figures in the JUnit report: --junitxml)."""
-    record_property("episode", check_conformance(seed, hours=(1.0, 6.0), tasks=(100, 1500)))
+    """The issue's conformance target: 200 more random fleets, longer horizons, more tasks, tasks on land, in
+    cities or clusters (each episode's figures in the JUnit report: --junitxml)."""
+    record_property("episode", check_conformance(seed, hours=(1.0, 6.0), tasks=(100, 1500),
+                                                 placements=("land", "cities", "clusters")))
 
 
 @functools.lru_cache(maxsize=None)
@@ -408,7 +410,8 @@ def test_bridges_off_never_observes_a_task_twice_all_does_and_stays_valid():
 # --- bad input: one line each, a clear exception in the library, exit 2 from a command line -------------
 
 def test_a_fleet_without_opportunities_is_refused():
-    f = generate(FleetGenConfig(satellites=2, tasks=5, hours=0.2, window_min_h=0.05, window_max_h=0.1, seed=3))
+    f = generate(FleetGenConfig(satellites=2, tasks=5, hours=0.2, window_min_h=0.05, window_max_h=0.1,
+                                placement="cities", seed=3))
     opps = compute(f)
     assert len(opps) == 0
     with pytest.raises(InputError, match="no opportunities") as exc:
