@@ -199,9 +199,10 @@ def candidates(fa, ep, k, bridges):
         v = fa.dst[i]
         ep.direct[fa.node_acq[v] - a0] = v
     t0, b0 = ep.bat_t[k], ep.bat_wh[k]
-    prev = ep.sat_prev[k]  # the last observation, maybe in an earlier pass (the arcs of a pass source assume nadir:
-    #                        exact for feasibility, since passes are a full 180-degree slew apart, not for the
-    #                        maneuver's duration, which the battery pays)
+    prev = ep.sat_prev[k]  # the last observation, maybe in an earlier pass: the arcs of a pass source assume a
+    #                        first slew from nadir, right for feasibility (passes are a full 180-degree slew apart),
+    #                        not for the maneuver's duration, which the battery pays; its slew is checked anyway
+    recheck = fa.node_acq[u] < 0 and prev >= 0
     n_ok = 0
     for a in range(na):
         v = ep.direct[a]
@@ -213,7 +214,7 @@ def candidates(fa, ep, k, bridges):
                 continue
             kind = BRIDGE
         for w in range(v, fa.acq_hi[a0 + a]):
-            if w != v and not slew_ok(fa, k, prev, w):
+            if (w != v or recheck) and not slew_ok(fa, k, prev, w):
                 continue
             need_us = np.int64(np.rint(slew_need(fa, k, prev, w) * 1e6))
             s, e = fa.node_start_us[w], fa.node_end_us[w]
