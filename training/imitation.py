@@ -29,7 +29,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from eosp.config import EnvConfig
+from eosp.config import EnvConfig, ImitationConfig
 from eosp.models.agent import EOSPAgent, batch_from_padded
 from eosp.reward import objective_mode, reward
 
@@ -251,12 +251,13 @@ def cosine_lr(lr: float, progress: float) -> float:
     return 0.5 * lr * (1.0 + math.cos(math.pi * min(max(progress, 0.0), 1.0)))
 
 
-def train_epoch(agent: EOSPAgent, opt: torch.optim.Optimizer, samples: list[Sample], batch_size: int,
-                value_coeff: float, grad_clip: float, rng: np.random.Generator,
-                deadline: float | None = None, regret_coeff: float = 0.0, average: WeightAverage | None = None,
+def train_epoch(agent: EOSPAgent, opt: torch.optim.Optimizer, samples: list[Sample], im: ImitationConfig,
+                rng: np.random.Generator, deadline: float | None = None, average: WeightAverage | None = None,
                 lr_at=None) -> dict[str, float]:
-    """One pass over `samples`.  `lr_at(fraction of this epoch done)`: the learning rate of each batch
-    (None: the optimizer's as it is); `average`: updated after every step."""
+    """One pass over `samples`, in batches of ``im.batch_size``, the loss weighted by ``im.value_coeff`` and
+    ``im.regret_coeff``, gradients clipped at ``im.grad_clip``.  `lr_at(fraction of this epoch done)`: the
+    learning rate of each batch (None: the optimizer's as it is); `average`: updated after every step."""
+    batch_size, value_coeff, grad_clip, regret_coeff = im.batch_size, im.value_coeff, im.grad_clip, im.regret_coeff
     agent.train()
     order = rng.permutation(len(samples))
     tot = {"policy_loss": 0.0, "value_loss": 0.0, "regret": 0.0, "accuracy": 0.0}
@@ -281,3 +282,75 @@ def train_epoch(agent: EOSPAgent, opt: torch.optim.Optimizer, samples: list[Samp
             break
     agent.eval()
     return {f"train/{k}": v / max(batches, 1) for k, v in tot.items()} | {"train/batches": batches}
+
+
+def fit(agent: EOSPAgent, data, validator, im: ImitationConfig, env_cfg, run_dir: Path, record: dict,
+        dagger=None, job: str = "pretrain") -> list[dict]:
+    """The imitation loop every imitation job shares (jobs/pretrain.py: the single pass; jobs/pretrain_fleet.py:
+    fleets), inside an active MLflow run: epochs over ``data.samples`` (:func:`train_epoch`; cosine learning rate
+    and weight averaging as `im` says), validation every ``im.validate_every`` epochs (``validator.run(policy)``,
+    the checkpoint of the best :func:`eosp.training.validation.selection_score` saved as ``checkpoints/best``),
+    ``dagger(policy, rng) -> metrics`` every ``im.dagger_every`` epochs (states added to ``data.samples``), until
+    ``im.epochs`` or the time budget; then ``checkpoints/last``, the learning curve and ``history.json``.
+    `env_cfg`: the environment configuration saved with the checkpoints; `record`: the run's whole configuration
+    (a dict), kept in history.json with the history.  Returns the history."""
+    import json
+
+    import mlflow
+
+    from eosp.atomic import atomic_path
+    from eosp.models.checkpoint import save_agent
+    from eosp.training.plots import imitation_curve
+    from eosp.training.validation import primary_metric, selection_score
+
+    rng = np.random.default_rng(im.seed)
+    ckpt = run_dir / "checkpoints"
+    opt = torch.optim.Adam(agent.parameters(), lr=im.lr, weight_decay=im.weight_decay)
+    history, best = [], float("-inf")
+    average = WeightAverage(agent, im.ema) if im.ema > 0 else None
+    t0 = time.perf_counter()
+    deadline = t0 + im.time_budget if im.time_budget > 0 else None
+    for epoch in range(1, im.epochs + 1):
+        lr_at = None
+        if im.lr_schedule == "cosine":
+            def lr_at(done: float, epoch: int = epoch) -> float:
+                by_epochs = (epoch - 1 + done) / im.epochs
+                by_time = (time.perf_counter() - t0) / im.time_budget if deadline is not None else 0.0
+                return cosine_lr(im.lr, max(by_epochs, by_time))
+        metrics = train_epoch(agent, opt, data.samples, im, rng, deadline, average, lr_at)
+        metrics["train/lr"] = opt.param_groups[0]["lr"]
+        policy = average.model if average is not None else agent  # what is validated, saved and rolled out
+        out_of_time = deadline is not None and time.perf_counter() > deadline
+        last = epoch == im.epochs or out_of_time
+        if validator is not None and (epoch % im.validate_every == 0 or last):
+            metrics.update(validator.run(policy).metrics)
+            if selection_score(metrics) > best:
+                best = selection_score(metrics)
+                save_agent(policy, ckpt / "best", env_cfg, {"epoch": epoch, "val": metrics, "source": "imitation"})
+        if dagger is not None and im.dagger_every and epoch % im.dagger_every == 0 and not last:
+            metrics.update(dagger(policy, rng))
+        metrics["wall_s"] = time.perf_counter() - t0
+        history.append({"epoch": epoch, **metrics})
+        mlflow.log_metrics(metrics, step=epoch)
+        val = primary_metric(metrics) if "val/policy_mean" in metrics else None
+        print(f"[{job}] epoch {epoch}: loss {metrics['train/policy_loss']:.4f} accuracy "
+              f"{metrics['train/accuracy']:.4f} value {metrics['train/value_loss']:.4f}"
+              + (f"  {val} {metrics[val]:.4f}" if val else "")
+              + "".join(f" /{b} {metrics[f'val/ratio_to_{b}']:.4f}" for b in ("exact", "fleet", "ramp", "features",
+                                                                               "greedy") if f"val/ratio_to_{b}" in metrics)
+              + (f"  dagger +{metrics['dagger/states_added']:.0f} states" if "dagger/states_added" in metrics else "")
+              + f"  ({metrics['wall_s']:.0f} s)", flush=True)
+        if out_of_time:
+            print(f"[{job}] time budget of {im.time_budget:.0f} s reached", flush=True)
+            break
+    policy = average.model if average is not None else agent
+    save_agent(policy, ckpt / "last", env_cfg, {"epoch": history[-1]["epoch"], "source": "imitation"})
+    if validator is None:
+        save_agent(policy, ckpt / "best", env_cfg, {"epoch": history[-1]["epoch"], "source": "imitation"})
+    png = imitation_curve(history, run_dir / "learning_curve")
+    mlflow.log_artifact(str(png))
+    mlflow.log_artifact(str(png.with_suffix(".svg")))
+    with atomic_path(run_dir / "history.json") as tmp:
+        tmp.write_text(json.dumps({"config": record, "history": history}, indent=1))
+    mlflow.log_metric("perf/train_wall_s", time.perf_counter() - t0)
+    return history
