@@ -32,6 +32,7 @@ from eosp.fleet.battery import Intervals, SunCache, simulate
 from eosp.fleet.geometry import (NUMERICAL_EPS, Geometry, angle_deg, brahe_module, epochs, pointing_ok,
                                  slew_time_s)
 from eosp.fleet.model import US, Fleet, Schedule, iso_z
+from eosp.problem import Verdict
 
 
 @dataclass(frozen=True)
@@ -61,6 +62,14 @@ class CheckResult:
     @property
     def first(self) -> Violation | None:
         return self.violations[0] if self.violations else None
+
+    def verdict(self) -> Verdict:
+        """The contract's verdict (:class:`eosp.problem.Verdict`), with the line ``eosp validate`` prints."""
+        m = self.metrics
+        if not self.valid:
+            return Verdict(False, m, str(self.first), f"invalid: {self.first}")
+        tat = "null" if m["TAT"] is None else repr(m["TAT"])
+        return Verdict(True, m, None, f"valid: WCR {m['WCR']!r} CR {m['CR']!r} TAT {tat} PC {m['PC']!r}")
 
 
 def zero_metrics() -> dict:

@@ -13,19 +13,22 @@ ROOT = Path(__file__).resolve().parents[1]
 
 # bottom first; modules of one layer may import each other
 LAYERS = [
-    {"eosp", "eosp.config", "eosp.errors", "eosp.atomic", "eosp.args", "eosp.memory", "eosp.ownership", "eosp.reward"},
+    {"eosp", "eosp.config", "eosp.errors", "eosp.atomic", "eosp.args", "eosp.memory", "eosp.ownership", "eosp.reward",
+     "eosp.problem"},
     {"eosp.sim"},
     {"eosp.graphs"},
     {"eosp.planning"},
     {"eosp.instances"},
     {"eosp.shards"},
     {"eosp.fleet"},
+    {"eosp.onera"},
     {"eosp.envs"},
     {"eosp.models"},
     {"eosp.search"},
     {"eosp.solvers"},
     {"eosp.training"},
     {"eosp.evaluation"},
+    {"eosp.kinds"},  # one folder per problem kind: its solvers above the single-pass ones, its registration
     {"eosp.jobs"},
     {"eosp.cli"},
 ]

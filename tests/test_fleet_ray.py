@@ -13,7 +13,7 @@ from eosp.fleet.geometry import Geometry
 from eosp.fleet.io import read_fleet, read_schedule, write_fleet
 from eosp.fleet.opportunities import compute
 from eosp.jobs import solve_fleet as job_mod
-from eosp.solvers.fleet import FleetConfig
+from eosp.kinds.fleet.config import FleetConfig
 
 ROUNDS = 2
 

@@ -1,16 +1,11 @@
-"""The fleet solver: a constellation's passes solved by the project's single-pass solvers, coordinated by
-task prices, with an upper bound.
+"""The fleet solver's coordinator: a constellation's passes solved by the project's single-pass solvers, held
+together by task prices (:mod:`eosp.kinds.fleet.prices`), with an upper bound.
 
 A constellation-day is hundreds of passes (:mod:`eosp.fleet.passgraph`) coupled by one constraint: a task is
 served at most once (and each satellite's battery runs from one pass to the next).  Relaxing "at most once"
-with a price ``lam[i] >= 0`` per task separates the passes: each pass is solved on its own with utilities
-``w[i] - lam[i]`` (tasks whose priced utility is not positive are left out), and
-
-    L(lam) = sum over passes of (the pass optimum under lam) + sum of lam
-
-bounds the weight any schedule can serve (energy relaxed).  When every pass term is an optimum the exact solver
-proved, or a bound it proved, L is proven; the prices move by subgradient steps (Polyak's rule towards the
-best schedule known) and the best L is kept.
+with prices separates the passes; a price round solves every pass under the prices on a pass pool
+(:mod:`eosp.kinds.fleet.pool`), proves the Lagrangian bound when every pass term is an optimum or a bound the
+exact solver proved, and moves the prices.
 
 Schedules come from the same pass solver with true weights:
 
@@ -21,9 +16,9 @@ Schedules come from the same pass solver with true weights:
   again in an order and with utilities perturbed by the prices (a contested task is left to the others when
   its price is high), coordinate descent follows, and the result is kept when it serves at least as much.
 
-Each schedule is checked against the battery with the checker's model; a satellite that runs dry loses its
-least valuable observations before the failure (and those tasks are barred from that satellite's passes in
-later rounds).  The final schedule is checked by the checker before it is returned.
+Each schedule is checked against the battery with the checker's model (:func:`eosp.fleet.timeline.repair_battery`);
+a satellite that runs dry loses its least valuable observations before the failure (and those tasks are barred
+from that satellite's passes in later rounds).
 """
 
 from __future__ import annotations
@@ -35,175 +30,13 @@ from typing import Callable
 
 import numpy as np
 
-from eosp.config import WEEK_S, choice, ranged
 from eosp.fleet.battery import SunCache
-from eosp.fleet.geometry import Geometry
-from eosp.fleet.greedy import Timeline, repair_battery, to_schedule
-from eosp.fleet.model import Fleet, Schedule
-from eosp.fleet.opportunities import Opportunities
-from eosp.fleet.passgraph import PassGraph, build_passes, fifo_violations, priced_instance
-from eosp.fleet.slew import LineOfSight
-
-PASS_SOLVERS = ("greedy", "ramp", "exact")
-LEARNED_PASS_SOLVERS = ("policy",)  # no model is trained on fleet passes yet: refused with one line
-
-
-@dataclass
-class FleetConfig:
-    """Options of the fleet solver (``eosp solve FLEET_DIR --solver fleet``)."""
-
-    pass_solver: str = choice("exact", *PASS_SOLVERS, *LEARNED_PASS_SOLVERS)
-    """Single-pass solver of every pass: exact (optima, hence a proven Lagrangian bound), ramp or greedy (the
-    conflict-free bound only); policy needs a model trained on fleet passes, which is not shipped yet."""
-    time_limit: float = ranged(60.0, 0, WEEK_S, lo_open=True)
-    """Seconds of search after the pass graphs are built (not applied with --rounds)."""
-    rounds: int | None = ranged(None, 1)
-    """Price rounds, each followed by a large-neighbourhood move; unset: as many as the time limit allows.  A run
-    with a number of rounds ignores the time limit and is deterministic for a seed."""
-    seed: int = ranged(0, 0)
-    """Seed of the large-neighbourhood moves."""
-    pass_time_limit: float = ranged(5.0, 0)
-    """Seconds the exact solver may spend on one pass (its bound is used when it stops early)."""
-    span_s: float = ranged(3600.0, 1)
-    """Length of the time span freed by one large-neighbourhood move."""
-    workers: int = ranged(1, 1, 256)
-    """Processes solving the passes of a price round (forked from this one, the pass graphs shared)."""
-
-
-@dataclass
-class PassResult:
-    nodes: np.ndarray  # pass-graph node ids, in order
-    value: float  # under the utilities it was solved with
-    bound: float | None  # a proven upper bound of that value, None when the solver gives none
-
-
-@dataclass
-class Problem:
-    """A fleet, its opportunities and its pass graphs, built once."""
-
-    fleet: Fleet
-    opps: Opportunities
-    geo: Geometry
-    los: LineOfSight
-    passes: list[PassGraph]
-    weight: np.ndarray  # float64 [tasks]
-    task_passes: list[np.ndarray]  # passes holding each task
-    pass_time: np.ndarray  # (first start, last end) of each pass, seconds
-    fifo_violations: int = 0  # see eosp.fleet.passgraph.fifo_violations: 0 makes the pass optima the passes'
-    build_s: float = 0.0
-
-    @classmethod
-    def build(cls, fleet: Fleet, opps: Opportunities, geo: Geometry | None = None) -> Problem:
-        t0 = time.perf_counter()
-        geo = geo or Geometry(fleet)
-        los = LineOfSight(fleet, geo)
-        passes = build_passes(fleet, opps, los)
-        n = len(fleet.tasks)
-        holders: list[list[int]] = [[] for _ in range(n)]
-        for pg in passes:
-            for t in pg.tasks.tolist():
-                holders[t].append(pg.pass_id)
-        span = np.array([[pg.graph.node_time[1:].min(),
-                          (pg.graph.node_time[1:] + pg.duration[pg.graph.node_acq[1:]]).max()] for pg in passes])
-        span = span.reshape(-1, 2)
-        fifo = sum(fifo_violations(pg.graph) for pg in passes)
-        return cls(fleet, opps, geo, los, passes, fleet.tasks.weight.astype(np.float64),
-                   [np.asarray(h, dtype=np.int64) for h in holders], span, fifo, time.perf_counter() - t0)
-
-    @property
-    def total_weight(self) -> float:
-        return float(self.weight.sum())
-
-
-def solve_pass(prob: Problem, p: int, value: np.ndarray, cfg: FleetConfig) -> PassResult:
-    """Pass `p` with utility `value[a]` per local task (non-positive ones left out)."""
-    return solve_pass_graph(prob.passes[p], value, cfg)
-
-
-def solve_pass_graph(pg: PassGraph, value: np.ndarray, cfg: FleetConfig) -> PassResult:
-    """One pass graph with utility `value[a]` per local task: what a worker holding the graph runs."""
-    from eosp.solvers.base import run_solver
-
-    pp = priced_instance(pg, value)
-    if pp is None:
-        return PassResult(np.zeros(0, np.int64), 0.0, 0.0)
-    opts = {"time_limit": cfg.pass_time_limit} if cfg.pass_solver in ("exact", "ramp") else {}
-    sol = run_solver(cfg.pass_solver, pp.instance, mode="utility", **opts)
-    bound = None
-    if cfg.pass_solver == "exact":
-        bound = sol.value if sol.info.get("status") == "optimal" else float(sol.info.get("bound", math.inf))
-    return PassResult(pp.nodes[np.asarray(sol.nodes, dtype=np.int64)], float(sol.value), bound)
-
-
-def rewalk(pg: PassGraph, path: np.ndarray) -> np.ndarray:
-    """The acquisitions of `path` (pass-graph nodes, in order) followed along the graph's arcs from the source:
-    each at its earliest node after the previous one; one that cannot follow is skipped."""
-    g = pg.graph
-    out, node = [], 0
-    for acq in g.node_acq[path].tolist():
-        nxt = g.successor(node, acq)
-        if nxt >= 0:
-            out.append(nxt)
-            node = nxt
-    return np.asarray(out, dtype=np.int64)
-
-
-_POOL_PROBLEM: Problem | None = None  # the problem a forked worker inherits
-_POOL_CFG: FleetConfig | None = None
-
-
-def _solve_chunk(args: tuple[list[int], list[np.ndarray]]) -> list[PassResult]:
-    passes, utils = args
-    return [solve_pass(_POOL_PROBLEM, p, u, _POOL_CFG) for p, u in zip(passes, utils)]
-
-
-class PassPool:
-    """Processes that solve passes under given utilities.  They are forked once the pass graphs are built, so
-    every worker holds them without any copy; a round sends only pass ids and utilities, and gets paths back."""
-
-    def __init__(self, prob: Problem, cfg: FleetConfig):
-        import multiprocessing
-
-        global _POOL_PROBLEM, _POOL_CFG
-        _POOL_PROBLEM, _POOL_CFG = prob, cfg
-        self.workers = cfg.workers
-        self.pool = multiprocessing.get_context("fork").Pool(cfg.workers)
-
-    def solve(self, passes: list[int], utils: list[np.ndarray],
-              deadline: float | None) -> dict[int, PassResult] | None:
-        """Every pass of `passes` (in chunks, about four per worker); None when the deadline came first."""
-        n = max(1, len(passes) // (4 * self.workers))
-        chunks = [(passes[i:i + n], utils[i:i + n]) for i in range(0, len(passes), n)]
-        job = self.pool.map_async(_solve_chunk, chunks)
-        timeout = None if deadline is None else max(0.0, deadline - time.perf_counter())
-        import multiprocessing
-
-        try:
-            results = job.get(timeout)
-        except multiprocessing.TimeoutError:
-            return None
-        return {p: r for chunk, res in zip(chunks, results) for p, r in zip(chunk[0], res)}
-
-    def close(self) -> None:
-        self.pool.terminate()
-        self.pool.join()
-
-
-@dataclass
-class Primal:
-    """A schedule as pass paths; ``served[i]`` = pass serving task i, or -1."""
-
-    paths: list[np.ndarray]
-    served: np.ndarray
-    value: float = 0.0
-
-    def copy(self) -> Primal:
-        return Primal(list(self.paths), self.served.copy(), self.value)
-
-
-def path_tasks(prob: Problem, p: int, path: np.ndarray) -> np.ndarray:
-    pg = prob.passes[p]
-    return pg.tasks[pg.graph.node_acq[path]]
+from eosp.fleet.timeline import Timeline, repair_battery, timelines, to_schedule
+from eosp.fleet.model import Schedule
+from eosp.kinds.fleet.config import FleetConfig
+from eosp.kinds.fleet.pool import InProcessPool, PassPool
+from eosp.kinds.fleet.prices import Prices
+from eosp.kinds.fleet.problem import PassResult, Primal, Problem, path_tasks, priced, rewalk, solve_pass
 
 
 @dataclass
@@ -212,19 +45,18 @@ class Coordinator:
 
     prob: Problem
     cfg: FleetConfig
-    lam: np.ndarray = field(init=False)
+    prices: Prices = field(init=False)
     best: Primal = field(init=False)
     best_bound: float = math.inf
     barred: np.ndarray = field(init=False)  # [satellite, task]: taken out of that satellite by the battery repair
     history: list[tuple[float, float, float]] = field(default_factory=list)  # (seconds, value, bound)
-    t0: float = field(default_factory=time.perf_counter)
+    t0: float = field(default_factory=time.perf_counter)  # when the problem was read: the time limit counts from it
     pass_solves: int = 0
-    step: float = 1.0  # Polyak step factor, halved when the bound stalls
     rounds_done: int = 0
     interrupted: bool = False
     bound_source: str = "conflict-free"  # until a proven Lagrangian bound is lower
 
-    pool: PassPool | None = None  # workers for the price rounds: processes (--workers > 1) or Ray actors
+    pool: PassPool | None = None  # what solves the passes of a price round (default: this process)
     on_round: Callable[[Coordinator], None] | None = None  # called after every round (checkpoints, MLflow)
     start_round: int = 0  # rounds a resumed run has done already
     round_s: list[float] = field(default_factory=list)  # wall seconds of every finished price round
@@ -233,9 +65,10 @@ class Coordinator:
 
     def __post_init__(self) -> None:
         n = len(self.prob.fleet.tasks)
-        self.lam = np.zeros(n)
+        self.prices = Prices.zero(n)
+        self.pool = self.pool or InProcessPool(self.prob, self.cfg)
         self.round_paths = [np.zeros(0, np.int64)] * len(self.prob.passes)
-        self.best = Primal([np.zeros(0, np.int64)] * len(self.prob.passes), np.full(n, -1, np.int64))
+        self.best = Primal.empty(len(self.prob.passes), n)
         self.barred = np.zeros((len(self.prob.fleet.satellites), n), dtype=bool)
         if self.frozen is None:
             self.frozen = np.zeros(len(self.prob.passes), dtype=bool)
@@ -291,8 +124,7 @@ class Coordinator:
                   primal: Primal | None = None, deadline: float | None = None) -> Primal:
         """Passes in `order`, each solved with the tasks still free (utility ``w - util_shift``, kept positive)."""
         w = self.prob.weight
-        primal = primal or Primal([np.zeros(0, np.int64)] * len(self.prob.passes),
-                                  np.full(len(w), -1, np.int64))
+        primal = primal or Primal.empty(len(self.prob.passes), len(w))
         for p in order.tolist():
             if deadline is not None and time.perf_counter() > deadline:
                 break
@@ -306,54 +138,35 @@ class Coordinator:
 
     # ------------------------------------------------------------------ prices and bound
     def price_round(self, deadline: float | None) -> float | None:
-        """Every pass under the current prices; returns L(lam) (None when cut by the deadline), moves prices."""
-        w = self.prob.weight
-        count = np.zeros(len(w))
-        total = float(self.lam.sum())
-        proven = True
+        """Every pass under the current prices (on the pool); returns L(lam) (None when cut by the deadline),
+        keeps the bound when it is proven and lower, and moves the prices."""
+        w, lam = self.prob.weight, self.prices.lam
         todo = np.flatnonzero(~self.frozen).tolist()
-        solved = None
-        if self.pool is not None:
-            if hasattr(self.pool, "solve_priced"):  # workers that hold the weights take the prices alone
-                solved = self.pool.solve_priced(todo, self.lam, deadline)
-            else:
-                solved = self.pool.solve(todo, [w[self.prob.passes[p].tasks] - self.lam[self.prob.passes[p].tasks]
-                                                for p in todo], deadline)
-            if solved is None:
-                return None  # cut by the deadline
-            self.pass_solves += len(todo)
-        for p, pg in enumerate(self.prob.passes):
-            if deadline is not None and time.perf_counter() > deadline:
-                return None
+        solved = self.pool.solve_priced(todo, lam, deadline)
+        if solved is None:
+            return None  # cut by the deadline
+        self.pass_solves += len(todo)
+        count = np.zeros(len(w))
+        terms, proven = [], True
+        for p in range(len(self.prob.passes)):
             if self.frozen[p]:  # a fixed term: its schedule under the prices
-                kept = path_tasks(self.prob, p, self.initial.paths[p])
-                res = PassResult(self.initial.paths[p], float((w[kept] - self.lam[kept]).sum()), None)
-                res.bound = res.value
-            elif solved is not None:
+                value = float(priced(w, lam, path_tasks(self.prob, p, self.initial.paths[p])).sum())
+                res = PassResult(self.initial.paths[p], value, value)
+            else:
                 res = solved[p]
-            else:
-                res = self._solve(p, w[pg.tasks] - self.lam[pg.tasks])
             self.round_paths[p] = res.nodes
-            if res.bound is None:
-                proven = False
-                total += res.value
-            else:
-                total += res.bound
+            proven &= res.bound is not None
+            terms.append(res.value if res.bound is None else res.bound)
             count[path_tasks(self.prob, p, res.nodes)] += 1
+        total = self.prices.dual(terms)
         if proven and self.prob.fifo_violations == 0 and total < self.best_bound:
             self.best_bound, self.bound_source = total, "lagrangian"
-        g = 1.0 - count
-        g[(self.lam <= 0) & (g > 0)] = 0.0  # a free task at price 0 cannot go lower
-        norm2 = float(g @ g)
-        if norm2 > 0:
-            step = self.step * max(total - self.best.value, 1e-6 * total) / norm2
-            self.lam = np.maximum(0.0, self.lam - step * g)
+        self.prices.step_towards(count, total, self.best.value)
         return total
 
     def empty(self) -> Primal:
         """No observation, except those of the frozen passes."""
-        n_pass = len(self.prob.passes)
-        primal = Primal([np.zeros(0, np.int64)] * n_pass, np.full(len(self.prob.weight), -1, np.int64))
+        primal = Primal.empty(len(self.prob.passes), len(self.prob.weight))
         for p in np.flatnonzero(self.frozen).tolist():
             self._assign(primal, p, self.initial.paths[p])
         return primal
@@ -405,26 +218,14 @@ class Coordinator:
         return total
 
     def timelines(self, primal: Primal) -> list[Timeline]:
+        """The schedule `primal` as one timeline per satellite (:mod:`eosp.fleet.timeline`)."""
         prob = self.prob
-        step = prob.fleet.horizon.action_step_s
-        tls = [Timeline() for _ in range(len(prob.fleet.satellites))]
-        for p, pg in enumerate(prob.passes):
-            path = primal.paths[p]
-            if len(path) == 0:
-                continue
-            rows = pg.rows[path - 1]
-            task = prob.opps.task[rows]
-            st = prob.opps.start[rows].astype(np.float64) * step
-            en = st + prob.fleet.tasks.duration_s[task]
-            l0, l1 = prob.los.los(pg.satellite, task, st), prob.los.los(pg.satellite, task, en)
-            tl = tls[pg.satellite]
-            for k in range(len(rows)):
-                tl.insert(len(tl.start), (float(st[k]), float(en[k]), int(task[k]), l0[k], l1[k]))
-        for tl in tls:  # passes of a satellite are in time order already; keep it explicit
-            order = np.argsort(np.asarray(tl.start), kind="stable")
-            for col in (tl.start, tl.end, tl.task, tl.los0, tl.los1):
-                col[:] = [col[i] for i in order]
-        return tls
+        rows = [prob.passes[p].rows[path - 1] for p, path in enumerate(primal.paths) if len(path)]
+        rows = np.concatenate(rows) if rows else np.zeros(0, np.int64)
+        task = prob.opps.task[rows]
+        st = prob.opps.start[rows].astype(np.float64) * prob.fleet.horizon.action_step_s
+        en = st + prob.fleet.tasks.duration_s[task]
+        return timelines(prob.fleet, prob.los, prob.opps.satellite[rows], task, st, en)
 
     def schedule(self, primal: Primal) -> Schedule:
         return to_schedule(self.prob.fleet, self.timelines(primal))
@@ -455,7 +256,7 @@ class Coordinator:
         for p in hit.tolist():
             self._assign(trial, p, np.zeros(0, np.int64))
         order = hit[rng.permutation(len(hit))]
-        shift = self.lam * rng.uniform(0.0, 1.0)
+        shift = self.prices.lam * rng.uniform(0.0, 1.0)
         self.construct(order, shift, trial, deadline)
         touched = sorted({q for p in hit.tolist() for t in prob.passes[p].tasks.tolist()
                           for q in prob.task_passes[t].tolist()})
@@ -470,7 +271,7 @@ class Coordinator:
 
     def run(self) -> Primal:
         cfg, prob = self.cfg, self.prob
-        deadline = None if cfg.rounds is not None else self.t0 + cfg.time_limit
+        deadline = None if cfg.time_limit is None else self.t0 + cfg.time_limit
         rng = np.random.default_rng(cfg.seed if self.start_round == 0 else [cfg.seed, self.start_round])
         order = np.argsort(prob.pass_time[:, 0], kind="stable")
         if self.initial is not None:  # start from the given schedule (its paths re-walked unless frozen)
@@ -491,7 +292,7 @@ class Coordinator:
 
     def _rounds(self, deadline: float | None, rng: np.random.Generator) -> None:
         cfg = self.cfg
-        rounds, stall = self.start_round, 0
+        rounds = self.start_round
         self.rounds_done = rounds
         while cfg.rounds is None or rounds < cfg.rounds:
             if deadline is not None and time.perf_counter() > deadline:
@@ -504,9 +305,7 @@ class Coordinator:
                 if self.price_round(deadline) is None:
                     break
                 self.round_s.append(time.perf_counter() - t_round)
-                stall = 0 if self.best_bound < before - 1e-9 else stall + 1
-                if stall >= 3:
-                    self.step, stall = self.step / 2, 0
+                self.prices.stalled(self.best_bound < before - 1e-9)
                 self.record()
                 if not self.offer(self.recover(rng, deadline)):
                     self.neighbourhood(rng, deadline)
@@ -523,117 +322,3 @@ class Coordinator:
         solver) and every pass graph is FIFO (:func:`eosp.fleet.passgraph.fifo_violations`), else the
         conflict-free bound (every task that has an opportunity, served once)."""
         return self.best_bound
-
-
-@dataclass
-class FleetSolution:
-    """The best schedule, the value and bound as fractions of the total weight (WCR), and the run's record."""
-
-    schedule: Schedule
-    value: float
-    bound: float | None
-    history: list[tuple[float, float, float]]
-    info: dict
-
-    @property
-    def gap(self) -> float | None:
-        return None if self.bound is None or self.bound <= 0 else (self.bound - self.value) / self.bound
-
-
-def primal_of(prob: Problem, sched: Schedule) -> Primal:
-    """A schedule as pass paths: each action at its opportunity's node (an action that is no opportunity, or a
-    task's second observation, is left out)."""
-    f, o = prob.fleet, prob.opps
-    step_us = f.horizon.action_step_s * 1_000_000
-    row_of = {key: r for r, key in enumerate(zip(o.task.tolist(), o.satellite.tolist(), o.start.tolist()))}
-    node_of = np.zeros(len(o), dtype=np.int64)
-    for pg in prob.passes:
-        node_of[pg.rows] = np.arange(1, len(pg.rows) + 1)
-    ti, si = f.task_index(), f.satellite_index()
-    per_pass: dict[int, list[tuple[int, int]]] = {}
-    seen = set()
-    for sat, task, st in zip(sched.satellite.tolist(), sched.task.tolist(), sched.start_us.tolist()):
-        r = row_of.get((ti.get(task, -1), si.get(sat, -1), int(st // step_us)))
-        if r is None or task in seen or st % step_us:
-            continue
-        seen.add(task)
-        per_pass.setdefault(int(o.pass_id[r]), []).append((int(st), int(node_of[r])))
-    primal = Primal([np.zeros(0, np.int64)] * len(prob.passes), np.full(len(f.tasks), -1, np.int64))
-    for p, acts in per_pass.items():
-        path = np.asarray([n for _, n in sorted(acts)], dtype=np.int64)
-        tasks = path_tasks(prob, p, path)
-        primal.paths[p] = path
-        primal.served[tasks] = p
-        primal.value += float(prob.weight[tasks].sum())
-    return primal
-
-
-@dataclass
-class Resume:
-    """Where a stopped run was (saved after every round by a job): prices, step, best bound, rounds done.  Its
-    best schedule is passed as the `initial` schedule of :func:`solve`."""
-
-    lam: np.ndarray
-    step: float
-    best_bound: float
-    bound_source: str
-    rounds_done: int
-
-
-def solve(fleet: Fleet, opps: Opportunities, cfg: FleetConfig | None = None, problem: Problem | None = None,
-          initial: Schedule | None = None, freeze_until_s: float | None = None, pool=None,
-          on_round: Callable[[Coordinator], None] | None = None, resume: Resume | None = None) -> FleetSolution:
-    """Schedule a fleet (see the module docstring); the schedule is checked by the checker before it is returned,
-    and an action it rejects is dropped (never expected: the pass graphs and the battery repair use its rules).
-
-    `initial`: a schedule to start from; `freeze_until_s`: the passes starting before this time (seconds from
-    the horizon start) keep the initial schedule's actions as they are (so every action before it is kept).
-    `pool`: what solves the passes of a price round (anything with PassPool's ``solve``, or ``solve_priced(passes,
-    prices, deadline)``, and ``close``, e.g. Ray actors; default: forked processes when ``cfg.workers > 1``); `on_round`: called after every round;
-    `resume`: prices and bound of a stopped run (its best schedule as `initial`)."""
-    from eosp.fleet.check import validate
-
-    cfg = cfg or FleetConfig()
-    prob = problem or Problem.build(fleet, opps)
-    start = None if initial is None else primal_of(prob, initial)
-    frozen = None
-    if freeze_until_s is not None:
-        frozen = prob.pass_time[:, 0] < freeze_until_s
-        start = start or Primal([np.zeros(0, np.int64)] * len(prob.passes), np.full(len(fleet.tasks), -1, np.int64))
-    own_pool = pool is None and cfg.workers > 1
-    pool = PassPool(prob, cfg) if own_pool else pool
-    coord = Coordinator(prob, cfg, pool=pool, initial=start, frozen=frozen, on_round=on_round)
-    if resume is not None:
-        if len(resume.lam) != len(fleet.tasks):
-            raise ValueError("resume: prices of another fleet")
-        coord.lam, coord.step, coord.start_round = resume.lam.astype(np.float64), resume.step, resume.rounds_done
-        if resume.best_bound < coord.best_bound:
-            coord.best_bound, coord.bound_source = resume.best_bound, resume.bound_source
-    try:
-        best = coord.run()
-    finally:
-        if own_pool:
-            pool.close()
-    sched = coord.schedule(best)
-    res = validate(fleet, sched, prob.geo)
-    dropped = 0
-    while not res.valid and len(sched):
-        bad = sorted({v.action for v in res.violations if v.action >= 0}) or [0]
-        keep = np.setdiff1d(np.arange(len(sched)), bad)
-        sched = Schedule(sched.satellite[keep], sched.task[keep], sched.start_us[keep], sched.end_us[keep])
-        dropped += len(bad)
-        res = validate(fleet, sched, prob.geo)
-    W = prob.total_weight
-    bound = coord.bound
-    info = {"pass_solver": cfg.pass_solver, "rounds": coord.rounds_done, "pass_solves": coord.pass_solves,
-            "passes": len(prob.passes), "build_s": round(prob.build_s, 3), "checker_drops": dropped,
-            "battery_barred": int(coord.barred.sum()), "metrics": res.metrics, "interrupted": coord.interrupted,
-            "bound_source": coord.bound_source, "price_round_s": [round(x, 4) for x in coord.round_s],
-            "no_lagrangian_bound_because": None if coord.bound_source == "lagrangian" else (
-                f"pass solver {cfg.pass_solver} proves no pass bound" if cfg.pass_solver != "exact"
-                else "a pass graph is not FIFO" if prob.fifo_violations
-                else "none was lower than the conflict-free bound" if coord.rounds_done
-                else "none needed: the conflict-free bound is met" if coord.best_bound <= coord.best.value + 1e-9
-                else "no price round finished")}
-    hist = [(t, v / W, b / W) for t, v, b in coord.history]
-    return FleetSolution(sched, float(res.metrics.get("WCR", 0.0)), min(1.0, bound / W) if W > 0 else 0.0, hist, info)

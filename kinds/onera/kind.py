@@ -1,191 +1,174 @@
-"""The ONERA benchmark's commands: import a ``.pb`` file, inspect, solve, validate and export plans.
+"""The ONERA kind: the ONERA constellation benchmark (requests of four kinds, observations with their windows,
+mandatory downloads; :mod:`eosp.onera.model`), checked by :mod:`eosp.onera.check`, solved by a greedy plan or by
+large-neighbourhood search with a proven bound (:mod:`eosp.kinds.onera.search`).
 
-``eosp import FILE.pb --out DIR``, ``eosp info|solve|validate DIR``, ``eosp export-schedule DIR S
---format onera --out PLAN.txt`` (routed by :mod:`eosp.cli.fleet_main` when the first path is an ONERA
-file or directory).  Each returns the exit status; user mistakes raise :class:`~eosp.errors.InputError`
-(one line, exit 2).
+``eosp import FILE.pb --out DIR``, ``eosp info|solve|validate|report DIR ...``, ``eosp export-schedule DIR S --format
+onera --out PLAN.txt``.  User mistakes raise :class:`~eosp.errors.InputError` (one line, exit 2).
 """
 
 from __future__ import annotations
 
+import argparse
 import time
 from pathlib import Path
+from typing import Any
 
-from eosp.errors import InputError
+from eosp.kinds.base import KindBase, labelled
+from eosp.problem import Detection, Export, Result, Solver, Source, Verdict
 
-SOLVERS = ("greedy", "onera")
-
-
-def is_onera_file(path) -> bool:
-    from eosp.fleet.onera import is_onera_file as _is
-
-    return _is(path)
+HERE = "eosp.kinds.onera.kind"
 
 
-def is_onera_dir(path) -> bool:
-    from eosp.fleet.onera import is_onera_dir as _is
+def is_pb(path: str) -> Detection:
+    from eosp.onera.model import is_onera_file
 
-    return _is(path)
+    if is_onera_file(path):
+        return Detection(True, "an ONERA .pb file")
+    return Detection(False, "not an ONERA benchmark instance (.pb)")
 
 
-def cmd_import(pb_file, out, overwrite: bool = False) -> int:
+def import_pb(paths: list[str], out: str, overwrite: bool = False) -> str:
     """Read an ONERA ``.pb`` instance and write its fleet directory."""
     from eosp.atomic import check_output_dir
-    from eosp.fleet.onera import KIND_SHORT, read_pb, write_onera
+    from eosp.onera.model import KIND_SHORT, is_onera_dir, read_pb, write_onera
 
+    (pb_file,) = paths
     check_output_dir(out, overwrite=overwrite, owned=is_onera_dir, what="ONERA fleet directory")
     t0 = time.perf_counter()
     f = read_pb(pb_file)
     write_onera(f, out, overwrite=overwrite, source=Path(pb_file).name)
     kinds = ", ".join(f"{KIND_SHORT[k]} {int((f.requests.kind == k).sum())}" for k in range(4))
-    print(f"{out}: {len(f.satellites)} satellites, {len(f.requests)} requests ({kinds}), {len(f.observations)} "
-          f"observations, {len(f.downloads)} downloads ({time.perf_counter() - t0:.1f} s)")
-    return 0
+    return (f"{out}: {len(f.satellites)} satellites, {len(f.requests)} requests ({kinds}), {len(f.observations)} "
+            f"observations, {len(f.downloads)} downloads ({time.perf_counter() - t0:.1f} s)")
 
 
-def cmd_info(fleet_dir) -> int:
-    """Sizes, opportunities per request and the conflict-free upper bound."""
-    import numpy as np
+def export_plan(problem, schedule, out: str, overwrite: bool = False) -> str:
+    """The ONERA text plan (docs/formats.md, "ONERA plan")."""
+    from eosp.onera.model import write_plan
 
-    from eosp.fleet.onera import KIND_SHORT, read_onera
-    from eosp.fleet.onera_check import best_values
-
-    f = read_onera(fleet_dir)
-    per = np.diff(f.requests.first)
-    print(f"ONERA fleet: {fleet_dir} ({f.name})")
-    print(f"satellites: {len(f.satellites)}; downloads: {len(f.downloads)} (mandatory)")
-    for k in range(4):
-        sel = f.requests.kind == k
-        if sel.any():
-            print(f"{KIND_SHORT[k]}: {int(sel.sum())} requests, {int(per[sel].sum())} observations")
-    best = best_values(f)
-    print(f"requests without opportunity: {int((per == 0).sum())}")
-    print(f"conflict-free upper bound: {best.sum():.6g}")
-    return 0
+    return f"{Path(write_plan(schedule, problem, out, overwrite=overwrite))}: {len(schedule)} activities"
 
 
-def cmd_solve(fleet_dir, solver: str, out, cfg, overwrite: bool = False) -> int:
-    """Solve (greedy: the greedy plan; onera: greedy + large-neighbourhood search and a bound), check, write."""
-    from eosp.fleet.onera import read_onera, write_schedule
-    from eosp.fleet.onera_check import validate
-    from eosp.ownership import check_output
-    from eosp.solvers.onera import solve
+class OneraKind(KindBase):
+    name = "onera"
+    title = "an ONERA fleet directory (eosp import FILE.pb)"
+    schedule_mark = "onera-schedule"
+    solvers = {"greedy": Solver("greedy", "eosp.kinds.onera.search:GreedyConfig",
+                                "eosp.kinds.onera.search:solve_greedy",
+                                "requests by value, each at its best fitting observations"),
+               "onera": Solver("onera", "eosp.kinds.onera.search:OneraConfig", "eosp.kinds.onera.search:solve_onera",
+                               "greedy, then large-neighbourhood search, with a proven bound")}
+    sources = (Source("an ONERA benchmark instance (.pb)", f"{HERE}:is_pb", f"{HERE}:import_pb"),)
+    exports = {"onera": Export("onera", "the ONERA text plan", f"{HERE}:export_plan")}
 
-    if solver not in SOLVERS:
-        raise InputError(solver, f"unknown solver for an ONERA fleet (choose from {', '.join(SOLVERS)})")
-    out = check_output(out, "onera-schedule", overwrite=overwrite, suffixes=(".parquet",))
-    f = read_onera(fleet_dir)
-    try:
-        sol = solve(f, cfg, greedy_only=solver == "greedy")
-    except ValueError as exc:  # an instance whose mandatory downloads do not fit
-        raise InputError(fleet_dir, str(exc)) from None
-    res = validate(f, sol.schedule)
-    if not res.valid:  # the solver guarantees validity: a bug, not a user error
-        raise RuntimeError(f"the ONERA solver produced an invalid plan: {res.first}")
-    info = {"value": sol.value, "solver": solver, "bound": sol.bound, "gap": sol.gap,
-            "bound_source": sol.info["bound_source"], "seconds": round(sol.info["seconds"], 3)}
-    write_schedule(sol.schedule, f, out, overwrite=overwrite, info=info)
-    served = ", ".join(f"{k} {v}" for k, v in res.served.items())
-    bound = "" if sol.bound is None else f", bound {sol.bound:.4f} ({sol.info['bound_source']}), gap {sol.gap:.2%}"
-    print(f"{out}: value {sol.value:.4f}{bound}; served {served}; {sol.info['moves']} moves "
-          f"({sol.info['seconds']:.1f} s)")
-    return 0
+    def detect(self, path: str) -> Detection:
+        from eosp.onera.model import KIND, is_onera_dir
 
+        if is_onera_dir(path):
+            return Detection(True, "an ONERA fleet directory")
+        return Detection(False, f"not an ONERA fleet directory (no meta.json of kind {KIND!r})")
 
-def cmd_validate(fleet_dir, schedule) -> int:
-    """0 and the value when the plan is valid, 1 and its first violation otherwise."""
-    from eosp.fleet.onera import read_onera, read_schedule
-    from eosp.fleet.onera_check import validate
+    def read(self, path: str, solving: bool = True) -> Any:
+        from eosp.onera.model import read_onera
 
-    f = read_onera(fleet_dir)
-    s, _ = read_schedule(schedule, f)
-    res = validate(f, s)
-    if not res.valid:
-        print(f"invalid: {res.first}")
-        return 1
-    served = ", ".join(f"{k} {v}" for k, v in res.served.items())
-    print(f"valid: value {res.value!r}; served {served}")
-    return 0
+        return read_onera(path)
 
+    def read_schedule(self, path: str, problem: Any) -> Any:
+        from eosp.onera.model import read_schedule
 
-def cmd_export(fleet_dir, schedule, fmt: str, out, overwrite: bool = False) -> int:
-    """Write a plan as the ONERA text plan (docs/formats.md, "ONERA plan")."""
-    from eosp.fleet.onera import read_onera, read_schedule, write_plan
+        return read_schedule(path, problem)[0]
 
-    if fmt != "onera":
-        raise InputError(fmt, "an ONERA fleet's plans export as --format onera")
-    f = read_onera(fleet_dir)
-    s, _ = read_schedule(schedule, f)
-    path = write_plan(s, f, out, overwrite=overwrite)
-    print(f"{Path(path)}: {len(s)} activities")
-    return 0
+    def write_schedule(self, schedule: Any, problem: Any, path: str, overwrite: bool = False,
+                       info: dict | None = None) -> Path:
+        from eosp.onera.model import write_schedule
 
+        return write_schedule(schedule, problem, path, overwrite=overwrite, info=info)
 
-def wants(argv: list[str]) -> bool:
-    """Is this command line for ONERA: ``import FILE.pb``, or info/solve/validate/export-schedule of an ONERA
-    fleet directory?"""
-    if not argv or argv[0] not in ("import", "info", "solve", "validate", "export-schedule"):
-        return False
-    path = next((a for a in argv[1:] if not a.startswith("-")), None)
-    if path is None:
-        return False
-    return is_onera_file(path) if argv[0] == "import" else is_onera_dir(path)
+    def check(self, problem: Any, schedule: Any) -> Verdict:
+        from eosp.onera.check import validate
 
+        return validate(problem, schedule).verdict()
 
-def parser(command: str):
-    from eosp.args import Parser, add_config_args
-    from eosp.solvers.onera import OneraConfig
+    def describe(self, problem: Any, path: str) -> str:
+        """Sizes, opportunities per request and the conflict-free upper bound."""
+        import numpy as np
 
-    p = Parser(prog=f"eosp {command}")
-    if command == "import":
-        p.add_argument("pb_file", help="an ONERA benchmark instance (.pb)")
-        p.add_argument("--out", required=True, help="ONERA fleet directory to write")
-        p.add_argument("--overwrite", action="store_true", help="replace an ONERA fleet directory eosp wrote")
-    elif command == "info":
-        p.add_argument("fleet_dir")
-    elif command == "validate":
-        p.add_argument("fleet_dir")
-        p.add_argument("schedule", help="ONERA schedule (.parquet) or text plan (.txt)")
-    elif command == "export-schedule":
-        p.add_argument("fleet_dir")
-        p.add_argument("schedule")
-        p.add_argument("--format", required=True, choices=("onera",), help="the ONERA text plan")
-        p.add_argument("--out", required=True, help="text plan to write (.txt)")
-        p.add_argument("--overwrite", action="store_true")
-    else:  # solve
-        p.add_argument("fleet_dir")
-        p.add_argument("--solver", required=True, choices=SOLVERS,
-                       help="greedy (requests by value, each at its best fitting observations) or onera (greedy, then "
-                            "large-neighbourhood search, with a proven bound)")
-        p.add_argument("--out", required=True, help="ONERA schedule file (.parquet)")
-        p.add_argument("--overwrite", action="store_true")
-        add_config_args(p, OneraConfig)
-    return p
+        from eosp.onera.check import best_values
+        from eosp.onera.model import KIND_SHORT
 
+        f = problem
+        per = np.diff(f.requests.first)
+        lines = [f"ONERA fleet: {path} ({f.name})",
+                 f"satellites: {len(f.satellites)}; downloads: {len(f.downloads)} (mandatory)"]
+        for k in range(4):
+            sel = f.requests.kind == k
+            if sel.any():
+                lines.append(f"{KIND_SHORT[k]}: {int(sel.sum())} requests, {int(per[sel].sum())} observations")
+        lines.append(f"requests without opportunity: {int((per == 0).sum())}")
+        lines.append(f"conflict-free upper bound: {best_values(f).sum():.6g}")
+        return "\n".join(lines)
 
-def route(argv: list[str]) -> int:
-    """Run an ONERA command line (:func:`wants`); user errors are one line and exit 2."""
-    import sys
+    def report(self, path: str, schedules: list[str], out: str, ns: argparse.Namespace) -> str:
+        """The fleet page (:mod:`eosp.evaluation.fleet_report`) of an ONERA fleet: its own model and plans, no
+        orbits."""
+        from eosp.evaluation.fleet_report import check_report_out
+        from eosp.kinds.fleet.kind import report_page
 
-    from eosp.args import config_from_args
+        check_report_out(out, ns.overwrite)
+        t0 = time.perf_counter()
+        f = self.read(path)
+        return report_page(f, None, labelled(schedules, lambda s: self.read_schedule(s, f)), out, ns, t0)
 
-    command = argv[0]
-    ns = parser(command).parse_args(argv[1:])
-    try:
+    # ------------------------------------------------------------------ the command line
+    def solver_config(self, solver: str | None) -> type:
+        from eosp.kinds.onera.search import OneraConfig
+
+        return super().solver_config(solver) if solver in self.solvers else OneraConfig
+
+    def solved(self, out: Path, solver: str, cfg: Any, res: Result, seconds: float) -> tuple[dict, str]:
+        from eosp.onera.model import KIND_SHORT
+
+        info = {"value": res.value, "solver": solver, "bound": res.bound, "gap": res.gap,
+                "bound_source": res.bound_kind, "seconds": round(res.timings["solve"], 3)}
+        served = ", ".join(f"{k} {res.verdict.metrics[k]}" for k in KIND_SHORT)
+        bound = "" if res.bound is None else f", bound {res.bound:.4f} ({res.bound_kind}), gap {res.gap:.2%}"
+        return info, (f"{out}: value {res.value:.4f}{bound}; served {served}; {res.info['moves']} moves "
+                      f"({res.timings['solve']:.1f} s)")
+
+    def arguments(self, command: str, p: argparse.ArgumentParser, solver: str | None) -> None:
+        from eosp.args import add_config_args
+
         if command == "import":
-            return cmd_import(ns.pb_file, ns.out, overwrite=ns.overwrite)
-        if command == "info":
-            return cmd_info(ns.fleet_dir)
-        if command == "validate":
-            return cmd_validate(ns.fleet_dir, ns.schedule)
-        if command == "export-schedule":
-            return cmd_export(ns.fleet_dir, ns.schedule, ns.format, ns.out, overwrite=ns.overwrite)
-        from eosp.solvers.onera import OneraConfig
+            p.add_argument("source", metavar="pb_file", help="an ONERA benchmark instance (.pb)")
+            p.add_argument("--out", required=True, help="ONERA fleet directory to write")
+            p.add_argument("--overwrite", action="store_true", help="replace an ONERA fleet directory eosp wrote")
+        elif command == "info":
+            p.add_argument("problem", metavar="fleet_dir")
+        elif command == "validate":
+            p.add_argument("problem", metavar="fleet_dir")
+            p.add_argument("schedule", help="ONERA schedule (.parquet) or text plan (.txt)")
+        elif command == "export-schedule":
+            p.add_argument("problem", metavar="fleet_dir")
+            p.add_argument("schedule")
+            p.add_argument("--format", required=True, choices=("onera",), help="the ONERA text plan")
+            p.add_argument("--out", required=True, help="text plan to write (.txt)")
+            p.add_argument("--overwrite", action="store_true")
+        elif command == "solve":
+            p.add_argument("problem", metavar="fleet_dir")
+            p.add_argument("--solver", required=True, choices=tuple(self.solvers),
+                           help="greedy (requests by value, each at its best fitting observations) or onera (greedy, "
+                                "then large-neighbourhood search, with a proven bound)")
+            p.add_argument("--out", required=True, help="ONERA schedule file (.parquet)")
+            p.add_argument("--overwrite", action="store_true")
+            add_config_args(p, self.solver_config(solver))
+        elif command == "report":
+            p.description = ("One self-contained HTML page of a constellation day: Gantt per satellite (UTC), map with "
+                             "tracks and targets, every task with the reason it was missed, summaries, differences.")
+            p.add_argument("problem", metavar="fleet_dir")
+            p.add_argument("schedules", nargs="+", help="fleet schedules (.parquet) or aeossp solutions (.json)")
+            p.add_argument("--out", required=True, help="HTML file to write")
+            p.add_argument("--title", default="")
+            p.add_argument("--overwrite", action="store_true")
 
-        return cmd_solve(ns.fleet_dir, ns.solver, ns.out, config_from_args(OneraConfig, ns), overwrite=ns.overwrite)
-    except InputError as exc:
-        print(f"eosp {command}: error: {exc}", file=sys.stderr)
-        return 2
-    except KeyboardInterrupt:
-        print(f"eosp {command}: interrupted: nothing written", file=sys.stderr)
-        return 130
+
+KIND = OneraKind()
