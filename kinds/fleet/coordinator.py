@@ -319,6 +319,6 @@ class Coordinator:
     @property
     def bound(self) -> float:
         """The best proven bound: the Lagrangian one when every pass term of a price round was proven (exact pass
-        solver) and every pass graph is FIFO (:func:`eosp.fleet.passgraph.fifo_violations`), else the
+        solver) and every pass graph is FIFO (:func:`eosp.graphs.prune.fifo_violations`), else the
         conflict-free bound (every task that has an opportunity, served once)."""
         return self.best_bound

@@ -12,8 +12,9 @@ import numpy as np
 from eosp.fleet.geometry import Geometry
 from eosp.fleet.model import Fleet, Schedule
 from eosp.fleet.opportunities import Opportunities
-from eosp.fleet.passgraph import PassGraph, build_passes, fifo_violations, priced_instance
+from eosp.fleet.passgraph import PassGraph, build_passes, priced_instance
 from eosp.fleet.slew import LineOfSight
+from eosp.graphs.prune import fifo_violations
 from eosp.kinds.fleet.config import FleetConfig
 
 
@@ -36,7 +37,7 @@ class Problem:
     weight: np.ndarray  # float64 [tasks]
     task_passes: list[np.ndarray]  # passes holding each task
     pass_time: np.ndarray  # (first start, last end) of each pass, seconds
-    fifo_violations: int = 0  # see eosp.fleet.passgraph.fifo_violations: 0 makes the pass optima the passes'
+    fifo_violations: int = 0  # see eosp.graphs.prune.fifo_violations: 0 makes the pass optima the passes'
     build_s: float = 0.0
 
     @classmethod
