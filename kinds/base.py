@@ -9,6 +9,7 @@ members (:class:`eosp.problem.ProblemKind`) and overrides only what it words dif
 from __future__ import annotations
 
 import argparse
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable, Mapping, Sequence
 
@@ -18,8 +19,28 @@ OVERWRITE_HELP = "replace an existing output that eosp wrote (a file or director
 PROBLEM_COMMANDS = ("info", "validate", "solve")
 
 
+@dataclass(frozen=True)
+class Words:
+    """How a kind's command lines word their arguments (None: no help text)."""
+
+    problem: str = "problem"  # the problem's positional argument
+    schedule: str | None = None  # a schedule file the kind reads
+    schedules: str | None = None  # report's schedule files
+    solver: str | None = None  # --solver (default: each solver with its help)
+    out: str | None = "schedule file to write"  # a solve's --out
+    overwrite: str | None = OVERWRITE_HELP
+    formats: str | None = None  # export-schedule's --format (default: each format with its help)
+    export_out: str | None = None  # export-schedule's --out
+    source: str = "source"  # import's positional argument
+    written: str | None = None  # the --out of import and generate
+    overwrite_written: str | None = OVERWRITE_HELP
+    generate_flag: str | None = None
+
+
 class KindBase:
     """Defaults of a problem kind (see the module docstring)."""
+
+    words = Words()
 
     name: str = ""
     title: str = ""
@@ -73,41 +94,48 @@ class KindBase:
         return load(self.solvers[solver].config) if solver in self.solvers else SolverConfig
 
     def arguments(self, command: str, p: argparse.ArgumentParser, solver: str | None) -> None:
-        """Add `command`'s arguments to its parser `p` (`solver`: the --solver given to a solve)."""
+        """Add `command`'s arguments to its parser `p` (`solver`: the --solver given to a solve), worded by the
+        kind's :class:`Words`."""
         from eosp.args import add_config_args
 
-        if command in ("info", "validate", "solve", "export-schedule", "report"):
-            p.add_argument("problem")
+        w = self.words
+        if command in ("info", "validate", "solve", "export-schedule"):
+            p.add_argument("problem", metavar=w.problem)
         if command == "validate":
-            p.add_argument("schedule")
+            p.add_argument("schedule", help=w.schedule)
         elif command == "solve":
-            p.add_argument("--solver", required=True, choices=tuple(self.solvers),
-                           help=", ".join(f"{k} ({s.help})" if s.help else k for k, s in self.solvers.items()))
-            p.add_argument("--out", required=True, help="schedule file to write")
-            p.add_argument("--overwrite", action="store_true", help=OVERWRITE_HELP)
+            p.add_argument("--solver", required=True, choices=tuple(self.solvers), help=w.solver or " or ".join(
+                f"{k} ({s.help})" if s.help else k for k, s in self.solvers.items()))
+            p.add_argument("--out", required=True, help=w.out)
+            p.add_argument("--overwrite", action="store_true", help=w.overwrite)
+            self.solve_arguments(p)
             add_config_args(p, self.solver_config(solver))
         elif command == "export-schedule":
             p.add_argument("schedule")
-            p.add_argument("--format", required=True, choices=tuple(self.exports),
-                           help=", ".join(f"{k}: {e.help}" for k, e in self.exports.items()))
-            p.add_argument("--out", required=True)
-            p.add_argument("--overwrite", action="store_true", help=OVERWRITE_HELP)
+            p.add_argument("--format", required=True, choices=tuple(self.exports), help=w.formats or ", ".join(
+                f"{k}: {e.help}" for k, e in self.exports.items()))
+            p.add_argument("--out", required=True, help=w.export_out)
+            p.add_argument("--overwrite", action="store_true", help=w.overwrite)
         elif command == "report":
-            p.add_argument("schedules", nargs="+")
+            p.add_argument("problem", metavar=w.problem)
+            p.add_argument("schedules", nargs="+", help=w.schedules)
             p.add_argument("--out", required=True, help="HTML file to write")
             p.add_argument("--title", default="")
-            p.add_argument("--overwrite", action="store_true", help=OVERWRITE_HELP)
+            p.add_argument("--overwrite", action="store_true", help=w.overwrite)
         elif command == "import":
-            p.add_argument("source", help=", ".join(s.what for s in self.sources))
-            p.add_argument("--out", required=True)
-            p.add_argument("--overwrite", action="store_true", help=OVERWRITE_HELP)
+            p.add_argument("source", metavar=w.source, help=", ".join(s.what for s in self.sources))
+            p.add_argument("--out", required=True, help=w.written)
+            p.add_argument("--overwrite", action="store_true", help=w.overwrite_written)
         elif command == "generate":
             gen = self.generators[0]
             if gen.flag:
-                p.add_argument(gen.flag, action="store_true", required=True)
-            p.add_argument("--out", required=True)
-            p.add_argument("--overwrite", action="store_true", help=OVERWRITE_HELP)
+                p.add_argument(gen.flag, action="store_true", required=True, help=w.generate_flag)
+            p.add_argument("--out", required=True, help=w.written)
+            p.add_argument("--overwrite", action="store_true", help=w.overwrite_written)
             add_config_args(p, load(gen.config))
+
+    def solve_arguments(self, p: argparse.ArgumentParser) -> None:
+        """The kind's own solve arguments (:meth:`solve_inputs` reads them), after --overwrite."""
 
     def generator(self, ns: argparse.Namespace) -> Generator:
         """The generator a command line selects: the one whose flag it gives, else the one without a flag."""

@@ -16,7 +16,7 @@ from pathlib import Path
 from typing import Any, NamedTuple
 
 from eosp.errors import InputError
-from eosp.kinds.base import KindBase, labelled
+from eosp.kinds.base import KindBase, Words, labelled
 from eosp.problem import Detection, Export, Generator, Result, Solver, Source, Verdict
 
 HERE = "eosp.kinds.fleet.kind"
@@ -124,6 +124,10 @@ def export_globe(fmt: str):
 export_czml, export_kml = export_globe("czml"), export_globe("kml")
 
 
+PAGE = ("One self-contained HTML page of a constellation day: Gantt per satellite (UTC), map with tracks and "
+        "targets, every task with the reason it was missed, summaries, differences.")  # eosp report's description
+
+
 def report_page(fleet, opps, schedules: dict, out: str, ns: argparse.Namespace, t0: float) -> str:
     """The planner's page of a fleet's day (:mod:`eosp.evaluation.fleet_report`, an aeossp or an ONERA fleet);
     `t0`: when the command started reading."""
@@ -138,6 +142,14 @@ def report_page(fleet, opps, schedules: dict, out: str, ns: argparse.Namespace, 
 class FleetKind(KindBase):
     name = "fleet"
     title = "an aeossp fleet directory (eosp import CASE, eosp generate --fleet)"
+    words = Words(problem="fleet_dir", schedule="fleet schedule (.parquet) or aeossp solution (.json)",
+                  schedules="fleet schedules (.parquet) or aeossp solutions (.json)",
+                  solver="greedy (each task once, by weight) or fleet (passes coordinated by prices, with a bound)",
+                  out="fleet schedule file (.parquet)", overwrite=None,
+                  formats="aeossp solution.json, CSV, CZML (Cesium) or KML (tracks, targets, observations)",
+                  source="case_dir", written="fleet directory to write",
+                  overwrite_written="replace a fleet directory eosp wrote",
+                  generate_flag="generate a fleet (not a single pass)")
     schedule_mark = "fleet-schedule"
     solvers = {"greedy": Solver("greedy", "eosp.kinds.fleet.config:GreedyConfig", "eosp.kinds.fleet.solve:solve_greedy",
                                 "each task once, by weight"),
@@ -272,53 +284,17 @@ class FleetKind(KindBase):
                       f"gap {res.gap:.4%}; {res.info['rounds']} rounds, {res.info['pass_solves']} pass solves "
                       f"({seconds:.1f} s){stop}")
 
+    def solve_arguments(self, p: argparse.ArgumentParser) -> None:
+        p.add_argument("--init", default="", help="a schedule of this fleet to start from")
+        p.add_argument("--freeze-until", default="", metavar="UTC",
+                       help="keep the passes that start before this time (ISO 8601) as in --init")
+
     def arguments(self, command: str, p: argparse.ArgumentParser, solver: str | None) -> None:
-        from eosp.args import add_config_args
-
         if command == "generate":
-            from eosp.fleet.generate import FleetGenConfig
-
             p.description = "Draw a synthetic fleet (Walker-delta orbits, tasks on land, in cities or clusters)."
-            p.add_argument("--fleet", action="store_true", required=True, help="generate a fleet (not a single pass)")
-            p.add_argument("--out", required=True, help="fleet directory to write")
-            p.add_argument("--overwrite", action="store_true", help="replace a fleet directory eosp wrote")
-            add_config_args(p, FleetGenConfig)
-        elif command == "import":
-            p.add_argument("source", metavar="case_dir", help="an astro-reason aeossp_standard case (mission.yaml, "
-                                                              "satellites.yaml, tasks.yaml)")
-            p.add_argument("--out", required=True, help="fleet directory to write")
-            p.add_argument("--overwrite", action="store_true", help="replace a fleet directory eosp wrote")
-        elif command == "info":
-            p.add_argument("problem", metavar="fleet_dir")
         elif command == "report":
-            p.description = ("One self-contained HTML page of a constellation day: Gantt per satellite (UTC), map with "
-                             "tracks and targets, every task with the reason it was missed, summaries, differences.")
-            p.add_argument("problem", metavar="fleet_dir")
-            p.add_argument("schedules", nargs="+", help="fleet schedules (.parquet) or aeossp solutions (.json)")
-            p.add_argument("--out", required=True, help="HTML file to write")
-            p.add_argument("--title", default="")
-            p.add_argument("--overwrite", action="store_true")
-        elif command == "validate":
-            p.add_argument("problem", metavar="fleet_dir")
-            p.add_argument("schedule", help="fleet schedule (.parquet) or aeossp solution (.json)")
-        elif command == "export-schedule":
-            p.add_argument("problem", metavar="fleet_dir")
-            p.add_argument("schedule")
-            p.add_argument("--format", required=True, choices=tuple(self.exports),
-                           help="aeossp solution.json, CSV, CZML (Cesium) or KML (tracks, targets, observations)")
-            p.add_argument("--out", required=True)
-            p.add_argument("--overwrite", action="store_true")
-        elif command == "solve":
-            p.add_argument("problem", metavar="fleet_dir")
-            p.add_argument("--solver", required=True, choices=tuple(self.solvers),
-                           help="greedy (each task once, by weight) or fleet (passes coordinated by prices, with a "
-                                "bound)")
-            p.add_argument("--out", required=True, help="fleet schedule file (.parquet)")
-            p.add_argument("--overwrite", action="store_true")
-            p.add_argument("--init", default="", help="a schedule of this fleet to start from")
-            p.add_argument("--freeze-until", default="", metavar="UTC",
-                           help="keep the passes that start before this time (ISO 8601) as in --init")
-            add_config_args(p, self.solver_config(solver))
+            p.description = PAGE
+        super().arguments(command, p, solver)
 
 
 KIND = FleetKind()

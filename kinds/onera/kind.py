@@ -13,7 +13,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from eosp.kinds.base import KindBase, labelled
+from eosp.kinds.base import KindBase, Words, labelled
 from eosp.problem import Detection, Export, Result, Solver, Source, Verdict
 
 HERE = "eosp.kinds.onera.kind"
@@ -52,6 +52,13 @@ def export_plan(problem, schedule, out: str, overwrite: bool = False) -> str:
 class OneraKind(KindBase):
     name = "onera"
     title = "an ONERA fleet directory (eosp import FILE.pb)"
+    words = Words(problem="fleet_dir", schedule="ONERA schedule (.parquet) or text plan (.txt)",
+                  schedules="ONERA schedules (.parquet) or text plans (.txt)",
+                  solver="greedy (requests by value, each at its best fitting observations) or onera (greedy, then "
+                         "large-neighbourhood search, with a proven bound)",
+                  out="ONERA schedule file (.parquet)", overwrite=None, formats="the ONERA text plan",
+                  export_out="text plan to write (.txt)", source="pb_file", written="ONERA fleet directory to write",
+                  overwrite_written="replace an ONERA fleet directory eosp wrote")
     schedule_mark = "onera-schedule"
     solvers = {"greedy": Solver("greedy", "eosp.kinds.onera.search:GreedyConfig",
                                 "eosp.kinds.onera.search:solve_greedy",
@@ -136,39 +143,11 @@ class OneraKind(KindBase):
                       f"({res.timings['solve']:.1f} s)")
 
     def arguments(self, command: str, p: argparse.ArgumentParser, solver: str | None) -> None:
-        from eosp.args import add_config_args
+        if command == "report":
+            from eosp.kinds.fleet.kind import PAGE
 
-        if command == "import":
-            p.add_argument("source", metavar="pb_file", help="an ONERA benchmark instance (.pb)")
-            p.add_argument("--out", required=True, help="ONERA fleet directory to write")
-            p.add_argument("--overwrite", action="store_true", help="replace an ONERA fleet directory eosp wrote")
-        elif command == "info":
-            p.add_argument("problem", metavar="fleet_dir")
-        elif command == "validate":
-            p.add_argument("problem", metavar="fleet_dir")
-            p.add_argument("schedule", help="ONERA schedule (.parquet) or text plan (.txt)")
-        elif command == "export-schedule":
-            p.add_argument("problem", metavar="fleet_dir")
-            p.add_argument("schedule")
-            p.add_argument("--format", required=True, choices=("onera",), help="the ONERA text plan")
-            p.add_argument("--out", required=True, help="text plan to write (.txt)")
-            p.add_argument("--overwrite", action="store_true")
-        elif command == "solve":
-            p.add_argument("problem", metavar="fleet_dir")
-            p.add_argument("--solver", required=True, choices=tuple(self.solvers),
-                           help="greedy (requests by value, each at its best fitting observations) or onera (greedy, "
-                                "then large-neighbourhood search, with a proven bound)")
-            p.add_argument("--out", required=True, help="ONERA schedule file (.parquet)")
-            p.add_argument("--overwrite", action="store_true")
-            add_config_args(p, self.solver_config(solver))
-        elif command == "report":
-            p.description = ("One self-contained HTML page of a constellation day: Gantt per satellite (UTC), map with "
-                             "tracks and targets, every task with the reason it was missed, summaries, differences.")
-            p.add_argument("problem", metavar="fleet_dir")
-            p.add_argument("schedules", nargs="+", help="fleet schedules (.parquet) or aeossp solutions (.json)")
-            p.add_argument("--out", required=True, help="HTML file to write")
-            p.add_argument("--title", default="")
-            p.add_argument("--overwrite", action="store_true")
+            p.description = PAGE
+        super().arguments(command, p, solver)
 
 
 KIND = OneraKind()
