@@ -97,7 +97,7 @@ def test_a_run_with_rounds_is_deterministic_for_a_seed(problem):
     from eosp.kinds.fleet.config import FleetConfig
     from eosp.kinds.fleet.solve import solve
 
-    a, b = (solve(problem.fleet, problem.opps, FleetConfig(rounds=3, seed=7), problem=problem)
+    a, b = (solve(problem.fleet, problem.opps, FleetConfig(rounds=3, seed=7, time_limit=None), problem=problem)
             for _ in range(2))
     assert a.schedule.task.tolist() == b.schedule.task.tolist()
     assert np.array_equal(a.schedule.start_us, b.schedule.start_us) and a.bound == b.bound
@@ -159,6 +159,7 @@ def test_two_worker_processes_give_the_same_run_as_one(problem):
     from eosp.kinds.fleet.config import FleetConfig
     from eosp.kinds.fleet.solve import solve
 
-    one, two = (solve(problem.fleet, problem.opps, FleetConfig(rounds=2, seed=3, workers=w), problem=problem)
+    one, two = (solve(problem.fleet, problem.opps, FleetConfig(rounds=2, seed=3, workers=w, time_limit=None),
+                      problem=problem)
                 for w in (1, 2))
     assert one.schedule.task.tolist() == two.schedule.task.tolist() and one.bound == two.bound
