@@ -121,10 +121,12 @@ class Export:
 @runtime_checkable
 class ProblemKind(Protocol):
     """What every problem kind offers (see the module docstring).  `read(path, solving=False)` may leave out
-    what only solvers need (a fleet's opportunities); `describe` is what ``eosp info`` prints."""
+    what only solvers need (a fleet's opportunities); `describe` is what ``eosp info`` prints.  The command line
+    words and runs a kind through the hooks of :class:`eosp.kinds.base.KindBase`, which a kind subclasses."""
 
     name: str
     title: str  # what `detect` accepts, in words ("an aeossp fleet directory")
+    commands: frozenset[str]  # the commands of ``eosp`` it offers
     solvers: Mapping[str, Solver]
     sources: Sequence[Source]
     generators: Sequence[Generator]
