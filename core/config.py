@@ -149,9 +149,18 @@ def apply_overrides(cfg: Any, overrides: dict[str, Any]) -> Any:
             apply_overrides(current, {rest: value})
         elif is_dataclass(current) and isinstance(value, dict):
             apply_overrides(current, value)
+        elif value is None and _optional(type(cfg), head):  # an optional field unset (a limit: no limit)
+            setattr(cfg, head, None)
         else:
             setattr(cfg, head, check_value(type(cfg), head, _coerce(type(cfg).__name__, head, current, value)))
     return cfg
+
+
+def _optional(cls: type, name: str) -> bool:
+    """Whether field `name` of `cls` is annotated ``X | None``."""
+    import typing
+
+    return type(None) in typing.get_args(typing.get_type_hints(cls)[name])
 
 
 def field_of(cls: type, name: str) -> Field:

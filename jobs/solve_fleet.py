@@ -356,6 +356,10 @@ def _main(argv: list[str] | None) -> int:
         require_findable(value, flag)
     if not is_fleet_dir(job.fleet_dir):
         raise InputError(f"--fleet-dir {job.fleet_dir}", "not a fleet directory (eosp import / eosp generate --fleet)")
+    try:
+        job.fleet.validate()  # the rules across its fields (a time limit or a number of rounds), set by the flags
+    except ValueError as exc:
+        raise InputError("--fleet", str(exc)) from None
     if job.fleet.pass_solver == "policy":
         raise InputError("--fleet.pass-solver", "policy: no model trained on fleet passes is shipped yet")
     run_dir = Path(job.run_dir)

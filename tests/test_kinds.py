@@ -11,7 +11,7 @@ import pytest
 
 from eosp import kinds
 from eosp.cli import main
-from eosp.config import ranged
+from eosp.config import apply_overrides, ranged
 from eosp.kinds.base import KindBase
 from eosp.problem import Detection, ProblemKind, Result, Solver, Verdict
 from eosp.solvers.base import SolverConfig
@@ -141,3 +141,6 @@ def test_time_limit_means_the_same_on_every_kind():
         with pytest.raises(ValueError, match=f"--{budget}"):
             anytime(time_limit=None)
         assert anytime(time_limit=None, **{budget: 2}).time_limit is None
+        cfg = apply_overrides(anytime(), {"time_limit": None})  # set one field at a time, as the jobs' flags are
+        with pytest.raises(ValueError, match=f"--{budget}"):
+            cfg.validate()  # what the solvers and the job check before any work

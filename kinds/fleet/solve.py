@@ -66,6 +66,7 @@ def solve(fleet: Fleet, opps: Opportunities, cfg: FleetConfig | None = None, pro
 
     t0 = time.perf_counter() if t0 is None else t0
     cfg = cfg or FleetConfig()
+    cfg.validate()  # fields set one by one (eosp.config.apply_overrides) are checked together here
     prob = problem or Problem.build(fleet, opps)
     start = None if initial is None else primal_of(prob, initial)
     frozen = None

@@ -482,6 +482,7 @@ def solve(f: OneraFleet, cfg: BoundConfig | None = None) -> Solution:
     """The greedy plan, then (an :class:`OneraConfig`) large-neighbourhood search until the time limit (counted
     from the call) or the move budget; the bound."""
     cfg = cfg or OneraConfig()
+    cfg.validate()  # fields set one by one (eosp.config.apply_overrides) are checked together here
     t0 = time.perf_counter()
     search = Search(f, seed=cfg.seed)
     search.greedy()
