@@ -15,6 +15,11 @@ Stages run in the benchmark's order and each action is judged by the first rule 
    each accepted action reserves a maneuver window [start - slew - settle, start];
 4. battery, per satellite in fleet order (see :mod:`eosp.fleet.battery`).
 
+The checker is the verifier re-implemented, on purpose independent of the solvers' code: its lines of sight come
+from brahe's GCRF states (:class:`Inertial`), not the grid tables of :mod:`eosp.fleet.slew`, and it derives the
+maneuver windows itself; it shares with them only the battery simulation (the verifier's recurrence, written
+once in :mod:`eosp.fleet.battery`) and the slew formula (:func:`eosp.sim.slew.bang_coast_bang`).
+
 Any violation makes the schedule invalid and every metric zero (TAT None).  Otherwise a task is
 complete when at least one action observes it (duplicates count once, the earliest end is its
 completion): CR = completed / tasks, WCR = completed weight / total weight, TAT = mean of
