@@ -80,7 +80,8 @@ def is_fleet_dir(path: str | os.PathLike) -> bool:
     return isinstance(meta, dict) and meta.get("kind") == KIND and (p / "satellites.parquet").is_file()
 
 
-def _table(columns: dict):
+def arrow_table(columns: dict):
+    """An Arrow table of named numpy columns (object arrays as strings): the tables of the fleet files."""
     import pyarrow as pa
 
     arrays = {}
@@ -107,18 +108,19 @@ def write_fleet(fleet: Fleet, opps: Opportunities, out: str | os.PathLike, overw
         "opportunities": len(opps), "passes": opps.n_passes, "extras": sorted(fleet.extras),
     }
     with atomic_dir(out, overwrite=overwrite, owned=is_fleet_dir) as tmp:
-        pq.write_table(_table({k: get(fleet.satellites) for k, (_, get) in SAT_COLUMNS.items()}),
+        pq.write_table(arrow_table({k: get(fleet.satellites) for k, (_, get) in SAT_COLUMNS.items()}),
                        tmp / "satellites.parquet")
-        pq.write_table(_table({k: get(fleet.tasks) for k, (_, get) in TASK_COLUMNS.items()}), tmp / "tasks.parquet")
-        pq.write_table(_table({"task": opps.task, "satellite": opps.satellite, "start": opps.start,
+        pq.write_table(arrow_table({k: get(fleet.tasks) for k, (_, get) in TASK_COLUMNS.items()}),
+                       tmp / "tasks.parquet")
+        pq.write_table(arrow_table({"task": opps.task, "satellite": opps.satellite, "start": opps.start,
                                "pass": opps.pass_id}), tmp / "opportunities.parquet")
         for name, cols in fleet.extras.items():
-            pq.write_table(_table(dict(cols)), tmp / f"extra_{name}.parquet")
+            pq.write_table(arrow_table(dict(cols)), tmp / f"extra_{name}.parquet")
         (tmp / "meta.json").write_text(json.dumps(meta, indent=2) + "\n")
     return Path(out)
 
 
-def _read_parquet(path: Path, expected: dict) -> dict:
+def read_columns(path: Path, expected: dict) -> dict:
     """Columns of a Parquet file, checked: present, nothing unexpected, right kind, no nulls/NaN."""
     import pyarrow as pa
 
@@ -202,7 +204,7 @@ def read_fleet(path: str | os.PathLike, with_opportunities: bool = True) -> tupl
     except (ValueError, TypeError) as exc:
         raise InputError(root / "meta.json", f"bad horizon: {exc}") from None
     sp = root / "satellites.parquet"
-    s = _read_parquet(sp, {k: kind for k, (kind, _) in SAT_COLUMNS.items()})
+    s = read_columns(sp, {k: kind for k, (kind, _) in SAT_COLUMNS.items()})
     _unique(sp, s["satellite_id"], "satellite_id")
     sats = Satellites(
         s["satellite_id"], s["sensor_type"], Tles(s["tle_line1"], s["tle_line2"], s["norad_catalog_id"]),
@@ -211,7 +213,7 @@ def read_fleet(path: str | os.PathLike, with_opportunities: bool = True) -> tupl
         Battery(s["battery_capacity_wh"], s["initial_battery_wh"], s["idle_power_w"], s["imaging_power_w"],
                 s["slew_power_w"], s["sunlit_charge_power_w"]))
     tp = root / "tasks.parquet"
-    t = _read_parquet(tp, {k: kind for k, (kind, _) in TASK_COLUMNS.items()})
+    t = read_columns(tp, {k: kind for k, (kind, _) in TASK_COLUMNS.items()})
     _unique(tp, t["task_id"], "task_id")
     tasks = Tasks(t["task_id"], t["name"], t["latitude_deg"], t["longitude_deg"], t["altitude_m"], t["release_s"],
                   t["due_s"], t["duration_s"], t["weight"], t["sensor_type"])
@@ -229,7 +231,7 @@ def read_fleet(path: str | os.PathLike, with_opportunities: bool = True) -> tupl
     if not with_opportunities:
         return fleet, None
     op = root / "opportunities.parquet"
-    o = _read_parquet(op, {c: "int" for c in OPP_COLUMNS})
+    o = read_columns(op, {c: "int" for c in OPP_COLUMNS})
     for c, hi in (("task", len(tasks)), ("satellite", len(sats)), ("start", h.n_action)):
         bad = np.flatnonzero((o[c] < 0) | (o[c] >= hi))
         if len(bad):

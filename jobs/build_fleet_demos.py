@@ -49,7 +49,8 @@ def solve_fleet_demo(path: str, time_limit: float, pass_solver: str, seed: int, 
     """One fleet solved by the fleet solver, its schedule written to `out` (a Ray task); returns its record."""
     from eosp.envs.constellation import read_fleet_dir
     from eosp.fleet.io import fingerprint, write_schedule
-    from eosp.solvers.fleet import FleetConfig, solve
+    from eosp.kinds.fleet.config import FleetConfig
+    from eosp.kinds.fleet.solve import solve
 
     t0 = time.perf_counter()
     fleet, opps = read_fleet_dir(path)
@@ -62,6 +63,20 @@ def solve_fleet_demo(path: str, time_limit: float, pass_solver: str, seed: int, 
             "wcr": sol.value, "bound": sol.bound, "rounds": sol.info["rounds"], "settings": settings_of(time_limit,
                                                                                                        pass_solver, seed),
             "seconds": round(time.perf_counter() - t0, 2)}
+
+
+def complete_day(fleet_path: str, part, freeze_s: float, time_limit: float):
+    """The fleet solver's completion of a partial schedule `part` (a Ray task of the DAgger rounds of
+    jobs/pretrain_fleet.py): the passes that start before `freeze_s` keep `part`'s observations, the rest of the day
+    is solved again (`time_limit` seconds after the fleet is read)."""
+    from eosp.envs.constellation import read_fleet_dir
+    from eosp.kinds.fleet.config import FleetConfig
+    from eosp.kinds.fleet.solve import solve
+
+    t0 = time.perf_counter()
+    fleet, opps = read_fleet_dir(fleet_path)
+    return solve(fleet, opps, FleetConfig(time_limit=time_limit), initial=part, freeze_until_s=freeze_s,
+                 t0=t0).schedule
 
 
 def settings_of(time_limit: float, pass_solver: str, seed: int) -> dict:

@@ -107,7 +107,9 @@ def run(cfg: FleetPretrainConfig) -> dict:
         mlflow.log_metrics({f"val/{k}_mean": float(v.mean()) for k, v in validator.baselines.items()}, step=0)
 
     def dagger(policy, rng):
-        return data.add_policy_states(policy, im.dagger_instances, im.dagger_time_limit, rng)
+        from eosp.jobs.build_fleet_demos import complete_day
+
+        return data.add_policy_states(policy, im.dagger_instances, complete_day, im.dagger_time_limit, rng)
 
     history = fit(agent, data, validator, im, cfg.env, run_dir, to_dict(cfg), dagger, job="pretrain_fleet")
     mlflow.end_run()

@@ -87,11 +87,20 @@ def scorer_of(agent_or_scorer) -> EvaluateMany:
         else network_scorer(agent_or_scorer)
 
 
+def sized(env_cfg: FleetEnvConfig, prepared: PreparedFleet) -> FleetEnvConfig:
+    """`env_cfg` for this fleet alone: its satellites as the agent slots, and observations padded to its largest
+    pass (the network reads graphs of any size: the padding is no part of the model)."""
+    from dataclasses import replace
+
+    return replace(env_cfg, fleets=(), max_satellites=0, max_edges=0,
+                   max_nodes=max(env_cfg.max_nodes, prepared.max_pass_tasks + 1))
+
+
 def decode(agent_or_scorer, prepared: PreparedFleet, env_cfg: FleetEnvConfig, sample: bool = False, seed: int = 0,
            temperature: float = 1.0) -> Decoded:
     """One episode: the argmax of every decision, or (`sample`) a draw from the softmax of the scores."""
     evaluate = scorer_of(agent_or_scorer)
-    env = TeamEnv(env_cfg, prepared)
+    env = TeamEnv(sized(env_cfg, prepared), prepared)
     rng = np.random.default_rng(seed) if sample else None
     t0 = time.perf_counter()
     obs, _ = env.reset(seed=seed)
@@ -111,7 +120,7 @@ def sample_best(agent_or_scorer, prepared: PreparedFleet, env_cfg: FleetEnvConfi
     rounds of `samples` until `time_limit` seconds, one round without it)."""
     from eosp.search.rollouts import replay, sample
 
-    env = TeamEnv(env_cfg, prepared)
+    env = TeamEnv(sized(env_cfg, prepared), prepared)
     t0 = time.perf_counter()
     best = sample(env, scorer_of(agent_or_scorer), samples=samples, temperature=temperature, seed=seed,
                   time_limit=time_limit)

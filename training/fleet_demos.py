@@ -29,7 +29,7 @@ from eosp.envs.constellation import ConstellationEnv, ScheduleFollower
 from eosp.envs.constellation_data import PreparedFleet
 from eosp.errors import InputError
 from eosp.fleet.model import Schedule
-from eosp.training.imitation import Sample
+from eosp.training.samples import Sample
 
 
 def trimmed(obs: dict[str, np.ndarray], action: int, value: float) -> Sample:
@@ -112,9 +112,11 @@ class FleetDemoData:
 
         return ConstellationEnv(replace(self.env_cfg, fleets=(), max_satellites=0), source=prepared)
 
-    def add_policy_states(self, agent, n: int, time_limit: float, rng: np.random.Generator) -> dict:
+    def add_policy_states(self, agent, n: int, complete, time_limit: float, rng: np.random.Generator) -> dict:
         """One DAgger round: on `n` training fleets the policy samples a partial day up to a random instant, the
-        fleet solver (`time_limit` s, Ray tasks) completes it, and the decisions from that instant on are added."""
+        expert completes it (``complete(fleet path, partial schedule, instant s, time_limit) -> schedule``: the
+        fleet solver, jobs/build_fleet_demos.complete_day; as Ray tasks when Ray runs), and the decisions from that
+        instant on are added."""
         import ray
 
         from eosp.solvers.fleet_policy import decode
@@ -133,10 +135,10 @@ class FleetDemoData:
         t_roll = time.perf_counter() - t0
         args = [(self.records[i]["fleet"], part, cut_s, time_limit) for i, cut_s, part in jobs]
         if ray.is_initialized():
-            task = ray.remote(num_cpus=1)(complete_day)
+            task = ray.remote(num_cpus=1)(complete)
             done = ray.get([task.remote(*a) for a in args])
         else:
-            done = [complete_day(*a) for a in args]
+            done = [complete(*a) for a in args]
         added, ratio = 0, []
         for (i, cut_s, _), sched in zip(jobs, done):
             p = self.fleets[i]
@@ -149,12 +151,3 @@ class FleetDemoData:
                 else float("nan"), "dagger/rollout_s": t_roll, "dagger/label_s": time.perf_counter() - t0 - t_roll,
                 "dagger/dataset_states": len(self.samples)}
 
-
-def complete_day(fleet_path: str, part: Schedule, freeze_s: float, time_limit: float) -> Schedule:
-    """The fleet solver's completion of a partial schedule (a Ray task): the passes that start before `freeze_s`
-    keep `part`'s observations, the rest of the day is solved again."""
-    from eosp.envs.constellation import read_fleet_dir
-    from eosp.solvers.fleet import FleetConfig, solve
-
-    fleet, opps = read_fleet_dir(fleet_path)
-    return solve(fleet, opps, FleetConfig(time_limit=time_limit), initial=part, freeze_until_s=freeze_s).schedule

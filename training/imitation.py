@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass, replace
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -32,20 +32,7 @@ import torch
 from eosp.config import EnvConfig, ImitationConfig
 from eosp.models.agent import EOSPAgent, batch_from_padded
 from eosp.reward import objective_mode, reward
-
-
-@dataclass
-class Sample:
-    """One labelled state, its observation trimmed to the instance (padding added per batch)."""
-
-    x: np.ndarray  # float32 [n, F]
-    edge_index: np.ndarray  # int32 [2, m]
-    edge_attr: np.ndarray  # float32 [m, 2]
-    mask: np.ndarray  # int8 [n]
-    optimal: np.ndarray  # int32: optimal actions
-    value: np.ndarray  # float32 [n_values]: remaining return (NaN: unknown)
-    allowed: np.ndarray | None = None  # int32: actions with a known value (None: unknown)
-    regret: np.ndarray | None = None  # float32: their regret, (Q* - Q(a)) / the instance's optimum
+from eosp.training.samples import Sample
 
 
 def samples_along(env, prepared, actions: np.ndarray, optimal: list[np.ndarray], values: np.ndarray,
