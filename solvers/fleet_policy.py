@@ -83,6 +83,7 @@ def network_scorer(agent) -> EvaluateMany:
 
 
 def scorer_of(agent_or_scorer) -> EvaluateMany:
+    """A scorer (a plain function) as it is; an agent (an EOSPAgent: a module with a ``cfg``) by its network."""
     return agent_or_scorer if callable(agent_or_scorer) and not hasattr(agent_or_scorer, "cfg") \
         else network_scorer(agent_or_scorer)
 

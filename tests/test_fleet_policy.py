@@ -223,3 +223,121 @@ def test_build_fleet_demos_refuses_a_directory_it_did_not_write_and_missing_opti
     assert main(["--fleets", str(tmp_path), "--out", str(foreign)]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "exists and is not" in err and "refusing" in err
+
+
+@pytest.fixture(scope="module")
+def fleet_dir(tmp_path_factory, fleet):
+    from eosp.fleet.io import write_fleet
+
+    return write_fleet(fleet.fleet, fleet.opps, tmp_path_factory.mktemp("fleetdir") / "fleet")
+
+
+@pytest.fixture(scope="module")
+def checkpoint(tmp_path_factory):
+    from eosp.models.checkpoint import save_agent
+
+    return save_agent(agent(2), tmp_path_factory.mktemp("ck") / "policy", FleetEnvConfig())
+
+
+def test_eosp_solve_fleet_policy_sample_and_features_write_checked_schedules(fleet_dir, checkpoint, tmp_path,
+                                                                             capsys):
+    from eosp.cli import main
+    from eosp.fleet.io import read_fleet, read_schedule
+
+    fleet, _ = read_fleet(fleet_dir, with_opportunities=False)
+    runs = {"fleet-policy": ["--checkpoint", str(checkpoint)],
+            "fleet-sample": ["--checkpoint", str(checkpoint), "--time-limit", "8", "--samples", "4"],
+            "fleet-features": ["--polish", "none"]}
+    for solver, flags in runs.items():
+        out = tmp_path / f"{solver}.parquet"
+        assert main(["solve", str(fleet_dir), "--solver", solver, "--out", str(out), *flags]) == 0
+        line = capsys.readouterr().out
+        assert "raw decode" in line and ("polish none" in line) == (solver == "fleet-features")
+        sched, info = read_schedule(out, fleet)
+        res = validate(fleet, sched)
+        assert res.valid and res.metrics["WCR"] == pytest.approx(float(info["value"]), abs=1e-12)
+        assert float(info["value"]) >= float(info["raw_wcr"]) - 1e-12  # fill is kept only when it serves more
+        assert main(["validate", str(fleet_dir), str(out)]) == 0
+        capsys.readouterr()
+
+
+def test_a_single_pass_or_corrupt_checkpoint_is_one_line_before_the_fleet_is_read(fleet_dir, tmp_path, capsys):
+    from eosp.cli import main
+    from eosp.models.agent import EOSPAgent
+    from eosp.models.checkpoint import save_agent
+
+    single = save_agent(EOSPAgent(SMALL), tmp_path / "single", EnvConfig())
+    out = tmp_path / "x.parquet"
+    assert main(["solve", str(fleet_dir), "--solver", "fleet-policy", "--checkpoint", str(single),
+                 "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "a single-pass agent" in err and "not a fleet policy" in err
+    (single / "agent.json").write_text("{not json")
+    assert main(["solve", str(fleet_dir), "--solver", "fleet-sample", "--checkpoint", str(single),
+                 "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "not valid JSON" in err
+    assert main(["solve", str(fleet_dir), "--solver", "fleet-policy", "--time-limit", "5", "--out", str(out)]) == 2
+    assert "takes no time_limit" in capsys.readouterr().err
+    assert not out.exists()
+
+
+def test_fill_never_drops_a_served_task_it_cannot_keep_for_nothing(fleet):
+    """fill: every task the decode served stays served unless the battery repair drops it, and what it adds is
+    the fleet greedy's insertion: on a fleet whose batteries do not bind, the filled schedule serves a superset."""
+    from eosp.fleet.greedy import fill
+    from eosp.solvers.fleet_policy import DEFAULT_RULE, FEATURE_RULES, decode, rule_scorer
+
+    out = decode(rule_scorer({**FEATURE_RULES[DEFAULT_RULE], "skip": 100.0}), fleet, FleetEnvConfig())  # skips early
+    filled = fill(fleet.fleet, fleet.opps, out.schedule, fleet.geo)
+    res = validate(fleet.fleet, filled, fleet.geo)
+    assert res.valid and res.metrics["WCR"] > out.value
+    assert set(out.schedule.task.tolist()) <= set(filled.task.tolist())
+
+
+class _Trap:
+    """Unpickling this object would create the file it names: the sign that a checkpoint was unpickled."""
+
+    def __init__(self, path):
+        self.path = str(path)
+
+    def __reduce__(self):
+        return (open, (self.path, "w"))
+
+
+def test_a_fleet_checkpoint_of_another_layout_objective_or_pickled_weights_is_one_line_exit_2(
+        fleet_dir, checkpoint, tmp_path, capsys):
+    """Through `eosp solve`: what differs is named in one line, exit 2, no schedule written, and a weights file
+    holding Python objects is refused without being unpickled."""
+    import pickle
+    import shutil
+
+    import torch
+
+    from eosp.cli import main
+
+    out = tmp_path / "x.parquet"
+    d = tmp_path / "ck"
+    shutil.copytree(checkpoint, d)
+    meta = json.loads((d / "agent.json").read_text())
+    for change, why in ((lambda m: m["features"].__setitem__(3, "other"),
+                         "(column 3 is 'other' there, 'last' here)"),
+                        (lambda m: m["env"].__setitem__("reward", "cr"), "trained for reward 'cr', not 'wcr'")):
+        bad = json.loads(json.dumps(meta))
+        change(bad)
+        (d / "agent.json").write_text(json.dumps(bad))
+        assert main(["solve", str(fleet_dir), "--solver", "fleet-policy", "--checkpoint", str(d),
+                     "--out", str(out)]) == 2
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and why in err and "agent.json" in err
+    (d / "agent.json").write_text(json.dumps(meta))
+    trap = tmp_path / "unpickled"
+    torch.save({"w": _Trap(trap)}, d / "agent.pt")  # a zip archive like real weights, with a pickled object
+    assert main(["solve", str(fleet_dir), "--solver", "fleet-sample", "--checkpoint", str(d), "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "agent.pt" in err and "never unpickled" in err
+    (d / "agent.pt").write_bytes(pickle.dumps(_Trap(trap)))  # a bare pickle
+    assert main(["solve", str(fleet_dir), "--solver", "fleet-policy", "--checkpoint", str(d), "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "not a torch weights file" in err
+    assert not trap.exists() and not out.exists()
