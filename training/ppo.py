@@ -55,7 +55,7 @@ def ppo_config(cfg: RunConfig):
     from eosp.training.learner import EOSPPPOLearner
 
     learner = {"learner_class": EOSPPPOLearner}
-    if reward(cfg.env.reward).per_class:
+    if not fleet and reward(cfg.env.reward).per_class:  # the fleet's rewards ('wcr', 'cr') are scalars
         from eosp.training.lexicographic import LexicographicPPOLearner
 
         learner = {"learner_class": LexicographicPPOLearner}
