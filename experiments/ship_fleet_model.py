@@ -46,6 +46,41 @@ def command(section: str, cfg: dict) -> str:
     return f"python {JOBS[section]} " + " ".join(flags)
 
 
+def flags(diff: dict) -> str:
+    """Command-line flags of the fields in `diff` (dotted names)."""
+    out = []
+    for k, v in diff.items():
+        v = " ".join(map(str, v)) if isinstance(v, (list, tuple)) else str(v).lower() if isinstance(v, bool) else v
+        out.append(f"--{k.replace('_', '-')} {v}")
+    return " ".join(out)
+
+
+def data_recipe(demo_sets: list[str]) -> list[str]:
+    """The commands that made the demo sets' fleets: generate_fleets.py (from each fleet set's manifest) or eosp
+    import (an aeossp case, by its case id), then build_fleet_demos.py (from the demo set's manifest)."""
+    from eosp.config import changed, from_dict
+    from eosp.jobs.build_fleet_demos import FleetDemoConfig
+    from eosp.jobs.generate_fleets import FleetSetConfig
+
+    lines = []
+    for d in demo_sets:
+        settings = json.loads((Path(d) / "manifest.json").read_text())["settings"]
+        for f in settings["fleets"]:
+            manifest = Path(f) / "manifest.json"
+            if manifest.exists():
+                cfg = from_dict(FleetSetConfig, json.loads(manifest.read_text())["settings"])
+                diff = {k: v for k, v in changed(cfg, FleetSetConfig()).items() if not k.startswith("ray.")}
+                lines.append(f"python jobs/generate_fleets.py {flags(diff)}")
+            elif (Path(f) / "meta.json").exists():
+                meta = json.loads((Path(f) / "meta.json").read_text())
+                lines.append(f"eosp import ASTRO/benchmarks/aeossp_standard/dataset/cases/train/{meta['case_id']} "
+                             f"--out {f}   # the aeossp train split, astro-reason {meta.get('source_commit', '')}")
+        cfg = from_dict(FleetDemoConfig, settings)
+        diff = {k: v for k, v in changed(cfg, FleetDemoConfig()).items() if not k.startswith("ray.")}
+        lines.append(f"python jobs/build_fleet_demos.py {flags(diff)}")
+    return lines
+
+
 def recipe(run: Path) -> list[str]:
     """The commands of `run` and of the runs it started from, oldest first."""
     section, cfg = run_config(run)
@@ -61,6 +96,7 @@ def main() -> None:
     p.add_argument("--run", required=True)
     p.add_argument("--checkpoint", default="best", choices=["best", "last"])
     p.add_argument("--bench", default="", help="results.csv of benchmarks/bench_fleet_policy.py with this model")
+    p.add_argument("--note", default="", help="a paragraph for MODEL.md (what was tried and not kept)")
     a = p.parse_args()
     from eosp.envs.constellation_obs import FLEET_NODE_FEATURES
     from eosp.models.checkpoint import load_fleet_agent, save_agent
@@ -81,7 +117,9 @@ def main() -> None:
         if not init or Path(init).parent.name != "checkpoints":
             break
         first = Path(init).parent.parent
-    for d in run_config(first)[1].get("imitation", {}).get("train_data", []):
+    demo_sets = list(run_config(first)[1].get("imitation", {}).get("train_data", []))
+    val_set = run_config(first)[1].get("imitation", {}).get("val_data", "")
+    for d in demo_sets:
         recs = read_demo_set(d)
         sats = sorted(r.get("satellites", 0) for r in recs)
         sets.append(f"| {d} | {len(recs)} | {sats[0]}-{sats[-1]} | "
@@ -94,9 +132,7 @@ def main() -> None:
           f"`{a.checkpoint}` ({meta.get('source', '')}, epoch/iteration {meta.get('epoch', meta.get('iteration'))}).  "
           "Used by `eosp solve FLEET_DIR --solver fleet-policy|fleet-sample` without `--checkpoint`.", "",
           "## How it was trained", "", "```bash",
-          "python jobs/generate_fleets.py ...   # the generated training fleets (data/fleets/gen-train/*)",
-          "eosp import CASE --out data/fleets/aeossp-train/case_000N   # the aeossp train split (cases 1-9; 10 held out)",
-          "python jobs/build_fleet_demos.py --fleets ... --out data/demos/train --time-limit 60   # the fleet solver",
+          *data_recipe([*demo_sets, val_set] if val_set else demo_sets),
           *lines, "```", "", "Demonstrations (the fleet solver, 60 s a fleet, exact pass solver):", "",
           "| demo set | fleets | satellites | mean WCR of the fleet solver |", "|---|---|---|---|", *sets, ""]
     if val:
@@ -116,6 +152,8 @@ def main() -> None:
                f"{sum(num(r, 'policy') for r in aeossp) / max(len(aeossp), 1):.4f}, features-only "
                f"{sum(num(r, 'features') for r in aeossp) / max(len(aeossp), 1):.4f}, fleet greedy "
                f"{sum(num(r, 'greedy') for r in aeossp) / max(len(aeossp), 1):.4f}.", ""]
+    if a.note:
+        md += ["## Tried and not kept", "", a.note, ""]
     (dest / "MODEL.md").write_text("\n".join(md))
     print("\n".join(md))
 
