@@ -130,18 +130,20 @@ def run_fleet(name: str, path: Path, agent: tuple, a: argparse.Namespace) -> dic
 
 
 def markdown(rows: list[dict], samples: list[float]) -> str:
-    f = (lambda x: "-" if x is None else f"{x:.4f}")
+    """The table of docs/results.md ("The learned fleet scheduler")."""
+    f = (lambda x: "-" if x in (None, "") else f"{float(x):.4f}")
     t_eq = f"{max(samples):g}"
-    head = ["fleet", "sat / tasks", "raw decode", "fleet-policy (s)", "decisions/s"] + \
-        [f"fleet-sample {s:g} s" for s in samples] + ["features-only", "fleet greedy", f"fleet solver {t_eq} s",
-                                                     "fleet solver 120 s", "bound", "policy / bound", "mwis"]
+    head = ["fleet", "sat / tasks", "raw decode", "fleet-policy (wall s)", "decisions/s"] + \
+        [f"fleet-sample {s:g} s (episodes)" for s in samples] + \
+        ["features-only raw", "features-only", "fleet greedy", f"fleet solver {t_eq} s", f"its bound {t_eq} s",
+         "fleet solver 120 s", "bound", "fleet-policy / bound", "mwis"]
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for r in rows:
-        cells = [r["fleet"], f"{r['satellites']} / {r['tasks']:,}", f(r["raw"]),
-                 f"{f(r['policy'])} ({r['policy_wall_s']:.0f})", f"{r['decisions_per_s']:.0f}"] + \
-            [f(r[f"sample{s:g}"]) for s in samples] + \
-            [f(r["features"]), f(r["greedy"]), f(r[f"fleet{t_eq}"]), f(r["fleet120"]), f(r["bound"]),
-             f(r["policy_over_bound"]), f(r["mwis"])]
+        cells = [r["fleet"], f"{int(r['satellites'])} / {int(r['tasks']):,}", f(r["raw"]),
+                 f"{f(r['policy'])} ({float(r['policy_wall_s']):.0f})", f"{float(r['decisions_per_s']):.0f}"] + \
+            [f"{f(r[f'sample{s:g}'])} ({int(r[f'sample{s:g}_episodes'])})" for s in samples] + \
+            [f(r["features_raw"]), f(r["features"]), f(r["greedy"]), f(r[f"fleet{t_eq}"]),
+             f(r[f"fleet{t_eq}_bound"]), f(r["fleet120"]), f(r["bound"]), f(r["policy_over_bound"]), f(r["mwis"])]
         lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n"
 
@@ -158,7 +160,11 @@ def main() -> None:
                    help="seconds of the fleet solver for the WCR and bound of fleets without a recorded run (0: none)")
     p.add_argument("--verify", action="store_true", help="run the astro-reason verifier on the policy's schedules")
     p.add_argument("--out", default="runs/bench-fleet-policy")
+    p.add_argument("--table", default="", help="only print the table of this results.csv of an earlier run")
     a = p.parse_args()
+    if a.table:
+        print(markdown(list(csv.DictReader(open(a.table))), a.sample))
+        return
     import torch
 
     from eosp.envs.constellation import expand_fleets
