@@ -40,15 +40,21 @@ def cmd_fleet_import(case_dir, out, overwrite: bool = False) -> int:
     from eosp.fleet.aeossp import read_case
     from eosp.fleet.geometry import Geometry
     from eosp.fleet.io import is_fleet_dir as owned
-    from eosp.fleet.io import write_fleet
+    from eosp.fleet.io import write_fleet, written_names
     from eosp.fleet.opportunities import compute
 
     if not is_aeossp_case(case_dir):
         raise InputError(case_dir, "not an aeossp case directory (mission.yaml, satellites.yaml, tasks.yaml)")
-    check_output_dir(out, overwrite=overwrite, owned=owned, what="fleet directory")
+    from eosp.fleet.check import require_feasible
+    from eosp.fleet.opportunities import require_scan_memory
+
+    check_output_dir(out, overwrite=overwrite, owned=owned, what="fleet directory", names=written_names)
     t0 = time.perf_counter()
     fleet = read_case(case_dir)
-    opps = compute(fleet, Geometry(fleet))
+    require_scan_memory(fleet, Path(case_dir) / "mission.yaml")  # the horizon's length as much as the fleet's size
+    geo = Geometry(fleet)
+    opps = compute(fleet, geo)
+    require_feasible(fleet, case_dir, geo)  # a battery that idling alone runs dry: no schedule is valid
     write_fleet(fleet, opps, out, overwrite=overwrite)
     print(f"{out}: {len(fleet.satellites)} satellites, {len(fleet.tasks)} tasks, {len(opps)} opportunities, "
           f"{opps.n_passes} passes ({time.perf_counter() - t0:.1f} s)")
@@ -61,22 +67,24 @@ def cmd_fleet_generate(cfg, out, overwrite: bool = False) -> int:
     The memory it needs is estimated from the request and checked against what the machine has before any
     work (one line, exit 2, instead of the kernel's out-of-memory killer hours later)."""
     from eosp.atomic import check_output_dir
-    from eosp.fleet.generate import estimate_bytes, generate
+    from eosp.fleet.generate import check, estimate_bytes, generate
     from eosp.fleet.geometry import Geometry
     from eosp.fleet.io import is_fleet_dir as owned
-    from eosp.fleet.io import write_fleet
+    from eosp.fleet.io import write_fleet, written_names
     from eosp.fleet.opportunities import compute
     from eosp.memory import require_memory
 
-    check_output_dir(out, overwrite=overwrite, owned=owned, what="fleet directory")
-    require_memory("--satellites/--tasks", estimate_bytes(cfg), f"a fleet of {cfg.satellites} satellites and "
-                                                                f"{cfg.tasks} tasks over {cfg.hours:g} h")
-    t0 = time.perf_counter()
+    check_output_dir(out, overwrite=overwrite, owned=owned, what="fleet directory", names=written_names)
     try:
-        fleet = generate(cfg)
+        check(cfg)
     except ValueError as exc:  # "FleetGenConfig.planes: reason" -> "--planes: reason"
         name, _, reason = str(exc).partition(": ")
         raise InputError("--" + name.rpartition(".")[2].replace("_", "-"), reason) from None
+    require_memory("--satellites/--tasks/--hours", estimate_bytes(cfg),
+                   f"a fleet of {cfg.satellites} satellites and {cfg.tasks} tasks over {cfg.hours:g} h "
+                   f"({cfg.hours * 720:,.0f} instants of the 5 s grid)")
+    t0 = time.perf_counter()
+    fleet = generate(cfg)
     opps = compute(fleet, Geometry(fleet))
     write_fleet(fleet, opps, out, overwrite=overwrite)
     print(f"{out}: {len(fleet.satellites)} satellites, {len(fleet.tasks)} tasks, {len(opps)} opportunities, "
@@ -130,6 +138,7 @@ def cmd_fleet_solve(fleet_dir, solver: str = "greedy", out=None, overwrite: bool
     from eosp.fleet.geometry import Geometry
     from eosp.fleet.greedy import solve
     from eosp.fleet.io import read_fleet, write_schedule
+    from eosp.fleet.passgraph import require_solvable
 
     if solver not in SOLVERS:
         raise InputError(solver, f"unknown fleet solver (choose from {', '.join(SOLVERS)})")
@@ -139,6 +148,7 @@ def cmd_fleet_solve(fleet_dir, solver: str = "greedy", out=None, overwrite: bool
     t0 = time.perf_counter()
     fleet, opps = read_fleet(fleet_dir)
     geo = Geometry(fleet)
+    require_solvable(fleet, opps, Path(fleet_dir) / "meta.json", geo)
     sched = solve(fleet, opps, geo)
     res = validate(fleet, sched, geo)
     if not res.valid:  # the solver guarantees validity: this is a bug, not a user error

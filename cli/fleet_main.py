@@ -15,7 +15,7 @@ import time
 from datetime import timedelta
 from pathlib import Path
 
-from eosp.args import Parser, add_config_args, config_from_args
+from eosp.args import Parser, add_config_args, add_memory_arg, config_from_args
 from eosp.errors import InputError
 
 FLEET_SOLVERS = ("greedy", "fleet")
@@ -62,12 +62,14 @@ def parser(command: str) -> Parser:
         p.add_argument("--fleet", action="store_true", required=True, help="generate a fleet (not a single pass)")
         p.add_argument("--out", required=True, help="fleet directory to write")
         p.add_argument("--overwrite", action="store_true", help="replace a fleet directory eosp wrote")
+        add_memory_arg(p)
         add_config_args(p, FleetGenConfig)
     elif command == "import":
         p.add_argument("case_dir", help="an astro-reason aeossp_standard case (mission.yaml, satellites.yaml, "
                                         "tasks.yaml)")
         p.add_argument("--out", required=True, help="fleet directory to write")
         p.add_argument("--overwrite", action="store_true", help="replace a fleet directory eosp wrote")
+        add_memory_arg(p)
     elif command == "info":
         p.add_argument("fleet_dir")
     elif command == "report":
@@ -97,6 +99,7 @@ def parser(command: str) -> Parser:
         p.add_argument("--init", default="", help="a schedule of this fleet to start from")
         p.add_argument("--freeze-until", default="", metavar="UTC",
                        help="keep the passes that start before this time (ISO 8601) as in --init")
+        add_memory_arg(p)
         add_config_args(p, FleetConfig)
     else:
         raise InputError(command, "not a fleet command")
@@ -109,16 +112,23 @@ def route(argv: list[str]) -> int:
 
     if onera.wants(argv):  # an ONERA .pb file or fleet directory: its own model and commands
         return onera.route(argv)
+    from eosp.memory import memory_ceiling
+
     command = argv[0]
     ns = parser(command).parse_args(argv[1:])
     try:
-        return _run(command, ns)
+        with memory_ceiling(getattr(ns, "max_memory_gb", None)):
+            return _run(command, ns)
     except InputError as exc:
         print(f"eosp {command}: error: {exc}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print(f"eosp {command}: interrupted: nothing written", file=sys.stderr)
         return 130
+    except OSError as exc:  # the system refused a path of the user's (permission, disk full, not found, ...)
+        where = f"{exc.filename}: " if exc.filename else ""
+        print(f"eosp {command}: error: {where}{(exc.strerror or str(exc)).lower()}", file=sys.stderr)
+        return 2
 
 
 def _run(command: str, ns) -> int:
@@ -151,6 +161,7 @@ def solve_fleet(ns) -> int:
     from eosp.fleet.io import read_fleet, read_schedule, write_schedule
     from eosp.fleet.model import parse_utc
     from eosp.ownership import check_output
+    from eosp.fleet.passgraph import require_solvable
     from eosp.solvers.fleet import FleetConfig, solve
 
     cfg = config_from_args(FleetConfig, ns)
@@ -160,6 +171,7 @@ def solve_fleet(ns) -> int:
     out = check_output(ns.out, "fleet-schedule", overwrite=ns.overwrite, suffixes=(".parquet",))
     t0 = time.perf_counter()
     fleet, opps = read_fleet(ns.fleet_dir)
+    require_solvable(fleet, opps, Path(ns.fleet_dir) / "meta.json")
     initial, freeze_s = None, None
     if ns.init:
         initial, _ = read_schedule(ns.init, fleet)  # a schedule of another fleet is refused (fingerprint)
@@ -179,14 +191,22 @@ def solve_fleet(ns) -> int:
             raise InputError("--freeze-until", "needs --init (the schedule whose actions are kept)")
         freeze_s = (at - h.start) / timedelta(seconds=1)
     sol = solve(fleet, opps, cfg, initial=initial, freeze_until_s=freeze_s)
+    if sol.info.get("interrupted"):
+        import signal
+
+        signal.signal(signal.SIGINT, signal.SIG_IGN)  # a second Ctrl-C must not leave a half-written file
     elapsed = time.perf_counter() - t0
     info = {"value": sol.value, "solver": "fleet", "pass_solver": cfg.pass_solver, "seconds": round(elapsed, 3),
             "bound": sol.bound, "gap": sol.gap, "bound_source": sol.info["bound_source"]}
     write_schedule(sol.schedule, fleet, out, overwrite=ns.overwrite, info=info)
     why = sol.info["no_lagrangian_bound_because"]
     source = sol.info["bound_source"] + ("" if why is None else f": {why}")
-    bound = f", bound {sol.bound:.6f} ({source}), gap {sol.gap:.4%}"
-    stop = " (interrupted: the best schedule so far)" if sol.info.get("interrupted") else ""
+    gap = "-" if sol.gap is None else f"{sol.gap:.4%}"
+    bound = "" if sol.bound is None else f", bound {sol.bound:.6f} ({source}), gap {gap}"
     print(f"{Path(out)}: {len(sol.schedule)} observations, WCR {sol.value:.6f}{bound}; {sol.info['rounds']} rounds, "
-          f"{sol.info['pass_solves']} pass solves ({elapsed:.1f} s){stop}")
+          f"{sol.info['pass_solves']} pass solves ({elapsed:.1f} s)")
+    if sol.info.get("interrupted"):  # Ctrl-C: the best schedule so far (checked by the checker) was written
+        print(f"eosp solve: interrupted: wrote the best valid schedule so far to {out} ({len(sol.schedule)} "
+              f"observations, WCR {sol.value:.6f})", file=sys.stderr)
+        return 130
     return 0

@@ -8,6 +8,7 @@ file or directory).  Each returns the exit status; user mistakes raise :class:`~
 
 from __future__ import annotations
 
+import sys
 import time
 from pathlib import Path
 
@@ -31,9 +32,10 @@ def is_onera_dir(path) -> bool:
 def cmd_import(pb_file, out, overwrite: bool = False) -> int:
     """Read an ONERA ``.pb`` instance and write its fleet directory."""
     from eosp.atomic import check_output_dir
-    from eosp.fleet.onera import KIND_SHORT, read_pb, write_onera
+    from eosp.fleet.onera import KIND_SHORT, TABLE_FILES, read_pb, write_onera
 
-    check_output_dir(out, overwrite=overwrite, owned=is_onera_dir, what="ONERA fleet directory")
+    check_output_dir(out, overwrite=overwrite, owned=is_onera_dir, what="ONERA fleet directory",
+                     names=lambda _: TABLE_FILES)
     t0 = time.perf_counter()
     f = read_pb(pb_file)
     write_onera(f, out, overwrite=overwrite, source=Path(pb_file).name)
@@ -80,7 +82,16 @@ def cmd_solve(fleet_dir, solver: str, out, cfg, overwrite: bool = False) -> int:
     except ValueError as exc:  # an instance whose mandatory downloads do not fit
         raise InputError(fleet_dir, str(exc)) from None
     res = validate(f, sol.schedule)
-    if not res.valid:  # the solver guarantees validity: a bug, not a user error
+    interrupted = sol.info.get("interrupted", False)
+    if interrupted:
+        import signal
+
+        signal.signal(signal.SIGINT, signal.SIG_IGN)  # a second Ctrl-C must not leave a half-written file
+        if not res.valid:  # never write what the checker refuses
+            print(f"eosp solve: interrupted: the plan so far is refused by the checker ({res.first}), nothing "
+                  "written", file=sys.stderr)
+            return 130
+    elif not res.valid:  # the solver guarantees validity: a bug, not a user error
         raise RuntimeError(f"the ONERA solver produced an invalid plan: {res.first}")
     info = {"value": sol.value, "solver": solver, "bound": sol.bound, "gap": sol.gap,
             "bound_source": sol.info["bound_source"], "seconds": round(sol.info["seconds"], 3)}
@@ -89,6 +100,10 @@ def cmd_solve(fleet_dir, solver: str, out, cfg, overwrite: bool = False) -> int:
     bound = "" if sol.bound is None else f", bound {sol.bound:.4f} ({sol.info['bound_source']}), gap {sol.gap:.2%}"
     print(f"{out}: value {sol.value:.4f}{bound}; served {served}; {sol.info['moves']} moves "
           f"({sol.info['seconds']:.1f} s)")
+    if interrupted:
+        print(f"eosp solve: interrupted: wrote the best valid plan so far to {out} (value {sol.value:.4f})",
+              file=sys.stderr)
+        return 130
     return 0
 
 
@@ -165,8 +180,6 @@ def parser(command: str):
 
 def route(argv: list[str]) -> int:
     """Run an ONERA command line (:func:`wants`); user errors are one line and exit 2."""
-    import sys
-
     from eosp.args import config_from_args
 
     command = argv[0]
@@ -189,3 +202,7 @@ def route(argv: list[str]) -> int:
     except KeyboardInterrupt:
         print(f"eosp {command}: interrupted: nothing written", file=sys.stderr)
         return 130
+    except OSError as exc:  # the system refused a path of the user's (permission, disk full, not found, ...)
+        where = f"{exc.filename}: " if exc.filename else ""
+        print(f"eosp {command}: error: {where}{(exc.strerror or str(exc)).lower()}", file=sys.stderr)
+        return 2

@@ -154,6 +154,84 @@ class Schedule:
                         np.zeros(0, np.int64), np.zeros(0, np.int64))
 
 
+SENSORS = ("visible", "infrared")
+NORAD_MAX = 999_999_999  # the largest catalog number kept (int64 column; TLEs' alpha-5 numbers reach 339,999)
+EPS = 1.0e-9  # the benchmark's tolerance on values that must not be negative
+ALTITUDE_M = (-11_000.0, 100_000.0)  # a target on (or above) the Earth's surface: the ocean floor to the Karman line
+
+
+def satellite_fault(sats: Satellites) -> tuple[int, str, str] | None:
+    """The first satellite whose parameters are out of range: (row, field, reason), fields named as the fleet
+    directory's columns (= the aeossp keys); None when all are in range.  Checked where a fleet enters (the aeossp
+    reader, the fleet directory reader), so that no solver divides by a zero slew rate or looks past the horizon."""
+    a, b = sats.attitude, sats.battery
+    checks = (
+        ("norad_catalog_id", (sats.tle.norad < 0) | (sats.tle.norad > NORAD_MAX), f"must lie in [0, {NORAD_MAX}]"),
+        ("max_off_nadir_deg", ~((a.max_off_nadir_deg >= -EPS) & (a.max_off_nadir_deg <= 90)), "must lie in [0, 90]"),
+        ("max_slew_velocity_deg_per_s", ~(a.max_rate_deg_s > 0), "must be > 0"),
+        ("max_slew_acceleration_deg_per_s2", ~(a.max_acc_deg_s2 > 0), "must be > 0"),
+        ("settling_time_s", ~(a.settling_s >= -EPS), "must be >= 0"),
+        ("battery_capacity_wh", ~(b.capacity_wh > 0), "must be > 0"),
+        ("initial_battery_wh", ~((b.initial_wh >= -EPS) & (b.initial_wh <= b.capacity_wh + EPS)),
+         "must lie within [0, battery_capacity_wh]"),
+        ("idle_power_w", ~(b.idle_w >= -EPS), "must be >= 0"), ("imaging_power_w", ~(b.imaging_w >= -EPS), "must be >= 0"),
+        ("slew_power_w", ~(b.slew_w >= -EPS), "must be >= 0"),
+        ("sunlit_charge_power_w", ~(b.sunlit_w >= -EPS), "must be >= 0"),
+        ("sensor_type", ~np.isin(sats.sensor.astype(str), SENSORS), f"must be one of {', '.join(SENSORS)}"),
+    )
+    return _first_fault(checks, {"norad_catalog_id": sats.tle.norad, "max_off_nadir_deg": a.max_off_nadir_deg,
+                                 "max_slew_velocity_deg_per_s": a.max_rate_deg_s,
+                                 "max_slew_acceleration_deg_per_s2": a.max_acc_deg_s2, "settling_time_s": a.settling_s,
+                                 "battery_capacity_wh": b.capacity_wh, "initial_battery_wh": b.initial_wh,
+                                 "idle_power_w": b.idle_w, "imaging_power_w": b.imaging_w, "slew_power_w": b.slew_w,
+                                 "sunlit_charge_power_w": b.sunlit_w, "sensor_type": sats.sensor})
+
+
+def task_fault(tasks: Tasks, horizon: Horizon) -> tuple[int, str, str] | None:
+    """The first task out of range (place, window inside the horizon and on the action grid, duration, weight,
+    sensor), as :func:`satellite_fault`; also the sum of the weights must be finite (two weights of 1e308 are
+    each finite, their sum is not, and every metric is that sum's fraction)."""
+    step, h = horizon.action_step_s, horizon.seconds
+
+    def off_grid(v: np.ndarray) -> np.ndarray:
+        return np.abs(v / step - np.round(v / step)) > 1e-9
+
+    checks = (
+        ("latitude_deg", ~((tasks.lat_deg >= -90) & (tasks.lat_deg <= 90)), "must lie in [-90, 90]"),
+        ("longitude_deg", ~((tasks.lon_deg >= -180) & (tasks.lon_deg <= 180)), "must lie in [-180, 180]"),
+        ("altitude_m", ~((tasks.alt_m >= ALTITUDE_M[0]) & (tasks.alt_m <= ALTITUDE_M[1])),
+         f"must lie in [{ALTITUDE_M[0]:g}, {ALTITUDE_M[1]:g}] (a place on the Earth)"),
+        ("release_s", ~((tasks.release_s >= 0) & (tasks.release_s <= h)) | off_grid(tasks.release_s),
+         f"must lie in the horizon [0, {h}] on the {step} s action grid"),
+        ("due_s", ~((tasks.due_s > tasks.release_s) & (tasks.due_s <= h)) | off_grid(tasks.due_s),
+         f"must lie after release_s, in the horizon [0, {h}], on the {step} s action grid"),
+        ("duration_s", ~((tasks.duration_s > 0) & (tasks.duration_s <= tasks.due_s - tasks.release_s))
+         | off_grid(tasks.duration_s), f"must be > 0, a multiple of {step} s and fit in the window"),
+        ("weight", ~(tasks.weight > 0), "must be > 0"),
+        ("sensor_type", ~np.isin(tasks.sensor.astype(str), SENSORS), f"must be one of {', '.join(SENSORS)}"),
+    )
+    values = {"latitude_deg": tasks.lat_deg, "longitude_deg": tasks.lon_deg, "altitude_m": tasks.alt_m,
+              "release_s": tasks.release_s, "due_s": tasks.due_s, "duration_s": tasks.duration_s,
+              "weight": tasks.weight, "sensor_type": tasks.sensor}
+    fault = _first_fault(checks, values)
+    with np.errstate(over="ignore"):
+        total = np.sum(tasks.weight)
+    if fault is None and len(tasks) and not np.isfinite(total):
+        return len(tasks) - 1, "weight", "makes the sum of the weights overflow (every metric divides by it)"
+    return fault
+
+
+def _first_fault(checks, values: dict) -> tuple[int, str, str] | None:
+    with np.errstate(invalid="ignore", over="ignore"):
+        for name, bad, reason in checks:
+            rows = np.flatnonzero(bad)
+            if len(rows):
+                r = int(rows[0])
+                got = values[name][r]
+                return r, name, f"{reason}, got {got.item() if hasattr(got, 'item') else got!r}"
+    return None
+
+
 def strings(values) -> np.ndarray:
     """A 1-D object array of Python strings (numpy's fixed-width unicode would truncate nothing but
     pads and compares differently)."""

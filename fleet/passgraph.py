@@ -36,6 +36,37 @@ from eosp.graphs.discrete import DiscreteGraph, arc_to_acq
 from eosp.instances.instance import Acquisitions, Instance
 
 
+# Memory of a fleet's pass graphs and their geometry (Problem.build, a worker's graphs): per base-grid instant the
+# cached frame rotations and their transients, per satellite and instant its positions, per opportunity its graph
+# (nodes, arcs, lines of sight: 1.1 GB for 766,306 opportunities of 200 satellites over 24 h, docs/results.md).
+SOLVE_INSTANT_BYTES = 1000
+GRAPH_BYTES = 1000
+
+
+def require_solve_memory(fleet: Fleet, n_opportunities: int, where: object) -> None:
+    """Refuse (one line with the estimate) a fleet whose pass graphs cannot fit in memory, before building them."""
+    from math import gcd
+
+    from eosp.fleet.opportunities import BASE_BYTES, SATELLITE_INSTANT_BYTES, instants
+    from eosp.memory import require_memory
+
+    h = fleet.horizon
+    n = instants(h.seconds, gcd(h.action_step_s, h.geometry_step_s))
+    need = BASE_BYTES + n * (SOLVE_INSTANT_BYTES + SATELLITE_INSTANT_BYTES * len(fleet.satellites)) \
+        + n_opportunities * GRAPH_BYTES
+    require_memory(where, int(need), f"the pass graphs of {n_opportunities:,} opportunities of "
+                                     f"{len(fleet.satellites)} satellites over {h.seconds:,} s ({n:,} instants)")
+
+
+def require_solvable(fleet: Fleet, opps: Opportunities, where: object, geo=None) -> None:
+    """Before solving: the pass graphs' memory estimated and checked (:func:`require_solve_memory`), and the fleet
+    feasible (:func:`eosp.fleet.check.require_feasible`)."""
+    from eosp.fleet.check import require_feasible
+
+    require_solve_memory(fleet, len(opps), where)
+    require_feasible(fleet, where, geo)
+
+
 @dataclass(frozen=True, eq=False)
 class PassGraph:
     """One pass as a discrete graph over its opportunities.

@@ -62,7 +62,7 @@ class FleetConfig:
     with a number of rounds ignores the time limit and is deterministic for a seed."""
     seed: int = ranged(0, 0)
     """Seed of the large-neighbourhood moves."""
-    pass_time_limit: float = ranged(5.0, 0)
+    pass_time_limit: float = ranged(5.0, 0, WEEK_S)
     """Seconds the exact solver may spend on one pass (its bound is used when it stops early)."""
     span_s: float = ranged(3600.0, 1)
     """Length of the time span freed by one large-neighbourhood move."""
@@ -152,6 +152,14 @@ _POOL_PROBLEM: Problem | None = None  # the problem a forked worker inherits
 _POOL_CFG: FleetConfig | None = None
 
 
+def _ignore_sigint() -> None:
+    """A pool worker leaves Ctrl-C to its parent (a terminal sends SIGINT to the whole process group): the parent
+    keeps the best schedule and terminates the pool, instead of every worker printing a traceback."""
+    import signal
+
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
 def _solve_chunk(args: tuple[list[int], list[np.ndarray]]) -> list[PassResult]:
     passes, utils = args
     return [solve_pass(_POOL_PROBLEM, p, u, _POOL_CFG) for p, u in zip(passes, utils)]
@@ -167,7 +175,7 @@ class PassPool:
         global _POOL_PROBLEM, _POOL_CFG
         _POOL_PROBLEM, _POOL_CFG = prob, cfg
         self.workers = cfg.workers
-        self.pool = multiprocessing.get_context("fork").Pool(cfg.workers)
+        self.pool = multiprocessing.get_context("fork").Pool(cfg.workers, initializer=_ignore_sigint)
 
     def solve(self, passes: list[int], utils: list[np.ndarray],
               deadline: float | None) -> dict[int, PassResult] | None:
@@ -433,9 +441,9 @@ class Coordinator:
     def record(self) -> None:
         self.history.append((time.perf_counter() - self.t0, self.best.value, self.best_bound))
 
-    def offer(self, primal: Primal) -> bool:
+    def offer(self, primal: Primal, deadline: float | None = None) -> bool:
         """Keep `primal` (after battery repair) when it serves more than the best."""
-        self.battery_repair(primal)
+        self.battery_repair(primal, deadline)
         if primal.value > self.best.value + 1e-9:
             self.best = primal
             self.record()
@@ -473,20 +481,24 @@ class Coordinator:
         deadline = None if cfg.rounds is not None else self.t0 + cfg.time_limit
         rng = np.random.default_rng(cfg.seed if self.start_round == 0 else [cfg.seed, self.start_round])
         order = np.argsort(prob.pass_time[:, 0], kind="stable")
-        if self.initial is not None:  # start from the given schedule (its paths re-walked unless frozen)
-            first = self.empty()
-            for p in np.flatnonzero(~self.frozen).tolist():
-                path = self.initial.paths[p]
-                free = self._available(first, p)[prob.passes[p].graph.node_acq[path]] if len(path) else path
-                self._assign(first, p, rewalk(prob.passes[p], path[free]) if len(path) else path)
-        else:
-            first = self.construct(order, primal=self.empty())
-        self.descend(first, list(range(len(prob.passes))), deadline)
-        self.offer(first)
-        try:
-            self._rounds(deadline, rng)
-        except KeyboardInterrupt:  # Ctrl-C: the best schedule so far is the answer
+        first = self.empty()
+        try:  # Ctrl-C while the first schedule is built: the passes built so far are the answer
+            if self.initial is not None:  # start from the given schedule (its paths re-walked unless frozen)
+                for p in np.flatnonzero(~self.frozen).tolist():
+                    path = self.initial.paths[p]
+                    free = self._available(first, p)[prob.passes[p].graph.node_acq[path]] if len(path) else path
+                    self._assign(first, p, rewalk(prob.passes[p], path[free]) if len(path) else path)
+            else:
+                self.construct(order, primal=first)
+            self.descend(first, list(range(len(prob.passes))), deadline)
+        except KeyboardInterrupt:
             self.interrupted = True
+        self.offer(first, time.perf_counter() if self.interrupted else None)  # repaired, not improved, after Ctrl-C
+        if not self.interrupted:
+            try:
+                self._rounds(deadline, rng)
+            except KeyboardInterrupt:  # Ctrl-C: the best schedule so far is the answer
+                self.interrupted = True
         return self.best
 
     def _rounds(self, deadline: float | None, rng: np.random.Generator) -> None:

@@ -44,7 +44,8 @@ class OneraConfig:
     """Options of the ONERA solver (``eosp solve ONERA_DIR --solver onera``)."""
 
     time_limit: float = ranged(30.0, 0, WEEK_S)
-    """Seconds of large-neighbourhood search after the greedy plan (0: the greedy plan)."""
+    """Seconds of the whole solve: the greedy plan, the large-neighbourhood search and the lp bound, which gets the
+    time left, at most bound_time_limit and half of this (0: the greedy plan, and the bound in bound_time_limit)."""
     seed: int = ranged(0, 0)
     """Seed of the large-neighbourhood moves."""
     span_s: float = ranged(1200.0, 1)
@@ -53,7 +54,8 @@ class OneraConfig:
     """Upper bound: lp (the time-capacity relaxation, solved by HiGHS, certified from its duals),
     conflict-free (each request at its best), none."""
     bound_time_limit: float = ranged(30.0, 0, WEEK_S)
-    """Seconds of cutting-plane rounds of the lp bound (the last solve's certified bound is kept)."""
+    """At most this many seconds of the time limit go to the lp bound's cutting-plane rounds (the last finished
+    solve's certified bound is kept; none finished: the conflict-free bound)."""
 
 
 @dataclass
@@ -381,11 +383,22 @@ class Search:
 
     def lns(self, deadline: float, span_s: float, trace: list, t0: float, target: float = math.inf) -> int:
         """Destroy-and-repair moves until `deadline` or the value `target` (an upper bound); the number of moves."""
+        pl = self.plan
+        pl.journal = []
+        try:
+            return self._moves(deadline, span_s, trace, t0, target)
+        except KeyboardInterrupt:  # Ctrl-C: the move in flight undone, the plan as it was before it
+            if pl.journal:
+                pl.undo(0)
+            raise
+        finally:
+            pl.journal = None
+
+    def _moves(self, deadline: float, span_s: float, trace: list, t0: float, target: float) -> int:
         pl, rng, f = self.plan, self.rng, self.f
         n_sat = len(f.satellites)
         obj = self.objective
         moves = 0
-        pl.journal = []
         while time.perf_counter() < deadline and obj < target - 1e-9:
             moves += 1
             s = rng.randrange(n_sat)
@@ -435,38 +448,50 @@ class Search:
             else:
                 pl.undo(mark)
                 pl.journal.clear()
-        pl.journal = None
         return moves
 
 
 def solve(f: OneraFleet, cfg: OneraConfig | None = None, greedy_only: bool = False) -> Solution:
-    """Greedy plan, then (unless `greedy_only`) large-neighbourhood search until the time limit; the bound."""
+    """Greedy plan, then (unless `greedy_only`) large-neighbourhood search, then the bound, all within the time
+    limit (the search stops early by the bound's share).  Ctrl-C keeps the plan as it was before the move in flight
+    (``info["interrupted"]``, the conflict-free bound)."""
     cfg = cfg or OneraConfig()
     t0 = time.perf_counter()
     search = Search(f, seed=cfg.seed)
-    search.greedy()
-    trace = [(time.perf_counter() - t0, search.objective)]
-    greedy_value = search.objective
-    moves = 0
-    if not greedy_only and cfg.time_limit > 0:
-        moves = search.lns(time.perf_counter() + cfg.time_limit, cfg.span_s, trace, t0, target=float(search.best.sum()))
+    search_time = cfg.time_limit if not greedy_only else 0.0
+    reserve = min(cfg.bound_time_limit, search_time / 2) if cfg.bound == "lp" else 0.0
+    trace: list = []
+    moves, interrupted = 0, False
+    try:
+        search.greedy()
+        trace.append((time.perf_counter() - t0, search.objective))
+        if search_time > 0:
+            moves = search.lns(t0 + search_time - reserve, cfg.span_s, trace, t0, target=float(search.best.sum()))
+    except KeyboardInterrupt:
+        interrupted = True
+    if not trace:
+        trace.append((time.perf_counter() - t0, search.objective))
+    greedy_value = trace[0][1]
     value = search.objective
     t_search = time.perf_counter() - t0
     schedule = search.plan.schedule()
+    free = float(search.best.sum())  # the conflict-free bound
     bound, source = None, cfg.bound
-    if cfg.bound == "conflict-free":
-        bound = float(search.best.sum())
-    elif cfg.bound == "lp" and value >= float(search.best.sum()) - 1e-9:  # the plan meets the conflict-free bound
-        bound, source = float(search.best.sum()), "conflict-free"
+    if cfg.bound == "conflict-free" or (cfg.bound == "lp" and (interrupted or value >= free - 1e-9)):
+        bound, source = free, "conflict-free"  # the plan meets it, or Ctrl-C: no LP after it
     elif cfg.bound == "lp":
         from eosp.solvers.onera_bound import lp_bound
 
         lp_info: dict = {}
-        bound = min(lp_bound(f, time_limit=cfg.bound_time_limit, info=lp_info), float(search.best.sum()))
-        source = f"lp ({lp_info.get('rounds', 0)} rounds, {lp_info.get('cuts', 0)} cuts)"
+        budget = cfg.bound_time_limit if search_time <= 0 else max(0.0, t0 + search_time - time.perf_counter())
+        try:
+            bound = min(lp_bound(f, time_limit=budget, info=lp_info), free)
+            source = f"lp ({lp_info.get('rounds', 0)} rounds, {lp_info.get('cuts', 0)} cuts)"
+        except KeyboardInterrupt:
+            interrupted, bound, source = True, free, "conflict-free"
     gap = None if bound is None else (0.0 if bound <= 0 else max(0.0, (bound - value) / bound))
-    t99 = next(t for t, v in trace if v >= 0.99 * value - 1e-12)
+    t99 = next((t for t, v in trace if v >= 0.99 * value - 1e-12), trace[-1][0])
     return Solution(schedule, value, bound, gap,
                     {"greedy_value": greedy_value, "moves": moves, "seconds_search": t_search,
                      "seconds": time.perf_counter() - t0, "time_to_99": t99, "bound_source": source,
-                     "trace": trace})
+                     "trace": trace, "interrupted": interrupted})

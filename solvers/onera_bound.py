@@ -377,11 +377,12 @@ def lp_bound(f: OneraFleet, rounds: int = 40, time_limit: float = 60.0, info: di
     n_rounds = 0
     for n_rounds in range(1, rounds + 1):
         A, b = m.matrix()
-        # the first solve runs to its end (it gives the first bound); a later one cut short by the time
-        # limit keeps the last round's bound
+        # every solve within the time limit (the caller's time limit covers the bound): one cut short keeps the
+        # last finished round's bound, or the conflict-free bound when none finished
         left = time_limit - (time.perf_counter() - t0)
-        options = {} if n_rounds == 1 else {"time_limit": max(5.0, left)}
-        res = linprog(-m.c, A_ub=A, b_ub=b, bounds=(0, 1), method="highs", options=options)
+        if left <= 0:
+            break
+        res = linprog(-m.c, A_ub=A, b_ub=b, bounds=(0, 1), method="highs", options={"time_limit": left})
         if res.status != 0:
             break
         y = -np.asarray(res.ineqlin.marginals)
