@@ -35,19 +35,19 @@ def is_fleet_dir(path) -> bool:
 
 
 def cmd_fleet_import(case_dir, out, overwrite: bool = False) -> int:
-    """Read an aeossp case, compute opportunities and passes, write the fleet directory `out`."""
+    """Read an aeossp case, compute opportunities and passes, write the fleet directory `out`; the memory of the scan
+    (the horizon's instants x satellites, the tasks) is estimated and checked after reading, before any propagation,
+    and a fleet without any valid schedule is refused."""
     from eosp.atomic import check_output_dir
     from eosp.fleet.aeossp import read_case
+    from eosp.fleet.check import require_feasible
     from eosp.fleet.geometry import Geometry
     from eosp.fleet.io import is_fleet_dir as owned
     from eosp.fleet.io import write_fleet, written_names
-    from eosp.fleet.opportunities import compute
+    from eosp.fleet.opportunities import compute, require_scan_memory
 
     if not is_aeossp_case(case_dir):
         raise InputError(case_dir, "not an aeossp case directory (mission.yaml, satellites.yaml, tasks.yaml)")
-    from eosp.fleet.check import require_feasible
-    from eosp.fleet.opportunities import require_scan_memory
-
     check_output_dir(out, overwrite=overwrite, owned=owned, what="fleet directory", names=written_names)
     t0 = time.perf_counter()
     fleet = read_case(case_dir)
