@@ -43,8 +43,10 @@ SOLVE_INSTANT_BYTES = 1000
 GRAPH_BYTES = 1000
 
 
-def require_solve_memory(fleet: Fleet, n_opportunities: int, where: object) -> None:
-    """Refuse (one line with the estimate) a fleet whose pass graphs cannot fit in memory, before building them."""
+def require_solve_memory(fleet: Fleet, n_opportunities: int, where: object, processes: int = 1) -> None:
+    """Refuse (one line with the estimate) a fleet whose pass graphs cannot fit in memory, before building them.
+    `processes`: processes on this machine that each build the geometry of the whole horizon and a share of the
+    graphs (the driver and local Ray actors; forked workers share the driver's)."""
     from math import gcd
 
     from eosp.fleet.opportunities import BASE_BYTES, SATELLITE_INSTANT_BYTES, instants
@@ -52,18 +54,19 @@ def require_solve_memory(fleet: Fleet, n_opportunities: int, where: object) -> N
 
     h = fleet.horizon
     n = instants(h.seconds, gcd(h.action_step_s, h.geometry_step_s))
-    need = BASE_BYTES + n * (SOLVE_INSTANT_BYTES + SATELLITE_INSTANT_BYTES * len(fleet.satellites)) \
-        + n_opportunities * GRAPH_BYTES
+    need = processes * (BASE_BYTES + n * SOLVE_INSTANT_BYTES) + n * SATELLITE_INSTANT_BYTES * len(fleet.satellites) \
+        + n_opportunities * GRAPH_BYTES * (2 if processes > 1 else 1)
+    on = f" in {processes} processes" if processes > 1 else ""
     require_memory(where, int(need), f"the pass graphs of {n_opportunities:,} opportunities of "
-                                     f"{len(fleet.satellites)} satellites over {h.seconds:,} s ({n:,} instants)")
+                                     f"{len(fleet.satellites)} satellites over {h.seconds:,} s ({n:,} instants){on}")
 
 
-def require_solvable(fleet: Fleet, opps: Opportunities, where: object, geo=None) -> None:
+def require_solvable(fleet: Fleet, opps: Opportunities, where: object, geo=None, processes: int = 1) -> None:
     """Before solving: the pass graphs' memory estimated and checked (:func:`require_solve_memory`), and the fleet
     feasible (:func:`eosp.fleet.check.require_feasible`)."""
     from eosp.fleet.check import require_feasible
 
-    require_solve_memory(fleet, len(opps), where)
+    require_solve_memory(fleet, len(opps), where, processes)
     require_feasible(fleet, where, geo)
 
 

@@ -19,7 +19,7 @@ import time
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
-from eosp.args import Parser, add_config_args, config_from_args, run_job  # noqa: E402
+from eosp.args import Parser, add_config_args, add_memory_arg, config_from_args, run_job  # noqa: E402
 from eosp.config import RayConfig, ranged, to_dict  # noqa: E402
 from eosp.fleet.generate import FleetGenConfig  # noqa: E402
 
@@ -137,11 +137,16 @@ def _main(argv: list[str] | None) -> int:
 
     p = Parser(prog=errors.PROG, description=__doc__.splitlines()[0])
     add_config_args(p, FleetSetConfig)
-    cfg = config_from_args(FleetSetConfig, p.parse_args(argv))
+    add_memory_arg(p)
+    ns = p.parse_args(argv)
+    cfg = config_from_args(FleetSetConfig, ns)
     if not cfg.out:
         raise InputError("--out", "required")
     require_findable(cfg.out, "--out")
-    m = run(cfg)
+    from eosp.memory import memory_ceiling
+
+    with memory_ceiling(ns.max_memory_gb):
+        m = run(cfg)
     print(f"[generate_fleets] {len(m['fleets'])} fleets -> {cfg.out} ({m['wall_seconds']:.1f} s)")
     return 0
 

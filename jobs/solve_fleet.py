@@ -34,7 +34,7 @@ from pathlib import Path
 
 import numpy as np
 
-from eosp.args import Parser, add_config_args, config_from_args, prefixed_config, run_job  # noqa: E402
+from eosp.args import Parser, add_config_args, add_memory_arg, config_from_args, prefixed_config, run_job  # noqa: E402
 from eosp.config import RayConfig, flatten  # noqa: E402
 from eosp.solvers.fleet import FleetConfig  # noqa: E402
 
@@ -312,7 +312,8 @@ def run(job: SolveFleetJob) -> dict:
     fp = fingerprint(fleet)
     run_dir = Path(job.run_dir)
     saved = _load_state(run_dir, fleet, fp) if run_dir.is_dir() else None
-    require_solvable(fleet, opps, f"--fleet-dir {job.fleet_dir}")
+    local_actors = job.fleet.workers if job.fleet.workers > 1 and not job.ray.address else 0
+    require_solvable(fleet, opps, f"--fleet-dir {job.fleet_dir}", processes=1 + local_actors)
     use_experiment(job.mlflow_uri, job.experiment)  # before the run dir: a store MLflow refuses leaves nothing behind
     make_run_dir(run_dir, replace=False, kind=RUN_KIND)
     (run_dir / META).write_text(json.dumps({"fingerprint": fp, "case_id": fleet.case_id,
@@ -379,6 +380,7 @@ def _main(argv: list[str] | None) -> int:
 
     p = Parser(prog=errors.PROG, description=__doc__.splitlines()[0])
     add_config_args(p, SolveFleetJob)
+    add_memory_arg(p)
     ns = p.parse_args(argv)
     job = config_from_args(SolveFleetJob, ns)
     for flag, value in (("--fleet-dir", job.fleet_dir), ("--run-dir", job.run_dir)):
@@ -396,7 +398,10 @@ def _main(argv: list[str] | None) -> int:
     check_mlflow(job.mlflow_uri)
     if job.ray.address and job.fleet.workers > 1:
         _require_ray_address(job.ray.address)
-    r = run(job)
+    from eosp.memory import memory_ceiling
+
+    with memory_ceiling(ns.max_memory_gb):
+        r = run(job)
     gap = "" if r["gap"] is None else f", gap {r['gap']:.4%}"
     print(f"[solve_fleet] {job.run_dir}: WCR {r['value']:.6f}, bound {r['bound']:.6f}{gap}; {r['rounds']} rounds, "
           f"{r['pass_solves']} pass solves on {r['workers']} worker(s), {r['faults']} lost to faults "

@@ -1449,18 +1449,19 @@ def test_mlflow_artifacts_go_next_to_the_sqlite_store(fleet_base, tmp_path, monk
 
 
 def count() -> tuple[int, int, list[str]]:
-    """(bad inputs tried, clean errors, the names of the others) over the table."""
+    """(bad inputs tried, clean errors, the names of the others) over the tables (single pass, then fleets)."""
     import tempfile
 
     with tempfile.TemporaryDirectory() as d:
-        base_dir = make_base(Path(d) / "base")
+        bases = (make_base(Path(d) / "base"), make_fleet_base(Path(d) / "fleet-base"))
         bad = []
-        for k, case in enumerate(CASES):
+        for k, (case, base_dir) in enumerate([(c, bases[0]) for c in CASES] + [(c, bases[1]) for c in FLEET_CASES]):
             ok, why = clean_error(case, fresh(base_dir, Path(d) / f"c{k}"))
             if not ok:
                 bad.append(f"{case.name}: {why}")
             shutil.rmtree(Path(d) / f"c{k}")
-    return len(CASES), len(CASES) - len(bad), bad
+    n = len(CASES) + len(FLEET_CASES)
+    return n, n - len(bad), bad
 
 
 if __name__ == "__main__":
