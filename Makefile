@@ -16,8 +16,10 @@ $(VENV)/.installed: pyproject.toml
 
 install: $(VENV)/.installed
 
+# the main job on small embedded defaults, then the kernels of the first `eosp` commands compiled (jobs/warmup.py)
 demo: install
 	$(PY) jobs/train.py --demo
+	$(PY) jobs/warmup.py
 
 # the tests without Ray on two xdist workers, then those with Ray one after another
 test: install

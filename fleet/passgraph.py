@@ -32,7 +32,7 @@ from eosp.fleet.geometry import NUMERICAL_EPS
 from eosp.fleet.model import Fleet
 from eosp.fleet.opportunities import Opportunities
 from eosp.fleet.slew import MARGIN_S, LineOfSight
-from eosp.graphs.discrete import DiscreteGraph, arc_to_acq
+from eosp.graphs.discrete import DiscreteGraph
 from eosp.instances.instance import Acquisitions, Instance
 
 
@@ -223,29 +223,3 @@ def priced_instance(pg: PassGraph, value: np.ndarray) -> PricedPass | None:
     return PricedPass(pg, inst, nodes, acqs)
 
 
-@numba.njit(cache=True)
-def _fifo_violations(node_acq, node_time, indptr, dst, acq_ptr):
-    count = 0
-    k = acq_ptr.shape[0] - 1
-    for a in range(k):
-        for u in range(acq_ptr[a], acq_ptr[a + 1] - 1):
-            v = u + 1  # the next start of the same task
-            for b in range(k):
-                if b == a:
-                    continue
-                later = arc_to_acq(indptr, dst, acq_ptr, v, b)
-                if later < 0:
-                    continue
-                early = arc_to_acq(indptr, dst, acq_ptr, u, b)
-                if early < 0 or node_time[early] > node_time[later]:
-                    count += 1
-    return count
-
-
-def fifo_violations(graph: DiscreteGraph) -> int:
-    """How often starting a task later lets another task start earlier (or at all) after it.
-
-    With none, following the earliest-start arcs loses no schedule: any feasible sequence of the pass's
-    tasks, re-timed to each task's earliest start after the previous one, stays feasible, so the exact
-    solver's optimum over the graph is the pass's optimum and its bound holds for the pass itself."""
-    return int(_fifo_violations(graph.node_acq, graph.node_time, graph.indptr, graph.dst, graph.acq_ptr))

@@ -324,9 +324,8 @@ def log_validation(result, metrics: dict, run_dir: Path, iteration: int, best: b
 
 def write_validation_reports(validator, agent, out_dir: Path, n: int = 2) -> list[Path]:
     """HTML reports (eosp.evaluation.html_report) of the first `n` validation instances: the policy's schedule
-    (greedy decoding, the reference) next to Greedy's when the data set kept the unpruned arcs Greedy needs,
-    each missed acquisition explained."""
-    from eosp.errors import InputError
+    (greedy decoding, the reference) next to Greedy's, each missed acquisition explained; only where the data
+    set kept the unpruned arcs that checking a schedule needs."""
     from eosp.evaluation.html_report import write_report
     from eosp.instances.schedule import from_internal_nodes
     from eosp.solvers.base import run_solver
@@ -334,15 +333,29 @@ def write_validation_reports(validator, agent, out_dir: Path, n: int = 2) -> lis
 
     pages = []
     for p in validator.prepared[:n]:
+        inst = with_unpruned_arcs(p.inst)
+        if inst is None:  # a data set stored without them: the report cannot check its schedules
+            continue
         nodes, _ = rollout(agent, p, validator.env_cfg)
-        scheds = {"policy": from_internal_nodes(p.inst, nodes)}
-        try:
-            scheds["greedy"] = from_internal_nodes(p.inst, run_solver("greedy", p.inst, mode=validator.mode).nodes)
-        except InputError:
-            pass
-        pages.append(write_report(p.inst, scheds, Path(out_dir) / f"{p.inst.name}.html", reference="policy",
+        scheds = {"policy": from_internal_nodes(inst, nodes),
+                  "greedy": from_internal_nodes(inst, run_solver("greedy", inst, mode=validator.mode).nodes)}
+        pages.append(write_report(inst, scheds, Path(out_dir) / f"{inst.name}.html", reference="policy",
                                   overwrite=True))
     return pages
+
+
+def with_unpruned_arcs(inst):
+    """`inst` with its unpruned arcs, read again from its shard when validation loaded only the pruned ones
+    (the reports check schedules on every arc); None when the shard does not store them."""
+    from eosp.shards.io import ShardReader
+
+    if inst.unpruned_graph is not None:
+        return inst
+    path, _, row = str(inst.meta.get("source", "")).rpartition("#")
+    if not path or not row.isdigit():
+        return None
+    full = ShardReader(path).read(int(row), unpruned=True)
+    return full if full.unpruned_graph is not None else None
 
 
 def log_validation_reports(validator, checkpoint: Path, run_dir: Path, n: int = 2) -> None:

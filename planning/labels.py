@@ -44,9 +44,9 @@ With no limit on the number of labels per node this is an exact dynamic
 program (:mod:`solvers.exact` runs it so, with Lagrangian bounds to cut labels).
 RAMP keeps only the ``beam`` best labels per node (by value, then by the smaller
 open set), so it is a heuristic: a label dropped for lack of room may have been
-the prefix of the optimum, and the default graph is the pruned one, which can
-lose optima because its pruning ignores the exclusion.  With ``beam=1`` it is
-the classic "best path per node, skip repeats".
+the prefix of the optimum (the default graph, the pruned one, keeps every
+schedule: :mod:`eosp.graphs.prune`).  With ``beam=1`` it is the classic "best
+path per node, skip repeats".
 
 When the time limit is reached the rest of the sweep keeps one label per node,
 so the result is always a complete schedule.

@@ -35,7 +35,7 @@ from eosp.memory import require_memory
 from eosp.graphs.discrete import DiscreteGraph, first_backward_arc
 from eosp.instances.instance import Acquisitions, Instance
 
-SCHEMA_VERSION = 1
+SCHEMA_VERSION = 2  # 2: pruned arcs by the lossless rule (eosp.graphs.prune); 1 had the paper's rule
 KIND = "eosp-instance-shard"
 
 _F64, _F32, _I32, _I64, _I8 = pa.float64(), pa.float32(), pa.int32(), pa.int64(), pa.int8()
@@ -147,6 +147,9 @@ class ShardReader:
         if md.get(b"eosp.kind") != KIND.encode():
             raise InputError(self.path, "not an EOSP shard (no 'eosp.kind' metadata): a foreign Parquet file?")
         version = md.get(b"eosp.schema_version", b"?").decode()
+        if version == "1":
+            raise InputError(self.path, "shard of schema version 1, whose pruned graphs can lose schedules (the "
+                                        "paper's pruning rule): build it again with jobs/build_shards.py")
         if version != str(SCHEMA_VERSION):
             raise InputError(self.path, f"unknown shard schema version {version!r} "
                                         f"(this version of eosp reads version {SCHEMA_VERSION})")

@@ -1,9 +1,9 @@
 """Exact solver: label-setting dynamic programming with Lagrangian bounds.
 
-The optimum is the best path from the source of the UNPRUNED discrete graph
-that visits each acquisition at most once (the pruned graph can lose optima:
-its pruning ignores that exclusion, and with non-FIFO transitions arriving
-earlier is not always better).
+The optimum is the best path from the source of the discrete graph that visits
+each acquisition at most once.  The sweep runs on the unpruned graph, the
+reference (the pruned graph has the same optimum, :mod:`eosp.graphs.prune`, and
+the fleet's pass graphs are not pruned).
 
 Why not an arc-flow integer program: it has one binary per arc (0.5M at 100
 acquisitions); HiGHS takes 1-23 s at 30 acquisitions where this DP takes

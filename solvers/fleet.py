@@ -41,7 +41,8 @@ from eosp.fleet.geometry import Geometry
 from eosp.fleet.greedy import Timeline, repair_battery, to_schedule
 from eosp.fleet.model import Fleet, Schedule
 from eosp.fleet.opportunities import Opportunities
-from eosp.fleet.passgraph import PassGraph, build_passes, fifo_violations, priced_instance
+from eosp.fleet.passgraph import PassGraph, build_passes, priced_instance
+from eosp.graphs.prune import fifo_violations
 from eosp.fleet.slew import LineOfSight
 
 PASS_SOLVERS = ("greedy", "ramp", "exact")
@@ -89,7 +90,7 @@ class Problem:
     weight: np.ndarray  # float64 [tasks]
     task_passes: list[np.ndarray]  # passes holding each task
     pass_time: np.ndarray  # (first start, last end) of each pass, seconds
-    fifo_violations: int = 0  # see eosp.fleet.passgraph.fifo_violations: 0 makes the pass optima the passes'
+    fifo_violations: int = 0  # see eosp.graphs.prune.fifo_violations: 0 makes the pass optima the passes'
     build_s: float = 0.0
 
     @classmethod
@@ -532,7 +533,7 @@ class Coordinator:
     @property
     def bound(self) -> float:
         """The best proven bound: the Lagrangian one when every pass term of a price round was proven (exact pass
-        solver) and every pass graph is FIFO (:func:`eosp.fleet.passgraph.fifo_violations`), else the
+        solver) and every pass graph is FIFO (:func:`eosp.graphs.prune.fifo_violations`), else the
         conflict-free bound (every task that has an opportunity, served once)."""
         return self.best_bound
 

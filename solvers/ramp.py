@@ -4,8 +4,8 @@ The paper's reference "RAMP" is a Dijkstra search in the discrete graph that is 
 exclusion between the nodes of one acquisition.  Here it is the forward label sweep of
 :func:`eosp.planning.labels.label_search` (the nodes by time, labels carrying their open acquisitions) with
 ``beam`` labels per node: a heuristic (a label dropped for lack of room may have been the prefix of the
-optimum, and the default graph is the pruned one, which can lose optima because its pruning ignores the
-exclusion).  With ``beam=1`` it is the classic "best path per node, skip repeats"; with no beam, the exact
+optimum; the default graph, the pruned one, keeps every schedule: :mod:`eosp.graphs.prune`).  With ``beam=1``
+it is the classic "best path per node, skip repeats"; with no beam, the exact
 solver's dynamic program (:mod:`eosp.solvers.exact`).
 
 When the time limit is reached the rest of the sweep keeps one label per node, so the result is always a
@@ -30,7 +30,7 @@ class RampConfig(SolverConfig):
     beam: int = ranged(4, 1)
     """Labels kept per node (1: the classic best path per node, skipping repeats)."""
     pruned: bool = True
-    """Search the pruned graph (false: the unpruned one, slower, never worse at equal beam)."""
+    """Search the pruned graph (false: the unpruned one, slower; both hold every schedule)."""
 
     NAME = "ramp"
 

@@ -14,11 +14,12 @@ from eosp.graphs.discrete import DiscreteGraph, acq_ptr_from_node_acq
 from eosp.instances.instance import Acquisitions, Instance
 
 
-def transition(base: np.ndarray, i: int, j: int, t_end: float) -> float:
-    return float(base[i, j] * (1.0 + 0.3 * np.sin(t_end / 37.0 + i - j)))
+def transition(base: np.ndarray, i: int, j: int, t_end: float, period: float = 37.0) -> float:
+    """With the default period the transition changes slower than time (FIFO); with a short one, faster."""
+    return float(base[i, j] * (1.0 + 0.3 * np.sin(t_end / period + i - j)))
 
 
-def synthetic_instance(n: int, seed: int, horizon: float = 400.0, step: float = 4.0) -> Instance:
+def synthetic_instance(n: int, seed: int, horizon: float = 400.0, step: float = 4.0, period: float = 37.0) -> Instance:
     rng = np.random.default_rng(seed)
     dur = np.round(rng.uniform(3.0, 12.0, n), 1)
     start = np.round(rng.uniform(0.0, horizon - 60.0, n), 2)
@@ -43,7 +44,7 @@ def synthetic_instance(n: int, seed: int, horizon: float = 400.0, step: float = 
                 row.append(int(acq_ptr[j]))
                 continue
             fin = node_time[u] + dur[i]
-            ready = fin + transition(base, i, j, fin)
+            ready = fin + transition(base, i, j, fin, period)
             for w in range(acq_ptr[j], acq_ptr[j + 1]):
                 if node_time[w] >= ready:
                     row.append(w)

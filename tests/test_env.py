@@ -485,7 +485,7 @@ def test_label_plan_values_each_action_by_a_chain_the_environment_can_play(rewar
             nodes, total, worth = env.completion()  # the plan the observation computed, read back
             np.testing.assert_array_equal(nodes, plan_completion(eg, env.state.ep, s.prepared.cand, env._plan)[1])
             assert sorted(eg.node_acq[nodes]) == sorted(np.flatnonzero(x[:n, PLAN]))
-            assert x[eg.node_acq[nodes[0]], PLAN + 1] == 1 and v[eg.node_acq[nodes[0]]] == best
+            assert x[eg.node_acq[nodes[0]], PLAN + 1] == 1 and v[eg.node_acq[nodes[0]]] == pytest.approx(best, rel=1e-12)
             assert worth == pytest.approx(best + (len(env.path()) if reward == "unitary" else value), rel=1e-12)
             assert total == pytest.approx(value + inst.acqs.utility[eg.node_acq[nodes]].sum(), rel=1e-12)
             obs, *_ = env.step(int(rng.choice(allowed)))
@@ -516,3 +516,22 @@ def test_rollout_features_value_each_action_by_greedys_completion_after_it(rewar
             assert_rollout_columns(x, v, reward)
             assert np.all(x[np.setdiff1d(np.arange(n), allowed), PLAN + 3:] == 0)
             obs, *_ = env.step(int(rng.choice(allowed)))
+
+
+@settings(max_examples=20, deadline=None)
+@given(seed=st.integers(0, 100_000), synthetic=st.booleans())
+def test_an_episode_never_ends_while_an_acquisition_is_still_insertable(seed, synthetic):
+    """Random allowed actions on the pruned graph until the mask is empty: then no unscheduled acquisition has
+    an arc of the unpruned graph from the last scheduled node (the pruning removes no way on)."""
+    rng = np.random.default_rng(seed)
+    inst = (synthetic_instance(int(rng.integers(3, 10)), seed, period=float(rng.choice([37.0, 2.0]))) if synthetic
+            else generated(str(rng.choice(["uniform", "clusters", "conflict"])), int(rng.integers(10, 40)), seed % 50))
+    env = make_env(inst)
+    env.reset(seed=seed)
+    terminated = False
+    while not terminated:
+        _, _, terminated, _, _ = env.step(int(rng.choice(np.flatnonzero(env.action_mask()))))
+    g, path = inst.unpruned(), env.path()
+    done = set(g.node_acq[path].tolist())
+    after = g.node_acq[g.dst[g.indptr[path[-1]]:g.indptr[path[-1] + 1]]]
+    assert not set(after.tolist()) - done

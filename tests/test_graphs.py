@@ -5,9 +5,12 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from eosp.config import family_config
 from eosp.graphs.continuous import continuous_graph
-from eosp.graphs.prune import prune
-from eosp.instances.generator import scenario_of
+from eosp.graphs.prune import fifo_violations, paper_prune, prune
+from eosp.instances.generator import generate, scenario_of
+from eosp.planning.labels import label_search
+from eosp.solvers.base import objective_weights
 from eosp.sim.geometry import rotation_angle_deg
 from eosp.sim.slew import slew_times
 from tests.conftest import generated
@@ -65,16 +68,50 @@ def test_source_reaches_first_node_of_every_acquisition():
     np.testing.assert_array_equal(g.dst[g.indptr[0]:g.indptr[1]], g.acq_ptr[:-1])
 
 
-def _insertable(g, d, u, v):
-    """Brute force: some k != acq(v) with u -> (k, t_k) -> (j, t') and t' <= t_v."""
+def _gap(g, d):
+    """Brute force: the smallest transition t_dst - (t_src + d_src) over the arcs not out of the source."""
+    gaps = [g.node_time[w] - g.node_time[u] - d[g.node_acq[u]]
+            for u in range(1, g.n_nodes) for w in g.dst[g.indptr[u]:g.indptr[u + 1]]]
+    return max(0.0, min(gaps, default=0.0))
+
+
+def _fifo_violations(g):
+    """Brute force: pairs (a later start v of an acquisition, an acquisition b) where v reaches b and the
+    start just before v does not, or reaches it later."""
+    def arc(u, b):
+        row = g.dst[g.indptr[u]:g.indptr[u + 1]]
+        hit = row[g.node_acq[row] == b]
+        return int(hit[0]) if hit.size else -1
+
+    count = 0
+    for v in range(2, g.n_nodes):
+        u = v - 1
+        if g.node_acq[u] != g.node_acq[v]:
+            continue
+        for b in range(g.n_acq):
+            late = arc(v, b)
+            early = arc(u, b)
+            count += late >= 0 and (early < 0 or g.node_time[early] > g.node_time[late])
+    return count
+
+
+def _witness(g, d, u, v, gap, fifo):
+    """Brute force of the lossless rule: some k != acq(v) that no path visits before u nor after v, with
+    u -> (k, t_k) -> (j, t') and t' = t_v (t' <= t_v when the graph is FIFO)."""
     j = g.node_acq[v]
     for a in range(g.indptr[u], g.indptr[u + 1]):
-        k = g.dst[a]
-        if g.node_acq[k] == j:
+        vk = g.dst[a]
+        k = g.node_acq[vk]
+        if k == j:
             continue
-        row = g.dst[g.indptr[k]:g.indptr[k + 1]]
+        first, last = g.node_time[g.acq_ptr[k]], g.node_time[g.acq_ptr[k + 1] - 1]
+        if u != 0 and first + d[k] + gap <= g.node_time[u]:
+            continue  # k could have been visited before u
+        if last >= g.node_time[v] + d[j] + gap:
+            continue  # k could be visited after v
+        row = g.dst[g.indptr[vk]:g.indptr[vk + 1]]
         hit = row[g.node_acq[row] == j]
-        if hit.size and g.node_time[hit[0]] <= g.node_time[v]:
+        if hit.size and (g.node_time[hit[0]] == g.node_time[v] or (fifo and g.node_time[hit[0]] < g.node_time[v])):
             return True
     return False
 
@@ -82,22 +119,65 @@ def _insertable(g, d, u, v):
 def _check_pruning(inst):
     g, d = inst.unpruned(), inst.acqs.duration
     p = prune(g, d)
+    fifo = _fifo_violations(g)
+    assert fifo_violations(g) == fifo
+    gap = _gap(g, d)
     kept = set(zip(p.src().tolist(), p.dst.tolist()))
     assert kept <= set(zip(g.src().tolist(), g.dst.tolist()))
     for u, v in zip(g.src().tolist(), g.dst.tolist()):
-        assert ((u, v) not in kept) == _insertable(g, d, u, v), (u, v)
+        assert ((u, v) not in kept) == _witness(g, d, u, v, gap, fifo == 0), (u, v)
+    # the paper's rule removes every arc this one removes, and more
+    paper = set(zip(*(lambda q: (q.src().tolist(), q.dst.tolist()))(paper_prune(g, d))))
+    assert paper <= kept
     return p
 
 
-def test_pruning_removes_exactly_the_arcs_with_an_insertable_k():
+def test_pruning_removes_exactly_the_arcs_with_a_witness():
     p = _check_pruning(generated("clusters", 10, 1, 4.0))
-    assert p.n_arcs > 0
+    assert 0 < p.n_arcs < generated("clusters", 10, 1, 4.0).unpruned().n_arcs
 
 
 @settings(max_examples=25, deadline=None)
-@given(n=st.integers(2, 7), seed=st.integers(0, 10_000))
-def test_pruning_property_on_synthetic_instances(n, seed):
-    _check_pruning(synthetic_instance(n, seed))
+@given(n=st.integers(2, 7), seed=st.integers(0, 10_000), period=st.sampled_from([37.0, 2.0]))
+def test_pruning_property_on_synthetic_instances(n, seed, period):
+    _check_pruning(synthetic_instance(n, seed, period=period))
+
+
+def test_fast_drifting_transitions_are_not_fifo():
+    """A transition that drifts faster than time breaks FIFO: the rule's fallback (same node only) is tested."""
+    assert not any(fifo_violations(synthetic_instance(7, s).unpruned()) for s in range(10))
+    assert sum(fifo_violations(synthetic_instance(7, s, period=2.0).unpruned()) > 0 for s in range(10)) >= 5
+
+
+def _lossless(inst):
+    g, pg = inst.unpruned(), inst.pruned()
+    for mode in ("utility", "unitary"):
+        w = objective_weights(inst, mode)
+        assert label_search(pg, w, beam=0).value == label_search(g, w, beam=0).value, mode
+
+
+@settings(max_examples=40, deadline=None)
+@given(n=st.integers(2, 9), seed=st.integers(0, 100_000), period=st.sampled_from([37.0, 2.0]))
+def test_the_pruned_graph_keeps_the_optimum_of_synthetic_instances(n, seed, period):
+    """The MDP's best (the exact DP on the pruned graph) is the unpruned optimum, FIFO or not."""
+    _lossless(synthetic_instance(n, seed, period=period))
+
+
+@settings(max_examples=15, deadline=None)
+@given(n=st.integers(10, 40), seed=st.integers(0, 100_000), family=st.sampled_from(["uniform", "clusters", "conflict"]),
+       slew=st.sampled_from(["piecewise", "bang_coast_bang"]))
+def test_the_pruned_graph_keeps_the_optimum_of_generated_instances(n, seed, family, slew):
+    _lossless(generate(family_config(family, n, seed, satellite={"slew_model": slew})))
+
+
+def test_the_papers_rule_loses_what_this_one_keeps():
+    """Seed 900002 at 50 acquisitions: the paper's rule leaves the MDP about a third of the optimum."""
+    inst = generate(family_config("uniform", 50, 900002))
+    g, w = inst.unpruned(), objective_weights(inst, "utility")
+    opt = label_search(g, w, beam=0).value
+    assert label_search(paper_prune(g, inst.acqs.duration), w, beam=0).value < 0.5 * opt
+    assert label_search(inst.pruned(), w, beam=0).value == opt
+    assert label_search(inst.pruned(), w, beam=4).value >= label_search(g, w, beam=4).value
 
 
 @settings(max_examples=25, deadline=None)

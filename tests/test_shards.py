@@ -100,3 +100,14 @@ def test_shard_too_large_for_memory_fails_in_one_line(shard, monkeypatch):
     with pytest.raises(InputError, match="too large for the memory available") as info:
         ShardReader(shard[0]).read(0)
     assert "needs about" in str(info.value) and "\n" not in str(info.value)
+
+
+def test_shards_pruned_by_the_papers_rule_are_refused(shard, tmp_path):
+    path, _ = shard
+    t = pq.read_table(path)
+    md = dict(t.schema.metadata)
+    md[b"eosp.schema_version"] = b"1"
+    p = tmp_path / "v1.parquet"
+    pq.write_table(t.replace_schema_metadata(md), p)
+    with pytest.raises(InputError, match="schema version 1.*build it again"):
+        ShardReader(p)

@@ -117,3 +117,28 @@ def test_validation_reports(tmp_path):
     text = pages[0].read_text()
     assert "policy <small>(reference)</small>" in text and "<tr data-schedule='greedy'" in text
     assert "id='missed-section'" in text
+
+
+@pytest.mark.parametrize("stored", [True, False])
+def test_validation_reports_of_a_data_set_read_with_its_pruned_arcs(tmp_path, stored):
+    """Validation reads its shards without the unpruned arcs; the reports read them back when the shard has
+    them (the demo's case: a page each, no warning) and skip the instances whose shard does not."""
+    from eosp.config import EnvConfig, ModelConfig
+    from eosp.envs.sources import prepare_instance
+    from eosp.models.agent import EOSPAgent
+    from eosp.jobs.train import write_validation_reports
+    from eosp.shards.io import read_instances, write_shard
+    from eosp.training.validation import Validator
+    from tests.conftest import generated
+
+    shard = write_shard(tmp_path / "val.parquet", [generated("uniform", 12, s) for s in (100, 101)],
+                        include_unpruned=stored)
+    v = Validator.__new__(Validator)
+    v.env_cfg, v.mode = EnvConfig(), "utility"
+    v.prepared = [prepare_instance(i, True) for i in read_instances([str(shard)], unpruned=False)]
+    assert all(p.inst.unpruned_graph is None for p in v.prepared)
+    pages = write_validation_reports(v, EOSPAgent(ModelConfig(hidden_dim=8, n_layers=1, heads=1)).eval(),
+                                     tmp_path / "reports", 2)
+    assert len(pages) == (2 if stored else 0)
+    if stored:
+        assert "<tr data-schedule='greedy'" in pages[0].read_text()
