@@ -406,7 +406,7 @@ def _main(argv: list[str] | None) -> int:
     print(f"[solve_fleet] {job.run_dir}: WCR {r['value']:.6f}, bound {r['bound']:.6f}{gap}; {r['rounds']} rounds, "
           f"{r['pass_solves']} pass solves on {r['workers']} worker(s), {r['faults']} lost to faults "
           f"({r['wall_s']:.1f} s)")
-    if r["interrupted"]:  # Ctrl-C: the best schedule so far was checked and written with the run's files
+    if r.get("interrupted"):  # Ctrl-C: the best schedule so far was checked and written with the run's files
         print(f"{errors.PROG}: interrupted: wrote the best valid schedule so far to "
               f"{Path(job.run_dir) / 'schedule.parquet'} (WCR {r['value']:.6f})", file=sys.stderr, flush=True)
         return 130
