@@ -277,6 +277,7 @@ class Search:
     def __init__(self, f: OneraFleet, seed: int = 0):
         self.f = f
         self.plan = Plan(f)
+        self.moves = 0  # moves tried so far (also when Ctrl-C stops the search)
         o, r = f.observations, f.requests
         self.rng = random.Random(seed)
         first = r.first.tolist()
@@ -401,6 +402,7 @@ class Search:
         moves = 0
         while time.perf_counter() < deadline and obj < target - 1e-9:
             moves += 1
+            self.moves += 1
             s = rng.randrange(n_sat)
             rows = self.sat_rows[s]
             if not len(rows):
@@ -461,12 +463,12 @@ def solve(f: OneraFleet, cfg: OneraConfig | None = None, greedy_only: bool = Fal
     search_time = cfg.time_limit if not greedy_only else 0.0
     reserve = min(cfg.bound_time_limit, search_time / 2) if cfg.bound == "lp" else 0.0
     trace: list = []
-    moves, interrupted = 0, False
+    interrupted = False
     try:
         search.greedy()
         trace.append((time.perf_counter() - t0, search.objective))
         if search_time > 0:
-            moves = search.lns(t0 + search_time - reserve, cfg.span_s, trace, t0, target=float(search.best.sum()))
+            search.lns(t0 + search_time - reserve, cfg.span_s, trace, t0, target=float(search.best.sum()))
     except KeyboardInterrupt:
         interrupted = True
     if not trace:
@@ -492,6 +494,6 @@ def solve(f: OneraFleet, cfg: OneraConfig | None = None, greedy_only: bool = Fal
     gap = None if bound is None else (0.0 if bound <= 0 else max(0.0, (bound - value) / bound))
     t99 = next((t for t, v in trace if v >= 0.99 * value - 1e-12), trace[-1][0])
     return Solution(schedule, value, bound, gap,
-                    {"greedy_value": greedy_value, "moves": moves, "seconds_search": t_search,
+                    {"greedy_value": greedy_value, "moves": search.moves, "seconds_search": t_search,
                      "seconds": time.perf_counter() - t0, "time_to_99": t99, "bound_source": source,
                      "trace": trace, "interrupted": interrupted})
