@@ -165,26 +165,22 @@ def satellite_fault(sats: Satellites) -> tuple[int, str, str] | None:
     directory's columns (= the aeossp keys); None when all are in range.  Checked where a fleet enters (the aeossp
     reader, the fleet directory reader), so that no solver divides by a zero slew rate or looks past the horizon."""
     a, b = sats.attitude, sats.battery
-    checks = (
-        ("norad_catalog_id", (sats.tle.norad < 0) | (sats.tle.norad > NORAD_MAX), f"must lie in [0, {NORAD_MAX}]"),
-        ("max_off_nadir_deg", ~((a.max_off_nadir_deg >= -EPS) & (a.max_off_nadir_deg <= 90)), "must lie in [0, 90]"),
-        ("max_slew_velocity_deg_per_s", ~(a.max_rate_deg_s > 0), "must be > 0"),
-        ("max_slew_acceleration_deg_per_s2", ~(a.max_acc_deg_s2 > 0), "must be > 0"),
-        ("settling_time_s", ~(a.settling_s >= -EPS), "must be >= 0"),
-        ("battery_capacity_wh", ~(b.capacity_wh > 0), "must be > 0"),
-        ("initial_battery_wh", ~((b.initial_wh >= -EPS) & (b.initial_wh <= b.capacity_wh + EPS)),
+    return _first_fault((
+        ("norad_catalog_id", sats.tle.norad, lambda v: (v >= 0) & (v <= NORAD_MAX), f"must lie in [0, {NORAD_MAX}]"),
+        ("max_off_nadir_deg", a.max_off_nadir_deg, lambda v: (v >= -EPS) & (v <= 90), "must lie in [0, 90]"),
+        ("max_slew_velocity_deg_per_s", a.max_rate_deg_s, lambda v: v > 0, "must be > 0"),
+        ("max_slew_acceleration_deg_per_s2", a.max_acc_deg_s2, lambda v: v > 0, "must be > 0"),
+        ("settling_time_s", a.settling_s, lambda v: v >= -EPS, "must be >= 0"),
+        ("battery_capacity_wh", b.capacity_wh, lambda v: v > 0, "must be > 0"),
+        ("initial_battery_wh", b.initial_wh, lambda v: (v >= -EPS) & (v <= b.capacity_wh + EPS),
          "must lie within [0, battery_capacity_wh]"),
-        ("idle_power_w", ~(b.idle_w >= -EPS), "must be >= 0"), ("imaging_power_w", ~(b.imaging_w >= -EPS), "must be >= 0"),
-        ("slew_power_w", ~(b.slew_w >= -EPS), "must be >= 0"),
-        ("sunlit_charge_power_w", ~(b.sunlit_w >= -EPS), "must be >= 0"),
-        ("sensor_type", ~np.isin(sats.sensor.astype(str), SENSORS), f"must be one of {', '.join(SENSORS)}"),
-    )
-    return _first_fault(checks, {"norad_catalog_id": sats.tle.norad, "max_off_nadir_deg": a.max_off_nadir_deg,
-                                 "max_slew_velocity_deg_per_s": a.max_rate_deg_s,
-                                 "max_slew_acceleration_deg_per_s2": a.max_acc_deg_s2, "settling_time_s": a.settling_s,
-                                 "battery_capacity_wh": b.capacity_wh, "initial_battery_wh": b.initial_wh,
-                                 "idle_power_w": b.idle_w, "imaging_power_w": b.imaging_w, "slew_power_w": b.slew_w,
-                                 "sunlit_charge_power_w": b.sunlit_w, "sensor_type": sats.sensor})
+        ("idle_power_w", b.idle_w, lambda v: v >= -EPS, "must be >= 0"),
+        ("imaging_power_w", b.imaging_w, lambda v: v >= -EPS, "must be >= 0"),
+        ("slew_power_w", b.slew_w, lambda v: v >= -EPS, "must be >= 0"),
+        ("sunlit_charge_power_w", b.sunlit_w, lambda v: v >= -EPS, "must be >= 0"),
+        ("sensor_type", sats.sensor, lambda v: np.isin(v.astype(str), SENSORS),
+         f"must be one of {', '.join(SENSORS)}"),
+    ))
 
 
 def task_fault(tasks: Tasks, horizon: Horizon) -> tuple[int, str, str] | None:
@@ -193,27 +189,24 @@ def task_fault(tasks: Tasks, horizon: Horizon) -> tuple[int, str, str] | None:
     each finite, their sum is not, and every metric is that sum's fraction)."""
     step, h = horizon.action_step_s, horizon.seconds
 
-    def off_grid(v: np.ndarray) -> np.ndarray:
-        return np.abs(v / step - np.round(v / step)) > 1e-9
+    def on_grid(v: np.ndarray) -> np.ndarray:
+        return np.abs(v / step - np.round(v / step)) <= 1e-9
 
-    checks = (
-        ("latitude_deg", ~((tasks.lat_deg >= -90) & (tasks.lat_deg <= 90)), "must lie in [-90, 90]"),
-        ("longitude_deg", ~((tasks.lon_deg >= -180) & (tasks.lon_deg <= 180)), "must lie in [-180, 180]"),
-        ("altitude_m", ~((tasks.alt_m >= ALTITUDE_M[0]) & (tasks.alt_m <= ALTITUDE_M[1])),
+    fault = _first_fault((
+        ("latitude_deg", tasks.lat_deg, lambda v: (v >= -90) & (v <= 90), "must lie in [-90, 90]"),
+        ("longitude_deg", tasks.lon_deg, lambda v: (v >= -180) & (v <= 180), "must lie in [-180, 180]"),
+        ("altitude_m", tasks.alt_m, lambda v: (v >= ALTITUDE_M[0]) & (v <= ALTITUDE_M[1]),
          f"must lie in [{ALTITUDE_M[0]:g}, {ALTITUDE_M[1]:g}] (a place on the Earth)"),
-        ("release_s", ~((tasks.release_s >= 0) & (tasks.release_s <= h)) | off_grid(tasks.release_s),
+        ("release_s", tasks.release_s, lambda v: (v >= 0) & (v <= h) & on_grid(v),
          f"must lie in the horizon [0, {h}] on the {step} s action grid"),
-        ("due_s", ~((tasks.due_s > tasks.release_s) & (tasks.due_s <= h)) | off_grid(tasks.due_s),
+        ("due_s", tasks.due_s, lambda v: (v > tasks.release_s) & (v <= h) & on_grid(v),
          f"must lie after release_s, in the horizon [0, {h}], on the {step} s action grid"),
-        ("duration_s", ~((tasks.duration_s > 0) & (tasks.duration_s <= tasks.due_s - tasks.release_s))
-         | off_grid(tasks.duration_s), f"must be > 0, a multiple of {step} s and fit in the window"),
-        ("weight", ~(tasks.weight > 0), "must be > 0"),
-        ("sensor_type", ~np.isin(tasks.sensor.astype(str), SENSORS), f"must be one of {', '.join(SENSORS)}"),
-    )
-    values = {"latitude_deg": tasks.lat_deg, "longitude_deg": tasks.lon_deg, "altitude_m": tasks.alt_m,
-              "release_s": tasks.release_s, "due_s": tasks.due_s, "duration_s": tasks.duration_s,
-              "weight": tasks.weight, "sensor_type": tasks.sensor}
-    fault = _first_fault(checks, values)
+        ("duration_s", tasks.duration_s, lambda v: (v > 0) & (v <= tasks.due_s - tasks.release_s) & on_grid(v),
+         f"must be > 0, a multiple of {step} s and fit in the window"),
+        ("weight", tasks.weight, lambda v: v > 0, "must be > 0"),
+        ("sensor_type", tasks.sensor, lambda v: np.isin(v.astype(str), SENSORS),
+         f"must be one of {', '.join(SENSORS)}"),
+    ))
     with np.errstate(over="ignore"):
         total = np.sum(tasks.weight)
     if fault is None and len(tasks) and not np.isfinite(total):
@@ -221,13 +214,14 @@ def task_fault(tasks: Tasks, horizon: Horizon) -> tuple[int, str, str] | None:
     return fault
 
 
-def _first_fault(checks, values: dict) -> tuple[int, str, str] | None:
+def _first_fault(checks) -> tuple[int, str, str] | None:
+    """The first (row, name, reason) of `checks`, each (name, values, ok(values) -> bool mask, reason)."""
     with np.errstate(invalid="ignore", over="ignore"):
-        for name, bad, reason in checks:
-            rows = np.flatnonzero(bad)
+        for name, values, ok, reason in checks:
+            rows = np.flatnonzero(~ok(values))
             if len(rows):
                 r = int(rows[0])
-                got = values[name][r]
+                got = values[r]
                 return r, name, f"{reason}, got {got.item() if hasattr(got, 'item') else got!r}"
     return None
 

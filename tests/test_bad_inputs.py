@@ -1145,7 +1145,8 @@ def _gen(r: Path, *extra) -> list:
 def fleet_cases() -> list[Case]:
     """The 16 defect classes and the weak classes of issue 55, each through the command or job that met it."""
     S, I, G = "eosp solve", "eosp import", "eosp generate"  # noqa: N806
-    J, GJ = dict(job="solve_fleet", prog="solve_fleet.py"), dict(job="generate_fleets", prog="generate_fleets.py")  # noqa: N806
+    J = dict(job="solve_fleet", prog="solve_fleet.py")  # noqa: N806
+    GJ = dict(job="generate_fleets", prog="generate_fleets.py")  # noqa: N806
     att = "satellites.yaml"
     return [
         # 1. integers too large for C types
