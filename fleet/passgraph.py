@@ -23,6 +23,7 @@ drops tasks whose priced value is not positive (their nodes and arcs) and return
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numba
@@ -32,8 +33,10 @@ from eosp.fleet.geometry import NUMERICAL_EPS
 from eosp.fleet.model import Fleet
 from eosp.fleet.opportunities import Opportunities
 from eosp.fleet.slew import MARGIN_S, LineOfSight
-from eosp.graphs.discrete import DiscreteGraph
+from eosp.graphs.discrete import DiscreteGraph, arc_to_acq
+from eosp.graphs.prune import fifo_violations
 from eosp.instances.instance import Acquisitions, Instance
+from eosp.planning.labels import label_search
 
 
 # Memory of a fleet's pass graphs and their geometry (Problem.build, a worker's graphs): per base-grid instant the
@@ -83,6 +86,8 @@ class PassGraph:
     rows: np.ndarray  # int64 [N - 1]
     duration: np.ndarray  # float64 [k]
     graph: DiscreteGraph
+    bound_graph: DiscreteGraph | None = None  # see bound_problem(); None: `graph` serves the bound as it is
+    bound_provable: bool = True  # False: the bound graph is not FIFO, no pass bound can be proven on it
 
     @property
     def n_tasks(self) -> int:
@@ -107,9 +112,10 @@ def _need(u, v, rate, acc, settle):
 
 
 @numba.njit(cache=True)
-def _arcs(acq_ptr, node_time, node_end, los_start, los_end, nadir, slew, margin):
-    """CSR arcs: from each node, to the earliest node of every other acquisition that can follow it.
-    `slew` = (max rate, max acceleration, settling); rows come out sorted by destination."""
+def _arcs(acq_ptr, node_time, node_end, los_start, los_end, nadir, slew, margin, repeats):
+    """CSR arcs: from each node, to the earliest node of every other acquisition that can follow it (and of its
+    own acquisition, a later start, when `repeats`).  `slew` = (max rate, max acceleration, settling); rows come
+    out sorted by destination."""
     rate, acc, settle = slew[0], slew[1], slew[2]
     n = node_time.shape[0]
     k = acq_ptr.shape[0] - 1
@@ -128,7 +134,7 @@ def _arcs(acq_ptr, node_time, node_end, los_start, los_end, nadir, slew, margin)
         while u >= acq_ptr[acq + 1]:
             acq += 1
         for b in range(k):
-            if b == acq:
+            if b == acq and not repeats:
                 continue
             lo, hi = acq_ptr[b], acq_ptr[b + 1]
             while lo < hi:  # first node of b starting after u ends
@@ -166,10 +172,72 @@ def build_pass(fleet: Fleet, opps: Opportunities, los: LineOfSight, p: int, offs
     nadir = np.vstack([np.zeros((1, 3)), los.nadir(sat, start)])
     att = fleet.satellites.attitude
     slew = np.array([att.max_rate_deg_s[sat], att.max_acc_deg_s2[sat], att.settling_s[sat]], dtype=np.float64)
-    indptr, dst = _arcs(acq_ptr, node_time, node_end, los_start, los_end, nadir, slew, MARGIN_S + NUMERICAL_EPS)
+    args = (acq_ptr, node_time, node_end, los_start, los_end, nadir, slew)
     node_acq = np.r_[-1, local].astype(np.int32)
-    graph = DiscreteGraph(node_acq, node_time, indptr, dst, acq_ptr)
-    return PassGraph(p, sat, tasks.astype(np.int32), rows.astype(np.int64), duration, graph)
+    graph = DiscreteGraph(node_acq, node_time, *_arcs(*args, MARGIN_S + NUMERICAL_EPS, False), acq_ptr)
+    loose = DiscreteGraph(node_acq, node_time, *_arcs(*args, -(MARGIN_S + NUMERICAL_EPS), True), acq_ptr)
+    fifo = fifo_violations(loose) == 0
+    if fifo and _same_arcs(_without_repeats(loose), graph) and bridge_triples(loose) == 0:
+        loose = None  # the pass graph serves the bound (bound_problem)
+    return PassGraph(p, sat, tasks.astype(np.int32), rows.astype(np.int64), duration, graph, loose, fifo)
+
+
+@numba.njit(cache=True)
+def _bridge_triples(node_acq, node_time, indptr, dst, acq_ptr):
+    count = 0
+    for u in range(node_acq.shape[0]):
+        for a in range(indptr[u], indptr[u + 1]):
+            v = dst[a]
+            for b in range(indptr[v], indptr[v + 1]):
+                x = dst[b]
+                y = arc_to_acq(indptr, dst, acq_ptr, u, node_acq[x])
+                if y < 0 or node_time[y] > node_time[x]:
+                    count += 1
+    return count
+
+
+def bridge_triples(graph: DiscreteGraph) -> int:
+    """Consecutive arcs u -> v -> x after which u has no arc to x's acquisition arriving by x's time: places
+    where leaving v out of a schedule can break it (v a bridge)."""
+    return int(_bridge_triples(graph.node_acq, graph.node_time, graph.indptr, graph.dst, graph.acq_ptr))
+
+
+def _without_repeats(graph: DiscreteGraph) -> DiscreteGraph:
+    src = graph.src()
+    keep = graph.node_acq[src] != graph.node_acq[graph.dst]
+    indptr = np.r_[0, np.cumsum(np.bincount(src[keep], minlength=graph.n_nodes))].astype(np.int64)
+    return graph.with_arcs(indptr, graph.dst[keep])
+
+
+def _same_arcs(a: DiscreteGraph, b: DiscreteGraph) -> bool:
+    return np.array_equal(a.indptr, b.indptr) and np.array_equal(a.dst, b.dst)
+
+
+def bound_problem(pg: PassGraph, value: np.ndarray, time_limit: float | None = None) -> float:
+    """An upper bound of what pass `pg` can serve under prices, for the fleet's Lagrangian bound: the best, over
+    every sequence of the pass's opportunities the verifier accepts (tasks observed again included, each
+    credited once), of the sum of ``max(0, value[a])`` over the tasks it observes; inf when none is proven.
+
+    Why it needs care: the verifier's slew rule is not hereditary (an observation that tracks its target turns
+    the line of sight for free, so A -> B -> C can be valid while A -> C is too short), so a task whose priced
+    value is not positive can still be needed as a bridge, and a task observed twice can be one too.  The
+    *loose* graph has an arc for every transition the verifier accepts (its 1e-9 s tolerance and our slew
+    numbers' last digits on the accepting side: arcs need the slew minus MARGIN_S + 1e-9 s, where the
+    schedule's graph asks for that much more), earliest starts only, and arcs to later starts of the same task.
+    When it is FIFO, any sequence the verifier accepts, re-timed to each task's earliest start after the
+    previous one, is one of its paths; the label search with repeats over it, weights ``max(0, value)``, is
+    then the best above.  When moreover it has no bridge triple (:func:`bridge_triples`) and, repeats aside,
+    equals the schedule's graph, leaving any observation out of a path keeps a path (by induction along it,
+    with FIFO), so the best is reached by a path of the schedule's graph over the tasks of positive value
+    alone: the pass's ordinary priced problem (:func:`priced_instance`), whose optimum the caller computes
+    anyway.  That case (``pg.bound_graph is None``) is not this function's to answer."""
+    if pg.bound_graph is None:
+        raise ValueError(f"pass {pg.pass_id}: its priced problem is its bound problem")
+    if not pg.bound_provable:
+        return math.inf
+    res = label_search(pg.bound_graph, np.maximum(np.asarray(value, dtype=np.float64), 0.0), beam=0,
+                       time_limit=time_limit, on_limit="stop", repeats=True)
+    return float(res.value) if res.complete else math.inf
 
 
 def build_passes(fleet: Fleet, opps: Opportunities, los: LineOfSight) -> list[PassGraph]:

@@ -106,9 +106,25 @@ def mlflow_uri(cfg: RunConfig) -> str:
 
 
 def ensure_demo_data(cfg: RunConfig) -> None:
+    """The demo's data sets, built when missing, and built again when an older eosp wrote them in a shard format
+    this one no longer reads (they are the demo's own: eosp-marked directories of generated instances)."""
+    import shutil
+
+    from eosp.errors import InputError
+    from eosp.jobs.build_shards import DATASET_KIND
     from eosp.jobs.build_shards import run as build
+    from eosp.ownership import kind_of
+    from eosp.shards.io import ShardReader
 
     for path, (n, seed) in DEMO_DATA.items():
+        shards = sorted(Path(path).glob("shard-*.parquet"))
+        if (Path(path) / "manifest.json").exists() and shards and kind_of(Path(path)) == DATASET_KIND:
+            try:
+                ShardReader(shards[0])
+            except InputError as exc:
+                print(f"[train] the demo data set {path} cannot be read ({exc.message}): building it again",
+                      flush=True)
+                shutil.rmtree(path)
         if not (Path(path) / "manifest.json").exists():
             print(f"[train] building demo data set {path} ({n} instances of {DEMO_ACQ} acquisitions)", flush=True)
             build(DatasetConfig(out=path, family="uniform", n_acquisitions=DEMO_ACQ, n_instances=n, per_shard=4,

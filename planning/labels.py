@@ -139,12 +139,14 @@ class SweepGraph(NamedTuple):
 
 class Cut(NamedTuple):
     """The bound test of :func:`_sweep`: a label of value v at node w with open set S is cut when
-    v + cbound[w] - sum(lam[S]) < incumbent + gain_abs + gain_rel * |incumbent|."""
+    v + cbound[w] - sum(lam[S]) < incumbent + gain_abs + gain_rel * |incumbent|.  `repeats`: an extension
+    to an acquisition of the open set is allowed and worth nothing (see :func:`label_search`)."""
 
     lam: np.ndarray
     cbound: np.ndarray
     gain_abs: float
     gain_rel: float
+    repeats: bool
 
 
 class Labels(NamedTuple):
@@ -180,7 +182,7 @@ def _sweep(pos, sg, cut, beam, max_work, labels):
     once w holds `beam` labels.
     """
     order, indptr, dst, node_acq, node_time, weight, last_time = sg
-    lam, cbound, gain_abs, gain_rel = cut
+    lam, cbound, gain_abs, gain_rel, repeats = cut
     val, par, lnode, lnext, sets, ssize, head, cnt, wval, state, inc, counters = labels
     cap = val.shape[0]
     m = sets.shape[1]
@@ -205,15 +207,15 @@ def _sweep(pos, sg, cut, beam, max_work, labels):
                     if sets[l, i] == k:
                         used = True
                         break
-                if used:
+                if used and not repeats:
                     continue
                 counters[3] += 1
                 tw = node_time[w]
-                newval = val[l] + weight[k]
+                newval = val[l] + (0.0 if used else weight[k])
                 # open set at w: the still-open acquisitions of l plus k, sorted
                 nb = 0
                 lam_sum = 0.0
-                placed = last_time[k] <= tw  # k closed at w: nothing to add
+                placed = used or last_time[k] <= tw  # k already in it, or closed at w: nothing to add
                 for i in range(nl):
                     x = sets[l, i]
                     if not placed and k < x:
@@ -385,13 +387,16 @@ class Bounds:
 
 def label_search(graph: DiscreteGraph, weights: np.ndarray, *, beam: int = 0, bounds: Bounds | None = None,
                  time_limit: float | None = None, max_labels: int = 20_000_000,
-                 on_limit: str = "beam1", check_every: int = 250_000) -> SearchResult:
+                 on_limit: str = "beam1", check_every: int = 250_000, repeats: bool = False) -> SearchResult:
     """Sweep the graph with labels; see the module docstring.
 
     `beam` = 0: unlimited labels per node (exact DP).  `bounds`: the incumbent and completion bounds that cut
     labels (:class:`Bounds`).  `on_limit`: at the time or label limit, "beam1" finishes the sweep with one
     label per node, "stop" returns at once (the result is then the best label seen).
-    The clock is read every `check_every` label extensions.
+    The clock is read every `check_every` label extensions.  `repeats`: a path may visit an acquisition again
+    (the graph may then have arcs between nodes of one acquisition), its weight counted once: the best path
+    where observing a target twice is allowed and credited once (the fleet bound's pass problems,
+    :mod:`eosp.fleet.passgraph`).
     """
     t0 = time.perf_counter()
     b = bounds or Bounds()
@@ -399,7 +404,7 @@ def label_search(graph: DiscreteGraph, weights: np.ndarray, *, beam: int = 0, bo
     w = np.asarray(weights, dtype=np.float64)
     lam = np.zeros(w.shape[0]) if b.lam is None else np.asarray(b.lam, dtype=np.float64)
     cbound = np.full(n_nodes, np.inf) if b.cbound is None else np.asarray(b.cbound, dtype=np.float64)
-    cut = Cut(lam, cbound, *((1.0 - 1e-6, 0.0) if b.unitary else (0.0, 1e-12)))
+    cut = Cut(lam, cbound, *((1.0 - 1e-6, 0.0) if b.unitary else (0.0, 1e-12)), repeats)
     order = topological_order(graph)
     sg = SweepGraph(order, graph.indptr, graph.dst, graph.node_acq, graph.node_time, w, acq_last_time(graph))
     m = max_open(graph)
@@ -448,7 +453,8 @@ def label_search(graph: DiscreteGraph, weights: np.ndarray, *, beam: int = 0, bo
     best_label = int(state[2])
     n_labels = int(state[0])
     nodes = _path(best_label, par, lnode) if best_label >= 0 else np.zeros(0, np.int64)
-    value = float(np.sum(w[graph.node_acq[nodes]])) if nodes.size else 0.0
+    acqs = graph.node_acq[nodes]
+    value = float(np.sum(w[np.unique(acqs) if repeats else acqs])) if nodes.size else 0.0
     return SearchResult(nodes, value, complete, float(frontier), n_labels, int(counters[1]), int(counters[2]),
                         int(counters[3]), time.perf_counter() - t0)
 

@@ -63,3 +63,27 @@ def test_evaluate(tmp_path):
     names = {a.path for a in client.list_artifacts(run.info.run_id)}
     assert {"class_counts.png", "report.md", "results.parquet", "reports"} <= names
     assert len(client.list_artifacts(run.info.run_id, "reports")) == 2
+
+
+def test_demo_data_built_by_an_older_eosp_is_built_again(tmp_path, monkeypatch, capsys):
+    """make demo after an upgrade: the demo's own data sets, in a shard format this eosp refuses, are rebuilt
+    (instead of the training failing on them); current ones are kept as they are."""
+    import pyarrow.parquet as pq
+
+    from eosp.jobs import train
+    from eosp.shards.io import ShardReader
+
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setattr(train, "DEMO_DATA", {"data/demo/train": (2, 1000)})
+    monkeypatch.setattr(train, "DEMO_ACQ", 10)
+    cfg, _ = train.parse(["--demo", "--ray.num-cpus", "1"])
+    train.ensure_demo_data(cfg)
+    shard = tmp_path / "data/demo/train/shard-00000.parquet"
+    t = pq.read_table(shard)
+    pq.write_table(t.replace_schema_metadata({**t.schema.metadata, b"eosp.schema_version": b"1"}), shard)
+    before = shard.stat().st_mtime_ns
+    train.ensure_demo_data(cfg)
+    assert "cannot be read" in capsys.readouterr().out
+    assert len(ShardReader(shard)) == 2 and shard.stat().st_mtime_ns != before
+    train.ensure_demo_data(cfg)  # current: kept
+    assert "building" not in capsys.readouterr().out
