@@ -44,7 +44,7 @@ def cmd_fleet_import(case_dir, out, overwrite: bool = False) -> int:
     from eosp.fleet.geometry import Geometry
     from eosp.fleet.io import is_fleet_dir as owned
     from eosp.fleet.io import write_fleet, written_names
-    from eosp.fleet.opportunities import compute, require_scan_memory
+    from eosp.fleet.opportunities import compute, require_check_memory, require_scan_memory
 
     if not is_aeossp_case(case_dir):
         raise InputError(case_dir, "not an aeossp case directory (mission.yaml, satellites.yaml, tasks.yaml)")
@@ -52,6 +52,7 @@ def cmd_fleet_import(case_dir, out, overwrite: bool = False) -> int:
     t0 = time.perf_counter()
     fleet = read_case(case_dir)
     require_scan_memory(fleet, Path(case_dir) / "mission.yaml")  # the horizon's length as much as the fleet's size
+    require_check_memory(fleet, Path(case_dir) / "mission.yaml")  # and the feasibility check below
     geo = Geometry(fleet)
     opps = compute(fleet, geo)
     require_feasible(fleet, case_dir, geo)  # a battery that idling alone runs dry: no schedule is valid
@@ -135,7 +136,6 @@ def cmd_fleet_solve(fleet_dir, solver: str = "greedy", out=None, overwrite: bool
     The greedy solver is deterministic and fast: it ignores `seed` and `time_limit`."""
     from eosp.ownership import check_output
     from eosp.fleet.check import validate
-    from eosp.fleet.geometry import Geometry
     from eosp.fleet.greedy import solve
     from eosp.fleet.io import read_fleet, write_schedule
     from eosp.fleet.passgraph import require_solvable
@@ -147,8 +147,7 @@ def cmd_fleet_solve(fleet_dir, solver: str = "greedy", out=None, overwrite: bool
     out = check_output(out, "fleet-schedule", overwrite=overwrite, suffixes=(".parquet",))
     t0 = time.perf_counter()
     fleet, opps = read_fleet(fleet_dir)
-    geo = Geometry(fleet)
-    require_solvable(fleet, opps, Path(fleet_dir) / "meta.json", geo)
+    geo = require_solvable(fleet, opps, Path(fleet_dir) / "meta.json")
     sched = solve(fleet, opps, geo)
     res = validate(fleet, sched, geo)
     if not res.valid:  # the solver guarantees validity: this is a bug, not a user error
@@ -166,9 +165,11 @@ def cmd_fleet_validate(fleet_dir, schedule) -> int:
     """Check a schedule (fleet schedule .parquet or aeossp solution .json): 0 valid, 1 invalid."""
     from eosp.fleet.check import validate
     from eosp.fleet.io import read_fleet, read_schedule
+    from eosp.fleet.opportunities import require_check_memory
 
     fleet, _ = read_fleet(fleet_dir, with_opportunities=False)
     sched, _ = read_schedule(schedule, fleet)
+    require_check_memory(fleet, Path(fleet_dir) / "meta.json")
     res = validate(fleet, sched)
     if not res.valid:
         print(f"invalid: {res.first}")
@@ -188,7 +189,10 @@ def cmd_fleet_report(fleet_dir, schedules, out, overwrite: bool = False, title: 
     check_report_out(out, overwrite)
     t0 = time.perf_counter()
     if is_fleet_dir(fleet_dir):
+        from eosp.fleet.opportunities import require_check_memory
+
         fleet, opps = read_fleet(fleet_dir)
+        require_check_memory(fleet, Path(fleet_dir) / "meta.json")  # the page checks and draws the whole horizon
         n_tasks = len(fleet.tasks)
     else:  # an ONERA fleet directory: its own model and schedules (no orbits)
         from eosp.fleet.onera import read_onera
@@ -218,6 +222,10 @@ def cmd_fleet_export_schedule(fleet_dir, schedule, fmt: str, out, overwrite: boo
         raise InputError(fmt, f"unknown export format (choose from {', '.join(EXPORT_FORMATS)})")
     fleet, _ = read_fleet(fleet_dir, with_opportunities=False)
     sched, _ = read_schedule(schedule, fleet)
+    if fmt in ("czml", "kml"):  # tracks over the whole horizon
+        from eosp.fleet.opportunities import require_check_memory
+
+        require_check_memory(fleet, Path(fleet_dir) / "meta.json")
     if fmt == "aeossp":
         path = write_solution(sched, fleet.horizon, out, overwrite=overwrite)
     elif fmt in ("czml", "kml"):

@@ -80,9 +80,11 @@ def parser(command: str) -> Parser:
         p.add_argument("--out", required=True, help="HTML file to write")
         p.add_argument("--title", default="")
         p.add_argument("--overwrite", action="store_true")
+        add_memory_arg(p)
     elif command == "validate":
         p.add_argument("fleet_dir")
         p.add_argument("schedule", help="fleet schedule (.parquet) or aeossp solution (.json)")
+        add_memory_arg(p)
     elif command == "export-schedule":
         p.add_argument("fleet_dir")
         p.add_argument("schedule")
@@ -90,6 +92,7 @@ def parser(command: str) -> Parser:
                        help="aeossp solution.json, CSV, CZML (Cesium) or KML (tracks, targets, observations)")
         p.add_argument("--out", required=True)
         p.add_argument("--overwrite", action="store_true")
+        add_memory_arg(p)
     elif command == "solve":
         p.add_argument("fleet_dir")
         p.add_argument("--solver", required=True, choices=FLEET_SOLVERS,

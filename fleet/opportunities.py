@@ -92,6 +92,31 @@ def scan_bytes(n_sat: int, n_tasks: int, n_instants: int, mean_window_s: float) 
                + expected_opportunities(n_sat, n_tasks, mean_window_s) * OPPORTUNITY_BYTES)
 
 
+# Memory of the geometry a check or a solve keeps over the whole horizon (frame rotations on the base grid, sunlight,
+# battery simulations), measured with eosp validate of a 30-day, 2-satellite fleet (860 bytes an instant).
+HORIZON_INSTANT_BYTES = 1000
+
+
+def horizon_bytes(fleet: Fleet, processes: int = 1) -> tuple[int, int]:
+    """(bytes, base-grid instants) of the whole-horizon geometry of a check or a solve: per process the instants'
+    rotations and sunlight, once the satellites' positions."""
+    from math import gcd
+
+    h = fleet.horizon
+    n = instants(h.seconds, gcd(h.action_step_s, h.geometry_step_s))
+    return processes * (BASE_BYTES + n * HORIZON_INSTANT_BYTES) + n * SATELLITE_INSTANT_BYTES * len(fleet.satellites), n
+
+
+def require_check_memory(fleet: Fleet, where: object) -> None:
+    """Refuse (one line with the estimate) a fleet whose checker (battery and sunlight over the horizon) cannot fit
+    in memory: before validating, reporting or exporting a schedule of it."""
+    from eosp.memory import require_memory
+
+    need, n = horizon_bytes(fleet)
+    require_memory(where, need, f"checking {len(fleet.satellites)} satellites over {fleet.horizon.seconds:,} s "
+                                f"({n:,} instants)")
+
+
 def require_scan_memory(fleet: Fleet, where: object) -> None:
     """Refuse (one line with the estimate, :func:`eosp.memory.require_memory`) a fleet whose opportunity scan cannot
     fit in memory, before any propagation."""

@@ -1292,11 +1292,19 @@ def test_fleet_size_guards_refuse_before_any_work(fleet_base, tmp_path, monkeypa
     def started(*args, **kwargs):
         raise AssertionError("the work started: the size guard did not refuse it first")
 
+    r = fresh(fleet_base, tmp_path)
+    _year_long(r)
     monkeypatch.setattr(geometry.Geometry, "__init__", started)
     monkeypatch.setattr(generate, "generate", started)
-    r = fresh(fleet_base, tmp_path)
     _edit(r / "case" / "mission.yaml", 'horizon_end: "2025-07-17T04:20:00Z"', 'horizon_end: "9999-12-31T23:59:50Z"')
+    (r / "empty.json").write_text('{"actions": []}')
     for argv, names in ((["import", r / "case", "--out", r / "new"], ("mission.yaml", "too large", "instants")),
+                        (["validate", r / "year", r / "empty.json", "--max-memory-gb", "1"],
+                         ("meta.json", "--max-memory-gb 1", "6,307,201 instants")),
+                        (["report", r / "year", r / "empty.json", "--out", r / "p.html", "--max-memory-gb", "1"],
+                         ("meta.json", "--max-memory-gb 1")),
+                        (["solve", r / "year", "--solver", "greedy", "--out", r / "o.parquet", "--max-memory-gb",
+                          "1"], ("meta.json", "--max-memory-gb 1", "pass graphs")),
                         (_gen(r)[:-2] + ["--satellites", "1000", "--tasks", "1000000", "--hours", "168", "--out",
                                          r / "g"], ("--hours", "too large", "instants")),
                         (_gen(r, "--max-memory-gb", "0.1"), ("--max-memory-gb 0.1", "GiB"))):
@@ -1304,6 +1312,20 @@ def test_fleet_size_guards_refuse_before_any_work(fleet_base, tmp_path, monkeypa
         assert res.rc == 2 and len(res.err.strip().splitlines()) == 1, (argv, res.err)
         assert all(n in res.err for n in names), (names, res.err)
     assert not (r / "new").exists() and not (r / "g").exists()
+    assert not (r / "p.html").exists() and not (r / "o.parquet").exists()
+
+
+def _year_long(r: Path) -> Path:
+    """The base fleet with its horizon stretched to a year (written as is: nothing propagated), at r/year."""
+    import dataclasses
+    from datetime import timedelta
+
+    from eosp.fleet.io import read_fleet, write_fleet
+
+    fleet, opps = read_fleet(r / "fl")
+    year = dataclasses.replace(fleet.horizon, end=fleet.horizon.start + timedelta(days=365))
+    write_fleet(dataclasses.replace(fleet, horizon=year), opps, r / "year")
+    return r / "year"
 
 
 def _fleet_for_ctrl_c(root: Path) -> Path:
