@@ -403,6 +403,41 @@ class EnvConfig:
 
 
 @dataclass
+class FleetEnvConfig:
+    """The multi-agent constellation environment (envs/constellation.py): one agent per satellite."""
+
+    reward: str = choice("wcr", "wcr", "cr")
+    """'wcr': a newly served task earns its weight / the fleet's total weight (an episode's return is the schedule's
+    WCR); 'cr': 1 / the number of tasks (the return is its CR, the unitary variant)."""
+    team_reward: float = ranged(0.0, 0.0, 1.0)
+    """Share of every reward that goes to the whole fleet: each agent receives (1 - share) x its own rewards plus
+    share x everything the fleet served, at its next observation (0: each agent earns only what it serves)."""
+    max_satellites: int = ranged(0, 0)
+    """Agent slots sat_0 .. sat_{K-1}; 0 = the largest fleet of the source.  A fleet with more satellites is refused."""
+    max_nodes: int = ranged(128, 2)
+    """Nodes of the padded observation graph: node 0 is 'skip to the next pass', the others the tasks of the pass."""
+    truncate: bool = False
+    """When a pass has more tasks than max_nodes - 1, show the first ones (the last observed task, the selectable
+    ones by start, then the others by earliest start); false: such a pass is refused when the fleet is loaded."""
+    max_out_degree: int = ranged(4, 1)
+    """Edges kept out of each task's earliest node ahead (to the earliest starts); every selectable task also gets
+    the edge from the last observation."""
+    max_edges: int = ranged(0, 0)
+    """Edge padding; 0 = max_nodes * (max_out_degree + 1)."""
+    bridges: str = choice("useful", "off", "useful", "all")
+    """A task already served (by any satellite) stays selectable at zero reward as a bridge (the verifier checks
+    the slew between consecutive observations only): 'useful' when, from its node, some unserved task of the pass
+    starts earlier than it can directly; 'all' always; 'off' never."""
+    fleets: tuple[str, ...] = ()
+    """Fleet directories (eosp generate --fleet) or aeossp case directories; environment copies share them out by
+    worker index.  Empty: a small generated fleet."""
+    seed: int = ranged(0, 0)
+    """Seed of the fleet draws (combined with the worker and vector index)."""
+    max_cached_fleets: int = ranged(8, 1)
+    """Prepared fleets each environment copy keeps in memory."""
+
+
+@dataclass
 class ModelConfig:
     """The GNN agent (models/agent.py).  Presets: MODEL_PRESETS."""
 

@@ -149,12 +149,15 @@ def _mlp(d_in: int, d_hidden: int, d_out: int) -> nn.Sequential:
 
 
 class EOSPAgent(nn.Module):
-    def __init__(self, cfg: ModelConfig | None = None):
+    """`n_node_features`: columns of the observation's ``x`` (the single pass's by default; the constellation
+    environment's observation has its own, eosp.envs.constellation_obs)."""
+
+    def __init__(self, cfg: ModelConfig | None = None, n_node_features: int = N_NODE_FEATURES):
         super().__init__()
         cfg = cfg or ModelConfig()
         self.cfg = cfg
         h = cfg.hidden_dim
-        self.node_embed = _mlp(N_NODE_FEATURES, h, h)
+        self.node_embed = _mlp(n_node_features, h, h)
         self.global_init = nn.Parameter(torch.zeros(h))
         self.edge_type_embed = nn.Embedding(4, h)
         self.edge_attr_embed = nn.Linear(N_EDGE_FEATURES, h, bias=False)

@@ -52,7 +52,10 @@ class EOSPTorchRLModule(TorchRLModule, ValueFunctionAPI):
         # RLlib adds its own default keys to model_config: keep ours
         names = {f.name for f in fields(ModelConfig)}
         cfg = from_dict(ModelConfig, {k: v for k, v in dict(self.model_config or {}).items() if k in names})
-        self.agent = EOSPAgent(cfg)
+        # the node features' width of the environment this module acts in (the single pass's, or the fleet's)
+        space = getattr(self, "observation_space", None)
+        x_space = space.spaces.get("x") if hasattr(space, "spaces") and isinstance(space.spaces, dict) else None
+        self.agent = EOSPAgent(cfg, *([x_space.shape[-1]] if x_space is not None else []))
         self.rollout_values = bool(dict(self.model_config or {}).get("rollout_values", False))
 
     def _run(self, batch: dict[str, Any]) -> tuple[torch.Tensor, torch.Tensor]:
