@@ -33,7 +33,9 @@ REFERENCE = {
 def run_case(case: Path, split: str, args: argparse.Namespace) -> dict:
     from eosp.fleet.aeossp import read_case, write_solution
     from eosp.fleet.opportunities import compute
-    from eosp.solvers.fleet import FleetConfig, Problem, solve
+    from eosp.kinds.fleet.config import FleetConfig
+    from eosp.kinds.fleet.problem import Problem
+    from eosp.kinds.fleet.solve import solve
 
     t0 = time.perf_counter()
     fleet = read_case(case)

@@ -91,7 +91,8 @@ def main() -> None:
         tag = f"{args.rounds}r" if args.rounds else f"{args.time_limit:g}s"
         run_dir = args.out / f"run-w{w}-{tag}-{time.strftime('%H%M%S')}"
         cmd = [sys.executable, str(ROOT / "jobs/solve_fleet.py"), "--fleet-dir", str(fleet), "--run-dir", str(run_dir),
-               "--fleet.workers", str(w), "--fleet.time-limit", str(args.time_limit), "--ray.num-cpus", str(max(w, 2)),
+               "--fleet.workers", str(w), "--fleet.time-limit", "0" if args.rounds else str(args.time_limit),
+               "--ray.num-cpus", str(max(w, 2)),
                *(["--fleet.rounds", str(args.rounds)] if args.rounds else []),
                "--mlflow-uri", f"sqlite:///{(args.out / 'mlflow.db').resolve()}"]
         before = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss

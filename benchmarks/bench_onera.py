@@ -23,15 +23,15 @@ import numpy as np
 
 
 def run_one(path: Path, time_limit: float, bound_time: float, seed: int) -> dict:
-    from eosp.fleet.onera import read_pb
-    from eosp.fleet.onera_check import best_values, validate
-    from eosp.solvers.onera import OneraConfig, solve
-    from eosp.solvers.onera_bound import lp_bound
+    from eosp.onera.model import read_pb
+    from eosp.onera.check import best_values, validate
+    from eosp.kinds.onera.search import GreedyConfig, OneraConfig, solve
+    from eosp.kinds.onera.bound import lp_bound
 
     t0 = time.perf_counter()
     f = read_pb(path)
     t_read = time.perf_counter() - t0
-    greedy = solve(f, OneraConfig(bound="none", seed=seed), greedy_only=True)
+    greedy = solve(f, GreedyConfig(bound="none", seed=seed))
     g_check = validate(f, greedy.schedule)
     t1 = time.perf_counter()
     sol = solve(f, OneraConfig(time_limit=time_limit, bound="none", seed=seed))

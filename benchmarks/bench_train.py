@@ -192,8 +192,7 @@ def observation_share(data: Path, cfg, steps: int = 600) -> float:
         s = env.state
         bufs = env._buffers()
         t2 = time.perf_counter()
-        build_observation(s.prepared.eg, s.ep, s.prepared.cand, cfg.max_out_degree, cfg.last_edges_cap,
-                          cfg.obs_edges == "full", *bufs, cfg.obs_horizon_s, cfg.lookahead)
+        build_observation(s.prepared.eg, s.ep, s.prepared.cand, env._obs_options()[:5] + (0,), (*bufs, None))
         t3 = time.perf_counter()
         if i >= 50:  # compiled by then
             t_step, t_obs = t_step + t1 - t0, t_obs + t3 - t2

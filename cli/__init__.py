@@ -3,10 +3,12 @@
 Every command reads user files through the checked readers and prints one clear
 line (exit code 2) on bad input instead of a traceback.
 
-This module only wires the commands: :mod:`eosp.cli.parser` builds the parser, whose subcommands name the
-module that runs them (:mod:`~eosp.cli.generate`, :mod:`~eosp.cli.import_export`, :mod:`~eosp.cli.info`,
-:mod:`~eosp.cli.validate`, :mod:`~eosp.cli.solve`, :mod:`~eosp.cli.build_shards`, :mod:`~eosp.cli.plot`,
-:mod:`~eosp.cli.report`); fleet and ONERA command lines go to :mod:`eosp.cli.fleet_main`.
+This module only wires the commands: it asks the registry of problem kinds (:mod:`eosp.kinds`) once which kind
+the command line's problem is, :mod:`eosp.cli.parser` builds the parser with that kind's arguments, and the
+command's module runs it on any kind (:mod:`eosp.cli.commands` lists them: :mod:`~eosp.cli.generate`,
+:mod:`~eosp.cli.import_export`, :mod:`~eosp.cli.info`, :mod:`~eosp.cli.validate`, :mod:`~eosp.cli.solve`,
+:mod:`~eosp.cli.report`, :mod:`~eosp.cli.export_schedule`; a single pass's :mod:`~eosp.cli.build_shards` and
+:mod:`~eosp.cli.plot`).
 """
 
 from __future__ import annotations
@@ -16,7 +18,7 @@ import os
 import sys
 
 from eosp.cli.build_shards import cmd_build_shards
-from eosp.cli.parser import build_parser
+from eosp.cli.parser import COMMANDS, build_parser
 from eosp.cli.solve import SIGINT_SEEN, solve_options, solver_of, unknown_option
 from eosp.errors import InputError
 
@@ -70,20 +72,22 @@ def main(argv: list[str] | None = None) -> int:
 
 def run(argv: list[str]) -> int:
     """:func:`main` without its Ctrl-C line."""
-    from eosp.cli.fleet_main import is_fleet_command, route
+    from eosp.kinds import get
 
-    if is_fleet_command(argv):  # a fleet (aeossp case, fleet directory) where a single pass would be
-        return route(argv)
+    if argv and argv[0] == "build-shards":
+        return cmd_build_shards(argparse.Namespace(), argv[1:])
+    kind, refusal = kind_of(argv)  # the kind of the problem the command line names, detected once
     solver = solver_of(argv)
-    parser = build_parser(solver)
+    parser = build_parser(solver, argv[0] if argv and argv[0] in COMMANDS else None, kind)
     if not argv:  # the usage only here and for --help; every other error is one line
         parser.print_help(sys.stderr)
         return 2
-    if argv and argv[0] == "build-shards":
-        return cmd_build_shards(argparse.Namespace(), argv[1:])
-    ns, extra = parser.parse_known_args(argv)
+    ns, extra = parser.parse_known_args(argv)  # bad option values are refused first, as for any kind
+    if refusal is not None:  # a problem no kind reads: its options are no kind's either
+        print(f"eosp {argv[0]}: error: {refusal}", file=sys.stderr)
+        return 2
     if extra and ns.command == "solve" and extra[0].startswith("--"):
-        message = unknown_option(solver, extra[0])  # a misspelled or foreign option: name it and the valid ones
+        message = unknown_option(get(ns.kind), solver, extra[0])  # a misspelled or foreign option: name it
         if message:
             print(message, file=sys.stderr)
             return 2
@@ -93,7 +97,7 @@ def run(argv: list[str]) -> int:
 
     try:
         with memory_ceiling(getattr(ns, "max_memory_gb", None)):
-            return ns.func(ns)
+            return ns.func(get(ns.kind), ns)
     except (InputError, FileExistsError, ValueError, IndexError) as exc:
         print(f"eosp {ns.command}: error: {exc}", file=sys.stderr)
         return 2
@@ -110,6 +114,37 @@ def run(argv: list[str]) -> int:
         where = f"{exc.filename}: " if exc.filename else ""
         print(f"eosp {ns.command}: error: {where}{(exc.strerror or str(exc)).lower()}", file=sys.stderr)
         return 2
+
+
+def kind_of(argv: list[str]) -> tuple:
+    """The problem kind of a command line (None: no command), and the refusal to report when its problem is no
+    kind's (an InputError naming every kind tried and why it refused; the first kind offering the command parses
+    its options then).  ``generate`` goes by the generator flag it gives (a fleet's --fleet), ``import`` by its
+    source, the others by the first argument that a kind recognizes as its problem; a command line that names
+    none (``eosp solve --help``) goes to the first kind offering the command."""
+    from eosp.kinds import detect, detect_source, generator_kind, kinds, offering
+
+    if not argv or argv[0] not in COMMANDS:
+        return None, None
+    command, rest = argv[0], argv[1:]
+    if command == "generate":
+        found = generator_kind(rest)
+        return (found[0] if found else offering(command)), None
+    offered_by = [k for k in kinds() if command in k.commands]
+    if len(offered_by) == 1:  # a command of one kind alone (a single pass's export, plot)
+        return offered_by[0], None
+    refusal = None
+    for path in (a for a in rest if not a.startswith("-")):  # an option's value may come before the problem
+        try:
+            kind = detect_source(path)[0] if command == "import" else detect(path)
+        except InputError as exc:
+            refusal = refusal or exc  # the first positional's refusal is the one to report
+            continue
+        if command not in kind.commands:
+            return offered_by[0], InputError(path, f"{kind.title}: its kind ({kind.name}) has no {command} (the "
+                                                   f"kinds that have: {', '.join(k.name for k in offered_by)})")
+        return kind, None
+    return offering(command), refusal
 
 
 if __name__ == "__main__":

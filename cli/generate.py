@@ -1,29 +1,14 @@
-"""``eosp generate OUT``: draw one single-pass instance and write it as an interchange directory (fleets:
-:mod:`eosp.cli.fleet`)."""
+"""``eosp generate [--fleet] ...``: draw a problem with the generator of the kind the command line selects and
+write it (a single pass: an interchange directory; a fleet: a fleet directory)."""
 
 from __future__ import annotations
 
 import argparse
-import time
 
-from eosp.args import config_from_args
-from eosp.config import InstanceConfig, family_config
+from eosp.problem import load
 
 
-def cmd_generate(ns: argparse.Namespace) -> int:
-    from eosp.instances.generator import generate
-    from eosp.instances.interchange import check_instance_out, write_instance
-
-    check_instance_out(ns.out, overwrite=ns.overwrite)
-    # the family's settings first, then every flag given
-    base = family_config(getattr(ns, "family", "uniform"), 100, 0)
-    cfg = config_from_args(InstanceConfig, ns, base=base)
-    from eosp.instances.generator import require_generate_memory
-
-    require_generate_memory(cfg, "--n-acquisitions")  # from the request, before minutes of generation
-    t0 = time.perf_counter()
-    inst = generate(cfg)
-    write_instance(inst, ns.out, overwrite=ns.overwrite)
-    print(f"{ns.out}: {inst.n_acq} acquisitions, {inst.n_nodes} nodes, {inst.unpruned().n_arcs} arcs "
-          f"({time.perf_counter() - t0:.2f} s)")
+def cmd_generate(kind, ns: argparse.Namespace) -> int:
+    gen = kind.generator(ns)
+    print(load(gen.generate)(kind.generator_config(gen, ns), ns.out, overwrite=ns.overwrite))
     return 0

@@ -1,32 +1,23 @@
-"""``eosp import DIR... --out SHARD`` (interchange directories into a Parquet shard) and ``eosp export SHARD
---out DIR`` (one instance of a shard back to an interchange directory)."""
+"""``eosp import SOURCE... --out OUT``: a format some kind imports (interchange directories into a Parquet shard,
+an aeossp case or an ONERA .pb into a fleet directory); ``eosp export SHARD --out DIR`` (a single pass: one
+instance of a shard back to an interchange directory)."""
 
 from __future__ import annotations
 
 import argparse
 
 from eosp.errors import InputError
+from eosp.problem import load
 
 
-def cmd_import(ns: argparse.Namespace) -> int:
-    from eosp.instances.interchange import read_instance
-    from eosp.shards.io import check_shard_out, write_shard
-
-    check_shard_out(ns.out, ns.overwrite)
-    insts, first = [], {}
-    for d in ns.instance_dirs:
-        inst = read_instance(d)
-        if inst.name in first:  # a shard's instances are told apart by their names
-            raise InputError(d, f"instance name {inst.name!r} already given by {first[inst.name]}: a shard holds "
-                                "distinct instances (rename one in its meta.json)")
-        first[inst.name] = d
-        insts.append(inst)
-    write_shard(ns.out, insts, include_unpruned=not ns.pruned_only, overwrite=ns.overwrite)
-    print(f"{ns.out}: {len(insts)} instance(s)")
+def cmd_import(kind, ns: argparse.Namespace) -> int:
+    paths = kind.import_paths(ns)
+    src = next((s for s in kind.sources if load(s.detect)(paths[0]).ok), kind.sources[0])
+    print(load(src.convert)(paths, ns.out, ns.overwrite, **kind.import_options(ns)))
     return 0
 
 
-def cmd_export(ns: argparse.Namespace) -> int:
+def cmd_export(kind, ns: argparse.Namespace) -> int:
     from eosp.instances.interchange import check_instance_out, write_instance
     from eosp.shards.io import ShardReader
 

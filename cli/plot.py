@@ -6,16 +6,15 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from eosp.cli.load import load_instance
 from eosp.errors import InputError
 
 
-def cmd_plot(ns: argparse.Namespace) -> int:
+def cmd_plot(kind, ns: argparse.Namespace) -> int:
     from eosp.evaluation.plots import check_plot_out, plot_trajectories
     from eosp.instances.schedule import check, read_schedule
 
     check_plot_out(ns.out, ns.overwrite)
-    inst = load_instance(ns.instance_dir)
+    inst = kind.read(ns.problem)
     schedules = {Path(s).stem: read_schedule(s) for s in ns.schedules}
     for name, sched in zip(ns.schedules, schedules.values()):
         verdict = check(inst, sched)  # plot only schedules that make sense for this instance

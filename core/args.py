@@ -127,10 +127,12 @@ def _parse_bool(text: str) -> bool:
 
 def _checked(cls: type, name: str, conv: Any) -> Any:
     """An argparse type: `conv`, then the field's own checks (finite, range, choices: config.check_value)."""
-    from eosp.config import check_value
+    from eosp.config import check_value, field_of
 
     def parse(text: str) -> Any:
         value = conv(text)
+        if value == 0 and field_of(cls, name).metadata.get("zero_unsets"):
+            return None  # an optional limit: 0 on a command line means unset
         try:
             check_value(cls, name, value)
         except ValueError as exc:

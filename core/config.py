@@ -12,11 +12,13 @@ from __future__ import annotations
 from dataclasses import Field, dataclass, field, fields, is_dataclass
 from typing import Any
 
-def ranged(default: Any, lo: float | None = None, hi: float | None = None, *, lo_open: bool = False) -> Any:
+def ranged(default: Any, lo: float | None = None, hi: float | None = None, *, lo_open: bool = False,
+           zero_unsets: bool = False) -> Any:
     """A numeric field whose values (every element, for a tuple) must lie in [lo, hi] ((lo, hi] with
     `lo_open`); every float field must besides be finite.  Checked by :func:`check_value` wherever a
-    value is set: command-line flags, :func:`apply_overrides`, :func:`from_dict`."""
-    meta = {"range": (lo, hi, lo_open)}
+    value is set: command-line flags, :func:`apply_overrides`, :func:`from_dict`.  `zero_unsets`: an optional
+    limit whose 0 on a command line means unset (None; :mod:`eosp.args`)."""
+    meta = {"range": (lo, hi, lo_open), "zero_unsets": zero_unsets}
     if isinstance(default, tuple):
         return field(default_factory=lambda: default, metadata=meta)
     return field(default=default, metadata=meta)
@@ -147,19 +149,29 @@ def apply_overrides(cfg: Any, overrides: dict[str, Any]) -> Any:
             apply_overrides(current, {rest: value})
         elif is_dataclass(current) and isinstance(value, dict):
             apply_overrides(current, value)
+        elif value is None and _optional(type(cfg), head):  # an optional field unset (a limit: no limit)
+            setattr(cfg, head, None)
         else:
             setattr(cfg, head, check_value(type(cfg), head, _coerce(type(cfg).__name__, head, current, value)))
     return cfg
 
 
-def _field(cls: type, name: str) -> Field:
+def _optional(cls: type, name: str) -> bool:
+    """Whether field `name` of `cls` is annotated ``X | None``."""
+    import typing
+
+    return type(None) in typing.get_args(typing.get_type_hints(cls)[name])
+
+
+def field_of(cls: type, name: str) -> Field:
+    """The dataclass field `name` of `cls`."""
     return next(f for f in fields(cls) if f.name == name)
 
 
 def check_value(cls: type, name: str, value: Any) -> Any:
     """`value` if field `name` of `cls` accepts it: floats finite, numbers in the field's range
     (:func:`ranged`), strings among its choices (:func:`choice`); else a one-line ValueError."""
-    f = _field(cls, name)
+    f = field_of(cls, name)
     items = value if isinstance(value, tuple) else (value,)
     for v in items:
         if isinstance(v, float) and v != v or isinstance(v, float) and v in (float("inf"), float("-inf")):

@@ -186,9 +186,7 @@ class EOSPEnv(gym.Env):
         core.start(prepared.eg, self.state.ep)
         self._publish_mask()
         bufs = self._buffers()
-        m = build_observation(prepared.eg, self.state.ep, prepared.cand, self.cfg.max_out_degree,
-                              self.cfg.last_edges_cap, self.cfg.obs_edges == "full", *bufs, self.cfg.obs_horizon_s,
-                              self.cfg.lookahead, self._plan, self._plan_out)
+        m = build_observation(prepared.eg, self.state.ep, prepared.cand, self._obs_options(), (*bufs, self._plan_out))
         self._plan_of = self.state.ep
         return self._observation(bufs, m), {"instance": prepared.inst.name, "n_acquisitions": prepared.inst.n_acq}
 
@@ -204,9 +202,8 @@ class EOSPEnv(gym.Env):
             raise InvalidAction(f"action {a} is not allowed: {why}; allowed: {np.flatnonzero(ep.mask).tolist()}")
         bufs = self._buffers()
         cfg = self.cfg
-        w, m = step_and_observe_fields(tuple(eg), tuple(ep), tuple(s.prepared.cand), a, cfg.max_out_degree,
-                                       cfg.last_edges_cap, cfg.obs_edges == "full", *bufs, cfg.obs_horizon_s,
-                                       cfg.lookahead, self._plan, self._plan_out)
+        w, m = step_and_observe_fields(tuple(eg), tuple(ep), tuple(s.prepared.cand), a, self._obs_options(),
+                                       (*bufs, self._plan_out))
         assert w >= 0
         self._plan_of = ep
         u = float(s.prepared.inst.acqs.utility[a])
@@ -273,6 +270,12 @@ class EOSPEnv(gym.Env):
         self._mask_padded = np.zeros(self.n_max, dtype=np.int8)
         self._mask_padded[: mask.shape[0]] = mask
         self.action_space.current_mask = self._mask_padded
+
+    def _obs_options(self) -> tuple:
+        """The observation kernels' options (k_out, k_last_cap, full, horizon, look, plan), a plain tuple."""
+        cfg = self.cfg
+        return (cfg.max_out_degree, cfg.last_edges_cap, cfg.obs_edges == "full", float(cfg.obs_horizon_s),
+                bool(cfg.lookahead), self._plan)
 
     def _buffers(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Zeroed x, edge_index, edge_attr of an observation (the kernels fill them)."""

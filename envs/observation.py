@@ -129,19 +129,26 @@ def _clip(x):
 
 
 @numba.njit(cache=True)
-def build_observation(g, ep, cand, k_out, k_last_cap, full, x, edge_index, edge_attr, horizon=0.0, look=False,
-                      plan=0, plan_out=None):
-    """Fill x [N_max, F], edge_index [2, E_max], edge_attr [E_max, 2]; returns the number of edges.
+def build_observation(g, ep, cand, opts, bufs):
+    """Fill the buffers `bufs` = (x [N_max, F], edge_index [2, E_max], edge_attr [E_max, 2], plan_out); returns
+    the number of edges.
 
     `g`: eosp.envs.core.EnvGraph, `ep`: eosp.envs.core.Episode (with first_alive advanced),
-    `cand`: :class:`Candidates`.  `horizon` > 0 (seconds): acquisitions that cannot be chosen now and
-    whose earliest start is more than `horizon` after the end of the last scheduled one are left out
-    of the graph (marked removed, no edge): the network's cost follows the near future only.  `look`:
-    fill the lookahead features; `plan` (:data:`PLAN_ORDERS` code): fill the plan features, and `plan_out`
-    (int32 [n + 1], optional) with the plan's nodes (see :func:`plan_features`).
+    `cand`: :class:`Candidates`; `opts` = (k_out, k_last_cap, full, horizon, look, plan), plain tuples (their
+    NamedTuples would cost the dispatcher more than the step, see :func:`step_and_observe_fields`).
+    `k_out`: edges out of each acquisition; `k_last_cap` (> 0): at most this many from the last one; `full`: every
+    arc instead.  `horizon` > 0 (seconds): acquisitions that cannot be chosen now and whose earliest start is more
+    than `horizon` after the end of the last scheduled one are left out of the graph (marked removed, no edge):
+    the network's cost follows the near future only.  `look`: fill the lookahead features; `plan`
+    (:data:`PLAN_ORDERS` code): fill the plan features, and `plan_out` (int32 [n + 1], or None) with the plan's
+    nodes (see :func:`plan_features`).
     """
+    k_out, k_last_cap, full, horizon, look, plan = opts
+    x, edge_index, edge_attr, plan_out = bufs
     node_acq, node_time, node_finish, indptr, dst, acq_ptr = g.node_acq, g.node_time, g.node_finish, g.indptr, \
         g.dst, g.acq_ptr
+    arcs = (node_acq, node_time, node_finish, indptr, dst)
+    out = (edge_index, edge_attr)
     alive, alive_count, first_alive, scheduled, mask = ep.alive, ep.alive_count, ep.first_alive, ep.scheduled, \
         ep.mask
     static = cand.static
@@ -191,8 +198,7 @@ def build_observation(g, ep, cand, k_out, k_last_cap, full, x, edge_index, edge_
     if k_last_cap > 0:
         k_last = min(k_last, k_last_cap)
     if last_acq >= 0:
-        m = _edges_from(node_acq, node_time, node_finish, indptr, dst, alive, beyond, last, last_acq, 1.0, k_last,
-                        edge_index, edge_attr, m)
+        m = _edges_from(arcs, alive, beyond, last, last_acq, 1.0, k_last, out, m)
     if full:
         stamp = np.full(n, -1, dtype=np.int64)
         for i in range(n):
@@ -214,8 +220,7 @@ def build_observation(g, ep, cand, k_out, k_last_cap, full, x, edge_index, edge_
         for i in range(n):
             if alive_count[i] == 0 or beyond[i]:
                 continue
-            m = _edges_from(node_acq, node_time, node_finish, indptr, dst, alive, beyond, first_alive[i], i, 0.0,
-                            k_out, edge_index, edge_attr, m)
+            m = _edges_from(arcs, alive, beyond, first_alive[i], i, 0.0, k_out, out, m)
     return m
 
 
@@ -494,38 +499,36 @@ def plan_features(g, ep, cand, plan, x, plan_out=None):
 
 
 @numba.njit(cache=True)
-def step_and_observe(g, ep, cand, action, k_out, k_last_cap, full, x, edge_index, edge_attr, horizon=0.0, look=False,
-                     plan=0, plan_out=None):
+def step_and_observe(g, ep, cand, action, opts, bufs):
     """eosp.envs.core.step, then :func:`build_observation` of the new state: one kernel call per environment
     step (each call unpacks the tuples again).  Returns (new node, number of edges); (-1, 0) and the state
     unchanged if `action` is not allowed."""
     w = step(g, ep, action)
     if w < 0:
         return w, 0
-    return w, build_observation(g, ep, cand, k_out, k_last_cap, full, x, edge_index, edge_attr, horizon, look, plan,
-                                plan_out)
+    return w, build_observation(g, ep, cand, opts, bufs)
 
 
 @numba.njit(cache=True)
-def step_and_observe_fields(g_fields, ep_fields, cand_fields, action, k_out, k_last_cap, full, x, edge_index,
-                            edge_attr, horizon=0.0, look=False, plan=0, plan_out=None):
+def step_and_observe_fields(g_fields, ep_fields, cand_fields, action, opts, bufs):
     """:func:`step_and_observe` called with ``tuple(g), tuple(ep), tuple(cand)``: the environment's hot path.
 
     Numba's dispatcher types a plain tuple of arrays about twice as fast as a NamedTuple, a noticeable share of
     a small instance's step; the NamedTuples are rebuilt here, for free.
     """
-    return step_and_observe(EnvGraph(*g_fields), Episode(*ep_fields), Candidates(*cand_fields), action, k_out,
-                            k_last_cap, full, x, edge_index, edge_attr, horizon, look, plan, plan_out)
+    return step_and_observe(EnvGraph(*g_fields), Episode(*ep_fields), Candidates(*cand_fields), action, opts, bufs)
 
 
 @numba.njit(cache=True)
-def _edges_from(node_acq, node_time, node_finish, indptr, dst, alive, beyond, u, i, flag, k, edge_index, edge_attr,
-                m):
+def _edges_from(arcs, alive, beyond, u, i, flag, k, out, m):
     """Append edges from acquisition i: the (at most k) arcs out of its node u to alive nodes reaching the
-    earliest start times; returns the new number of edges.
+    earliest start times into `out` = (edge_index, edge_attr); returns the new number of edges.  `arcs` =
+    (node_acq, node_time, node_finish, indptr, dst).
 
     Called once per acquisition: it takes the few arrays it reads, not the EnvGraph tuple, whose every
     array a call would reference-count (a large share of build_observation's time)."""
+    node_acq, node_time, node_finish, indptr, dst = arcs
+    edge_index, edge_attr = out
     e_max = edge_index.shape[1]
     best_t = np.full(k, np.inf)
     best_v = np.full(k, -1, dtype=np.int64)

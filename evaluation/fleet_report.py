@@ -111,7 +111,7 @@ def _slews(fleet: Fleet, los, sched_idx: tuple) -> np.ndarray:
 def _battery(fleet: Fleet, sun, los, k: int, st: np.ndarray, en: np.ndarray, need0: np.ndarray):
     """(times s, charge Wh) of satellite k's battery, min and max per time bin."""
     from eosp.fleet.battery import Intervals
-    from eosp.fleet.reasons import levels
+    from eosp.fleet.battery import levels
 
     o = np.argsort(st, kind="stable")
     s_us = np.round(st[o] * US).astype(np.int64)
@@ -274,12 +274,12 @@ def _page(data: dict, notes: list[str], summary: str, title: str, meta: str, lat
 # --------------------------------------------------------------------------- ONERA fleets (no orbits, downloads)
 
 def build_onera_page(f, schedules: dict, title: str | None = None) -> str:
-    """The page of an ONERA fleet (:mod:`eosp.fleet.onera`): a task row per request (at its first observation's
+    """The page of an ONERA fleet (:mod:`eosp.onera.model`): a task row per request (at its first observation's
     target, worth its best value alone, its kind as the group), observations and the mandatory downloads on
     the Gantt with the transition before each, no tracks, sunlight, battery or reasons (the instances have no
     orbits); times are seconds since 0 h, as the instances give them."""
-    from eosp.fleet.onera import KIND_SHORT, activity_durations, transition
-    from eosp.fleet.onera_check import best_values, request_values, validate
+    from eosp.onera.model import KIND_SHORT, activity_durations, transition
+    from eosp.onera.check import best_values, request_values, validate
 
     o, d, r = f.observations, f.downloads, f.requests
     first = r.first[:-1]

@@ -28,7 +28,8 @@ def main() -> None:
     from eosp.fleet.opportunities import Opportunities, passes, satellite_opportunities
     from eosp.fleet.passgraph import build_pass
     from eosp.fleet.slew import LineOfSight
-    from eosp.solvers.fleet import FleetConfig, solve_pass_graph
+    from eosp.kinds.fleet.config import FleetConfig
+    from eosp.kinds.fleet.problem import solve_pass_graph
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--satellites", type=int, default=1000)

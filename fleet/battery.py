@@ -148,22 +148,33 @@ class SunCache:
 
 
 @numba.njit(cache=True)
-def _run(load: np.ndarray, charge: np.ndarray, dur: np.ndarray, initial: float,
-         capacity: float) -> tuple[int, float, float]:
+def _run(load: np.ndarray, charge: np.ndarray, dur: np.ndarray, initial: float, capacity: float,
+         levels: np.ndarray) -> tuple[int, float, float]:
     """The charge recurrence, segment by segment (sequential by nature): the benchmark's float64 operations in
-    its order, compiled without fast-math, so every rounding is the benchmark's."""
+    its order, compiled without fast-math, so every rounding is the benchmark's.  Returns the first failing
+    segment (-1: none), the gross consumption up to it (or to the end) and the lowest charge before it; stops at
+    the failure unless `levels` has a slot per segment, which then gets the charge at the end of every segment,
+    the whole curve."""
     battery = initial
     gross = 0.0
     low = initial
+    keep = levels.shape[0] == load.shape[0]
+    fail, fail_gross, fail_low = -1, 0.0, 0.0
     for k in range(len(load)):
         ld, ch, dt = load[k], charge[k], dur[k]
         gross += (ld * dt) / 3600.0
         battery += ((ch - ld) * dt) / 3600.0
-        if battery < -1.0e-9:
-            return k, gross, low
+        if battery < -1.0e-9 and fail < 0:
+            fail, fail_gross, fail_low = k, gross, low
+            if not keep:
+                break
         battery = min(capacity, battery)
+        if keep:
+            levels[k] = battery
         if battery < low:
             low = battery
+    if fail >= 0:
+        return fail, fail_gross, fail_low
     return -1, gross, low
 
 
@@ -199,8 +210,19 @@ def simulate(fleet: Fleet, sun: SunCache, sat: int, obs: Intervals, man: Interva
     b = fleet.satellites.battery
     mid, _, load, charge, dur, a_obs = segments(fleet, sun, sat, obs, man)
     k, gross, low = _run(np.ascontiguousarray(load, dtype=np.float64), np.ascontiguousarray(charge, dtype=np.float64),
-                         dur, float(b.initial_wh[sat]), float(b.capacity_wh[sat]))
+                         dur, float(b.initial_wh[sat]), float(b.capacity_wh[sat]), np.zeros(0))
     if k < 0:
         return BatteryRun(True, float(gross), -1, -1, float(low))
     return BatteryRun(False, float(gross), int(mid[k]), int(a_obs[k]), float(low))
+
+
+def levels(fleet: Fleet, sun: SunCache, sat: int, obs: Intervals, man: Intervals) -> tuple[np.ndarray, np.ndarray]:
+    """The segments' ends (µs) and the battery charge (Wh) at each: the curve of :func:`simulate`, whole (the
+    reasons' battery bound, the report's curve)."""
+    b = fleet.satellites.battery
+    seg = segments(fleet, sun, sat, obs, man)
+    out = np.empty(len(seg.dur))
+    _run(np.ascontiguousarray(seg.load, dtype=np.float64), np.ascontiguousarray(seg.charge, dtype=np.float64),
+         seg.dur, float(b.initial_wh[sat]), float(b.capacity_wh[sat]), out)
+    return seg.end, out
 

@@ -15,6 +15,11 @@ Stages run in the benchmark's order and each action is judged by the first rule 
    each accepted action reserves a maneuver window [start - slew - settle, start];
 4. battery, per satellite in fleet order (see :mod:`eosp.fleet.battery`).
 
+The checker is the verifier re-implemented, on purpose independent of the solvers' code: its lines of sight come
+from brahe's GCRF states (:class:`Inertial`), not the grid tables of :mod:`eosp.fleet.slew`, and it derives the
+maneuver windows itself; it shares with them only the battery simulation (the verifier's recurrence, written
+once in :mod:`eosp.fleet.battery`) and the slew formula (:func:`eosp.sim.slew.bang_coast_bang`).
+
 Any violation makes the schedule invalid and every metric zero (TAT None).  Otherwise a task is
 complete when at least one action observes it (duplicates count once, the earliest end is its
 completion): CR = completed / tasks, WCR = completed weight / total weight, TAT = mean of
@@ -32,6 +37,7 @@ from eosp.fleet.battery import Intervals, SunCache, simulate
 from eosp.fleet.geometry import (NUMERICAL_EPS, Geometry, angle_deg, brahe_module, epochs, pointing_ok,
                                  slew_time_s)
 from eosp.fleet.model import US, Fleet, Schedule, iso_z
+from eosp.problem import Verdict
 
 
 @dataclass(frozen=True)
@@ -61,6 +67,14 @@ class CheckResult:
     @property
     def first(self) -> Violation | None:
         return self.violations[0] if self.violations else None
+
+    def verdict(self) -> Verdict:
+        """The contract's verdict (:class:`eosp.problem.Verdict`), with the line ``eosp validate`` prints."""
+        m = self.metrics
+        if not self.valid:
+            return Verdict(False, m, str(self.first), f"invalid: {self.first}")
+        tat = "null" if m["TAT"] is None else repr(m["TAT"])
+        return Verdict(True, m, None, f"valid: WCR {m['WCR']!r} CR {m['CR']!r} TAT {tat} PC {m['PC']!r}")
 
 
 def zero_metrics() -> dict:

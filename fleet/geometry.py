@@ -20,6 +20,7 @@ from math import gcd
 import numpy as np
 
 from eosp.fleet.model import Fleet
+from eosp.sim.slew import bang_coast_bang_array
 
 NUMERICAL_EPS = 1.0e-9  # the benchmark's tolerance on times, angles and energies
 OFF_NADIR_TOL_DEG = 1.0e-6
@@ -104,17 +105,10 @@ def pointing_ok(sat_ecef: np.ndarray, tgt_ecef: np.ndarray, max_off_nadir_deg) -
 
 
 def slew_time_s(angle, max_rate, max_acc) -> np.ndarray:
-    """Bang-coast-bang rest-to-rest slew time for an angle (degrees), without settling."""
-    angle = np.maximum(0.0, np.asarray(angle, dtype=float))
-    v = np.asarray(max_rate, dtype=float)
-    a = np.asarray(max_acc, dtype=float)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        tri = 2.0 * np.sqrt(angle / a)
-        thr = v * v / a
-        trap = 2.0 * (v / a) + (angle - thr) / v
-        t = np.where(angle <= thr, tri, trap)
-    t = np.where((v <= 0.0) | (a <= 0.0), np.inf, t)
-    return np.where(angle <= NUMERICAL_EPS, 0.0, t)
+    """Bang-coast-bang rest-to-rest slew time for an angle (degrees), without settling: the one formula,
+    :func:`eosp.sim.slew.bang_coast_bang`, over arrays."""
+    return bang_coast_bang_array(np.maximum(0.0, np.asarray(angle, dtype=float)), np.asarray(max_rate, dtype=float),
+                                 np.asarray(max_acc, dtype=float))
 
 
 def sunlit(pos_eci: np.ndarray, sun_eci: np.ndarray, r_earth: float) -> tuple[np.ndarray, np.ndarray]:

@@ -2,77 +2,31 @@
 
 Tasks are taken by decreasing weight (then weight per second of observation, then earliest
 due time).  A task goes to the opportunity that ends earliest among those that fit in their
-satellite's timeline: no overlap, and slew plus settling time (the checker's model, see
-:mod:`eosp.fleet.slew`) to and from the neighbouring observations, from nadir at the horizon
-start for the first one.  Candidates of one (task, satellite) are tested together as arrays.
+satellite's timeline (:func:`eosp.fleet.timeline.fits`: no overlap, and slew plus settling time to
+and from the neighbouring observations, from nadir at the horizon start for the first one).
+Candidates of one (task, satellite) are tested together as arrays.
 
-The battery is not planned ahead: each satellite's timeline is then simulated with the
-checker's battery model and, while it runs dry, the least valuable observation started before
-the failure is dropped (and the timeline re-checked for slews).  A final run of the checker
+The battery is not planned ahead: each satellite's timeline is then repaired
+(:func:`eosp.fleet.timeline.repair_battery`: while it runs dry, the least valuable observation
+started before the failure is dropped, and the timeline re-checked for slews).  A final run of the checker
 guards the result: an action it rejects is dropped and the schedule checked again.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
-
 import numpy as np
 
-from eosp.fleet.battery import Intervals, SunCache, simulate
-from eosp.fleet.check import timedelta_us, validate
+from eosp.fleet.check import validate
 from eosp.fleet.geometry import Geometry
-from eosp.fleet.model import US, Fleet, Schedule, strings
+from eosp.fleet.model import Fleet, Schedule
 from eosp.fleet.opportunities import Opportunities
-from eosp.fleet.slew import MARGIN_S, LineOfSight
-
-
-@dataclass
-class Timeline:
-    """One satellite's observations in time order, with their lines of sight at start and end."""
-
-    start: list = field(default_factory=list)
-    end: list = field(default_factory=list)
-    task: list = field(default_factory=list)
-    los0: list = field(default_factory=list)
-    los1: list = field(default_factory=list)
-
-    def insert(self, pos: int, row: tuple) -> None:
-        for col, v in zip((self.start, self.end, self.task, self.los0, self.los1), row):
-            col.insert(pos, v)
-
-    def remove(self, pos: int) -> None:
-        for col in (self.start, self.end, self.task, self.los0, self.los1):
-            del col[pos]
+from eosp.fleet.slew import LineOfSight
+from eosp.fleet.timeline import Arrays, Candidates, Timeline, fits, repair_battery, to_schedule
 
 
 def task_order(fleet: Fleet) -> np.ndarray:
     tk = fleet.tasks
     return np.lexsort((tk.due_s, -(tk.weight / tk.duration_s), -tk.weight))
-
-
-def _feasible(los: LineOfSight, tl: Timeline, sat: int, cand: tuple) -> np.ndarray:
-    """Which candidate (start, end, los0, los1) arrays fit into timeline `tl` of satellite `sat`."""
-    st, en, l0, l1 = cand
-    S = np.asarray(tl.start, dtype=np.float64)
-    E = np.asarray(tl.end, dtype=np.float64)
-    pos = np.searchsorted(S, st)
-    ok = np.ones(len(st), dtype=bool)
-    has_p, has_n = pos > 0, pos < len(S)
-    if len(S):
-        pe = E[np.maximum(pos - 1, 0)]
-        ns = S[np.minimum(pos, len(S) - 1)]
-        ok &= ~has_p | (pe <= st)
-        ok &= ~has_n | (en <= ns)
-        P1 = np.asarray(tl.los1).reshape(-1, 3)
-        N0 = np.asarray(tl.los0).reshape(-1, 3)
-        frm = np.where(has_p[:, None], P1[np.maximum(pos - 1, 0)], los.nadir(sat, st))
-        gap = np.where(has_p, st - pe, st)
-        ok &= los.need_s(sat, frm, l0) + MARGIN_S <= gap
-        need_n = los.need_s(sat, l1, N0[np.minimum(pos, len(S) - 1)])
-        ok &= ~has_n | (need_n + MARGIN_S <= ns - en)
-    else:
-        ok &= los.need_s(sat, los.nadir(sat, st), l0) + MARGIN_S <= st
-    return ok
 
 
 def insert_greedily(fleet: Fleet, opps: Opportunities, los: LineOfSight) -> list[Timeline]:
@@ -93,7 +47,8 @@ def insert_greedily(fleet: Fleet, opps: Opportunities, los: LineOfSight) -> list
             en = st + dur[t]
             tt = np.full(len(r), t)
             l0, l1 = los.los(sat, tt, st), los.los(sat, tt, en)
-            ok = _feasible(los, tls[sat], sat, (st, en, l0, l1))
+            tl = Arrays.of(tls[sat])
+            ok = fits(los, sat, tl, Candidates(st, en, l0, l1), np.searchsorted(tl.start, st))
             if not ok.any():
                 continue
             j = int(np.flatnonzero(ok)[np.argmin(en[ok])])
@@ -103,63 +58,6 @@ def insert_greedily(fleet: Fleet, opps: Opportunities, los: LineOfSight) -> list
             _, sat, row = best
             tls[sat].insert(int(np.searchsorted(np.asarray(tls[sat].start), row[0])), row)
     return tls
-
-
-def _recheck_slews(los: LineOfSight, tl: Timeline, sat: int) -> None:
-    """Drop observations whose slew no longer fits after a removal (first one kept)."""
-    k = 0
-    while k < len(tl.start):
-        frm = tl.los1[k - 1] if k else los.nadir(sat, tl.start[k])
-        gap = tl.start[k] - (tl.end[k - 1] if k else 0.0)
-        if float(los.need_s(sat, np.asarray(frm), np.asarray(tl.los0[k]))) + MARGIN_S > gap:
-            tl.remove(k)
-            continue
-        k += 1
-
-
-def _intervals(los: LineOfSight, tl: Timeline, sat: int) -> tuple[Intervals, Intervals]:
-    st = np.round(np.asarray(tl.start, dtype=np.float64) * US).astype(np.int64)
-    en = np.round(np.asarray(tl.end, dtype=np.float64) * US).astype(np.int64)
-    w0 = []
-    for k in range(len(st)):
-        frm = tl.los1[k - 1] if k else los.nadir(sat, tl.start[k])
-        need = float(los.need_s(sat, np.asarray(frm), np.asarray(tl.los0[k])))
-        w0.append(st[k] - timedelta_us(need))
-    return Intervals(st, en), Intervals(np.asarray(w0, dtype=np.int64), st.copy())
-
-
-def repair_battery(fleet: Fleet, los: LineOfSight, tls: list[Timeline], sats=None, sun: SunCache | None = None) -> int:
-    """Drop the least valuable observations until every battery stays above zero; returns drops.
-
-    `sats`: only these satellites' timelines (default: all); `sun`: a cache of sunlight kept between calls."""
-    sun = sun or SunCache(los.geo)
-    w, dur = fleet.tasks.weight, fleet.tasks.duration_s
-    dropped = 0
-    for sat in range(len(tls)) if sats is None else sats:
-        tl = tls[sat]
-        while True:
-            run = simulate(fleet, sun, sat, *_intervals(los, tl, sat))
-            if run.ok or not tl.start:
-                break
-            before = [k for k in range(len(tl.start)) if tl.start[k] * US <= run.fail_us] or list(range(len(tl.start)))
-            k = min(before, key=lambda k: (w[tl.task[k]], w[tl.task[k]] / dur[tl.task[k]], -tl.start[k]))
-            tl.remove(k)
-            dropped += 1
-            _recheck_slews(los, tl, sat)
-    return dropped
-
-
-def to_schedule(fleet: Fleet, tls: list[Timeline]) -> Schedule:
-    sat, task, st, en = [], [], [], []
-    for k, tl in enumerate(tls):
-        sat += [fleet.satellites.ids[k]] * len(tl.start)
-        task += [fleet.tasks.ids[t] for t in tl.task]
-        st += tl.start
-        en += tl.end
-    st_us = np.round(np.asarray(st, dtype=np.float64) * US).astype(np.int64)
-    order = np.lexsort((np.asarray([fleet.satellite_index()[s] for s in sat], dtype=np.int64), st_us))
-    return Schedule(strings(sat)[order], strings(task)[order], st_us[order],
-                    np.round(np.asarray(en, dtype=np.float64) * US).astype(np.int64)[order])
 
 
 def solve(fleet: Fleet, opps: Opportunities, geo: Geometry | None = None) -> Schedule:

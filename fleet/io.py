@@ -107,7 +107,8 @@ def is_fleet_dir(path: str | os.PathLike) -> bool:
     return isinstance(meta, dict) and meta.get("kind") == KIND and (p / "satellites.parquet").is_file()
 
 
-def _table(columns: dict):
+def arrow_table(columns: dict):
+    """An Arrow table of named numpy columns (object arrays as strings): the tables of the fleet files."""
     import pyarrow as pa
 
     arrays = {}
@@ -138,18 +139,19 @@ def write_fleet(fleet: Fleet, opps: Opportunities, out: str | os.PathLike, overw
     if bad is not None:
         raise ValueError(f"extra table name {bad!r}: letters, digits, '_' and '-' only")
     with atomic_dir(out, overwrite=overwrite, owned=is_fleet_dir, names=written_names) as tmp:
-        pq.write_table(_table({k: get(fleet.satellites) for k, (_, get) in SAT_COLUMNS.items()}),
+        pq.write_table(arrow_table({k: get(fleet.satellites) for k, (_, get) in SAT_COLUMNS.items()}),
                        tmp / "satellites.parquet")
-        pq.write_table(_table({k: get(fleet.tasks) for k, (_, get) in TASK_COLUMNS.items()}), tmp / "tasks.parquet")
-        pq.write_table(_table({"task": opps.task, "satellite": opps.satellite, "start": opps.start,
-                               "pass": opps.pass_id}), tmp / "opportunities.parquet")
+        pq.write_table(arrow_table({k: get(fleet.tasks) for k, (_, get) in TASK_COLUMNS.items()}),
+                       tmp / "tasks.parquet")
+        pq.write_table(arrow_table({"task": opps.task, "satellite": opps.satellite, "start": opps.start,
+                                    "pass": opps.pass_id}), tmp / "opportunities.parquet")
         for name, cols in fleet.extras.items():
-            pq.write_table(_table(dict(cols)), tmp / f"extra_{name}.parquet")
+            pq.write_table(arrow_table(dict(cols)), tmp / f"extra_{name}.parquet")
         (tmp / "meta.json").write_text(json.dumps(meta, indent=2) + "\n")
     return Path(out)
 
 
-def _read_parquet(path: Path, expected: dict, table=None, extra_ok: bool = False) -> dict:
+def read_columns(path: Path, expected: dict, table=None, extra_ok: bool = False) -> dict:
     """Columns of a Parquet file, checked: present, nothing unexpected (unless `extra_ok`), right kind ("str", "int",
     "float": a finite number, "timestamp"), no nulls/NaN.  `table`: already read."""
     import pyarrow as pa
@@ -280,7 +282,7 @@ def read_fleet(path: str | os.PathLike, with_opportunities: bool = True) -> tupl
     if min(h.action_step_s, h.geometry_step_s, h.resource_step_s) <= 0 or h.end <= h.start:
         raise InputError(root / "meta.json", "bad horizon: the steps must be > 0 and the end after the start")
     sp = root / "satellites.parquet"
-    s = _read_parquet(sp, {k: kind for k, (kind, _) in SAT_COLUMNS.items()})
+    s = read_columns(sp, {k: kind for k, (kind, _) in SAT_COLUMNS.items()})
     if len(s["satellite_id"]) == 0:
         raise InputError(sp, "no satellite (a fleet needs one)")
     _unique(sp, s["satellite_id"], "satellite_id")
@@ -292,7 +294,7 @@ def read_fleet(path: str | os.PathLike, with_opportunities: bool = True) -> tupl
                 s["slew_power_w"], s["sunlit_charge_power_w"]))
     _check_values(sp, satellite_fault(sats))
     tp = root / "tasks.parquet"
-    t = _read_parquet(tp, {k: kind for k, (kind, _) in TASK_COLUMNS.items()})
+    t = read_columns(tp, {k: kind for k, (kind, _) in TASK_COLUMNS.items()})
     if len(t["task_id"]) == 0:
         raise InputError(tp, "no task (a fleet needs one)")
     _unique(tp, t["task_id"], "task_id")
@@ -307,7 +309,7 @@ def read_fleet(path: str | os.PathLike, with_opportunities: bool = True) -> tupl
     if not with_opportunities:
         return fleet, None
     op = root / "opportunities.parquet"
-    o = _read_parquet(op, {c: "int" for c in OPP_COLUMNS})
+    o = read_columns(op, {c: "int" for c in OPP_COLUMNS})
     for c, hi in (("task", len(tasks)), ("satellite", len(sats)), ("start", h.n_action)):
         bad = np.flatnonzero((o[c] < 0) | (o[c] >= hi))
         if len(bad):
@@ -363,7 +365,7 @@ def write_schedule(schedule: Schedule, fleet: Fleet, path: str | os.PathLike, ov
 
 def read_schedule_table(path: Path, kind: bytes, fleet_fingerprint: str, columns: dict, what: str):
     """The columns of a schedule eosp wrote (`what`: "a fleet schedule"), checked: its `kind` mark, the fingerprint of
-    the fleet it was written for, and `columns` (name -> kind, as :func:`_read_parquet`) present, of their kind,
+    the fleet it was written for, and `columns` (name -> kind, as :func:`read_columns`) present, of their kind,
     without nulls; with its metadata as text."""
     table = read_parquet(path)
     md = table.schema.metadata or {}
@@ -371,7 +373,7 @@ def read_schedule_table(path: Path, kind: bytes, fleet_fingerprint: str, columns
         raise InputError(path, f"not {what} (no {kind.decode()} metadata)")
     if md.get(b"fleet_fingerprint", b"").decode(errors="replace") != fleet_fingerprint:
         raise InputError(path, "written for another fleet (fingerprint differs)")
-    cols = _read_parquet(path, columns, table=table, extra_ok=True)
+    cols = read_columns(path, columns, table=table, extra_ok=True)
     return cols, {k.decode(errors="replace"): v.decode(errors="replace") for k, v in md.items()}
 
 

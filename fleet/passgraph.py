@@ -37,6 +37,7 @@ from eosp.graphs.discrete import DiscreteGraph, arc_to_acq
 from eosp.graphs.prune import fifo_violations
 from eosp.instances.instance import Acquisitions, Instance
 from eosp.planning.labels import label_search
+from eosp.sim.slew import bang_coast_bang
 
 
 # Memory of a fleet's pass graphs (Problem.build, a worker's graphs), on top of the whole horizon's geometry
@@ -96,7 +97,8 @@ class PassGraph:
 
 @numba.njit(cache=True, inline="always")
 def _need(u, v, rate, acc, settle):
-    """Slew (bang-coast-bang) plus settling time between two pointing vectors."""
+    """Slew (bang-coast-bang, :func:`eosp.sim.slew.bang_coast_bang`) plus settling time between two pointing
+    vectors."""
     nu = np.sqrt(u[0] * u[0] + u[1] * u[1] + u[2] * u[2])
     nv = np.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2])
     if nu <= 1e-9 or nv <= 1e-9:
@@ -104,11 +106,7 @@ def _need(u, v, rate, acc, settle):
     c = (u[0] * v[0] + u[1] * v[1] + u[2] * v[2]) / (nu * nv)
     c = min(1.0, max(-1.0, c))
     angle = np.degrees(np.arccos(c))
-    if angle <= 1e-9:
-        return settle
-    if angle <= rate * rate / acc:
-        return 2.0 * np.sqrt(angle / acc) + settle
-    return 2.0 * rate / acc + (angle - rate * rate / acc) / rate + settle
+    return bang_coast_bang(angle, rate, acc) + settle
 
 
 @numba.njit(cache=True)

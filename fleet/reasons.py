@@ -8,7 +8,7 @@ For every task the schedule does not observe, the first of these that applies is
 3. **insertable** - one of its opportunities fits into its satellite's timeline as it is: no
    overlap, the slew and settling from the observation before it (from nadir at the horizon
    start for a first one) and to the one after it fit in the gaps (the checker's model,
-   :func:`eosp.fleet.greedy._feasible`), and the battery stays above zero with it: value left on
+   :func:`eosp.fleet.timeline.fits`), and the battery stays above zero with it: value left on
    the table;
 4. **energy** - some opportunity fits in time, as in 3, but with every one tried the battery
    would go below zero;
@@ -21,7 +21,7 @@ Every opportunity of a missed task is tried at its one position in its satellite
 (the timeline is ordered in time, so an opportunity has exactly one place; removals open that
 place).  Time tests are vectorised per satellite over all opportunities of missed tasks and all
 ten removal patterns (a before, b after, a + b <= 3).  The battery is tested with a bound first:
-the charge curve of the satellite as scheduled (:func:`levels`) minus the energy the insertion
+the charge curve of the satellite as scheduled (:func:`eosp.fleet.battery.levels`) minus the energy the insertion
 adds (imaging, and the slews into and out of it), less a margin for the charge sampled at new cut
 points, must stay above zero from the insertion on (clipping at the capacity only narrows a
 deficit); a candidate that fails the bound is simulated exactly (:func:`eosp.fleet.battery.simulate`
@@ -38,12 +38,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from eosp.fleet.battery import Intervals, SunCache, segments, simulate
+from eosp.fleet.battery import SunCache, levels, simulate
 from eosp.fleet.geometry import Geometry
-from eosp.fleet.greedy import Timeline, _feasible, _intervals
 from eosp.fleet.model import US, Fleet, Schedule, iso_z
 from eosp.fleet.opportunities import Opportunities
-from eosp.fleet.slew import MARGIN_S, LineOfSight
+from eosp.fleet.slew import LineOfSight
+from eosp.fleet.timeline import Arrays, Candidates, Timeline, fits, intervals, timelines
 
 KINDS = ("sensor mismatch", "no opportunity", "insertable", "energy", "blocked", "blocked, no small removal")
 SENSOR, NO_OPP, INSERTABLE, ENERGY, BLOCKED, BLOCKED_NONE = range(len(KINDS))
@@ -97,36 +97,13 @@ def describe(fleet: Fleet, r: Reasons, i: int) -> str:
             f"{int(r.candidates[i])} opportunities")
 
 
-def timelines(fleet: Fleet, schedule: Schedule, los: LineOfSight) -> list[Timeline]:
-    """The schedule as one time-ordered :class:`Timeline` per satellite (ids must be the fleet's)."""
+def schedule_timelines(fleet: Fleet, schedule: Schedule, los: LineOfSight) -> list[Timeline]:
+    """The schedule as one time-ordered :class:`~eosp.fleet.timeline.Timeline` per satellite (ids must be the
+    fleet's)."""
     si, ti = fleet.satellite_index(), fleet.task_index()
     sat = np.asarray([si[s] for s in schedule.satellite.tolist()], dtype=np.int64)
     task = np.asarray([ti[t] for t in schedule.task.tolist()], dtype=np.int64)
-    st, en = schedule.start_us / US, schedule.end_us / US
-    tls = []
-    for k in range(len(fleet.satellites)):
-        m = np.flatnonzero(sat == k)
-        m = m[np.lexsort((schedule.end_us[m], schedule.start_us[m]))]
-        tl = Timeline()
-        if len(m):
-            l0, l1 = los.los(k, task[m], st[m]), los.los(k, task[m], en[m])
-            tl = Timeline(st[m].tolist(), en[m].tolist(), task[m].tolist(), list(l0), list(l1))
-        tls.append(tl)
-    return tls
-
-
-def levels(fleet: Fleet, sun: SunCache, sat: int, obs: Intervals, man: Intervals) -> tuple[np.ndarray, np.ndarray]:
-    """The battery charge (Wh) at the end of every simulation segment and those ends (µs): the recurrence
-    of :func:`eosp.fleet.battery.simulate`, kept whole (used for the bound here and the report's curve)."""
-    b = fleet.satellites.battery
-    seg = segments(fleet, sun, sat, obs, man)
-    load, charge, dt = seg.load, seg.charge, seg.dur
-    out = np.empty(len(dt))
-    level, cap = float(b.initial_wh[sat]), float(b.capacity_wh[sat])
-    for k, (ld, ch, s) in enumerate(zip(load.tolist(), charge.tolist(), dt.tolist())):
-        level = min(cap, level + ((ch - ld) * s) / 3600.0)
-        out[k] = level
-    return seg.end, out
+    return timelines(fleet, los, sat, task, schedule.start_us / US, schedule.end_us / US)
 
 
 class _Sat:
@@ -134,40 +111,20 @@ class _Sat:
 
     def __init__(self, fleet: Fleet, los: LineOfSight, sun: SunCache, tl: Timeline, k: int):
         self.tl = tl
-        self.S = np.asarray(tl.start, dtype=np.float64)
-        self.E = np.asarray(tl.end, dtype=np.float64)
+        self.arrays = Arrays.of(tl)
+        self.S, self.E, self.L0, self.L1 = self.arrays
         self.T = np.asarray(tl.task, dtype=np.int64)
-        self.L0 = np.asarray(tl.los0, dtype=np.float64).reshape(-1, 3)
-        self.L1 = np.asarray(tl.los1, dtype=np.float64).reshape(-1, 3)
-        ends, lv = levels(fleet, sun, k, *_intervals(los, tl, k))
+        ends, lv = levels(fleet, sun, k, *intervals(los, tl, k))
         self.ends = ends
         self.suffix_min = np.minimum.accumulate(lv[::-1])[::-1]
 
 
-def _fits(los: LineOfSight, k: int, s: _Sat, st, en, l0, l1, pos, a: int, b: int) -> np.ndarray:
-    """Do the candidates fit once the `a` observations before and the `b` after their position are removed?"""
-    n = len(s.S)
-    p, q = pos - a - 1, pos + b
-    ok = (pos - a >= 0) & (q <= n)
-    has_p, has_n = p >= 0, q < n
-    pi, qi = np.clip(p, 0, max(n - 1, 0)), np.clip(q, 0, max(n - 1, 0))
-    if n:
-        pe, ns = s.E[pi], s.S[qi]
-        frm = np.where(has_p[:, None], s.L1[pi], los.nadir(k, st))
-        gap = np.where(has_p, st - pe, st)
-        ok &= ~has_p | (pe <= st)
-        ok &= los.need_s(k, frm, l0) + MARGIN_S <= gap
-        ok &= ~has_n | ((en <= ns) & (los.need_s(k, l1, s.L0[qi]) + MARGIN_S <= ns - en))
-    else:
-        ok &= los.need_s(k, los.nadir(k, st), l0) + MARGIN_S <= st
-    return ok
-
-
-def _extra_wh(fleet: Fleet, los: LineOfSight, k: int, s: _Sat, st, en, l0, l1, pos, a, b):
+def _extra_wh(fleet: Fleet, los: LineOfSight, k: int, s: _Sat, cand: Candidates, pos, a, b):
     """An upper bound on the energy an insertion adds (Wh): imaging, the slew in and the slew out (the
     slews it replaces and the observations it removes are not credited), plus the charge that sampling the
     sunlight at moved cut points may shift (one resource step of charging per cut point added or removed);
     and the slew time into it (s)."""
+    st, en, l0, l1 = cand
     bt = fleet.satellites.battery
     n = len(s.S)
     p, q = pos - a - 1, pos + b
@@ -189,7 +146,7 @@ def _exact_ok(fleet: Fleet, los: LineOfSight, sun: SunCache, k: int, s: _Sat, ro
     keep = list(range(0, pos - a)) + list(range(pos + b, len(tl.start)))
     new = Timeline(*([c[j] for j in keep] for c in cols))
     new.insert(pos - a, row)
-    return simulate(fleet, sun, k, *_intervals(los, new, k)).ok
+    return simulate(fleet, sun, k, *intervals(los, new, k)).ok
 
 
 def explain(fleet: Fleet, opps: Opportunities, schedule: Schedule, geo: Geometry | None = None,
@@ -221,7 +178,7 @@ def explain(fleet: Fleet, opps: Opportunities, schedule: Schedule, geo: Geometry
 
     # every opportunity of a still-open missed task, with its fewest removals (99: none up to three)
     rows = np.flatnonzero(open_[np.maximum(row_of[opps.task], 0)] & (row_of[opps.task] >= 0))
-    tls = timelines(fleet, schedule, los)
+    tls = schedule_timelines(fleet, schedule, los)
     sats: dict[int, _Sat] = {}
     cand = {"row": [], "sat": [], "st": [], "en": [], "l0": [], "l1": [], "pos": [], "a": [], "b": [], "fast": []}
     for k in range(n_sat):
@@ -241,14 +198,14 @@ def explain(fleet: Fleet, opps: Opportunities, schedule: Schedule, geo: Geometry
             if not todo.any():
                 break
             ok = np.zeros(len(r), dtype=bool)
-            ok[todo] = _fits(los, k, s, st[todo], en[todo], l0[todo], l1[todo], pos[todo], a, b)
+            ok[todo] = fits(los, k, s.arrays, Candidates(st[todo], en[todo], l0[todo], l1[todo]), pos[todo], a, b)
             best_a[ok], best_b[ok] = a, b
         has = best_a >= 0
         if not has.any():
             continue
         r, t, st, en, l0, l1, pos, a, b = (x[has] for x in (r, t, st, en, l0, l1, pos, best_a, best_b))
         # the battery bound: the curve's minimum from the slew into it on, less the added energy
-        extra, need_in = _extra_wh(fleet, los, k, s, st, en, l0, l1, pos, a, b)
+        extra, need_in = _extra_wh(fleet, los, k, s, Candidates(st, en, l0, l1), pos, a, b)
         if len(s.ends):
             at = np.minimum(np.searchsorted(s.ends, np.floor((st - need_in - 1.0) * US)), len(s.ends) - 1)
             fast = s.suffix_min[at] - extra > 1.0e-9

@@ -107,8 +107,7 @@ def run(cfg: PretrainConfig) -> dict:
                 by_epochs = (epoch - 1 + done) / im.epochs
                 by_time = (time.perf_counter() - t0) / im.time_budget if deadline is not None else 0.0
                 return cosine_lr(im.lr, max(by_epochs, by_time))
-        metrics = train_epoch(agent, opt, data.samples, im.batch_size, im.value_coeff, im.grad_clip, rng, deadline,
-                              im.regret_coeff, average, lr_at)
+        metrics = train_epoch(agent, opt, data.samples, im, rng, deadline, average, lr_at)
         metrics["train/lr"] = opt.param_groups[0]["lr"]
         policy = average.model if average is not None else agent  # what is validated, saved and rolled out
         out_of_time = deadline is not None and time.perf_counter() > deadline

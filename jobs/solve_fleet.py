@@ -36,7 +36,7 @@ import numpy as np
 
 from eosp.args import Parser, add_config_args, add_memory_arg, config_from_args, prefixed_config, run_job  # noqa: E402
 from eosp.config import RayConfig, flatten  # noqa: E402
-from eosp.solvers.fleet import FleetConfig  # noqa: E402
+from eosp.kinds.fleet.config import FleetConfig  # noqa: E402
 
 RUN_KIND = "fleet-run"
 STATE = "state.npz"
@@ -76,7 +76,7 @@ class PassWorker:
         self.weight = fleet.tasks.weight.astype(np.float64)
         self.graphs = {p: build_pass(fleet, opps, los, p, off) for p in passes}
         if self.graphs:  # compile the solver's kernels now, not in the first round (numba, per process)
-            from eosp.solvers.fleet import solve_pass_graph
+            from eosp.kinds.fleet.problem import solve_pass_graph
 
             pg = max(self.graphs.values(), key=lambda g: len(g.rows))
             solve_pass_graph(pg, self.weight[pg.tasks], cfg)
@@ -91,7 +91,7 @@ class PassWorker:
         """Every pass of `passes` under task prices `lam` (utility weight - price), packed in a few arrays
         (a round of thousands of passes costs thousands of small objects otherwise): pass ids, values, bounds
         (NaN: none), CSR offsets and nodes of the paths, seconds per pass."""
-        from eosp.solvers.fleet import solve_pass_graph
+        from eosp.kinds.fleet.problem import priced, solve_pass_graph
 
         n = len(passes)
         value, bound, secs = np.zeros(n), np.full(n, np.nan), np.zeros(n)
@@ -99,7 +99,7 @@ class PassWorker:
         for i, p in enumerate(passes.tolist()):
             pg = self.graphs[p]
             t = time.perf_counter()
-            res = solve_pass_graph(pg, self.weight[pg.tasks] - lam[pg.tasks], self.cfg)
+            res = solve_pass_graph(pg, priced(self.weight, lam, pg.tasks), self.cfg)
             secs[i] = time.perf_counter() - t
             value[i] = res.value
             if res.bound is not None:
@@ -126,8 +126,7 @@ def assign(prob, workers: int) -> np.ndarray:
 
 
 class RayPassPool:
-    """The passes of a price round solved by Ray actors (:meth:`solve_priced`, which the coordinator prefers to
-    :class:`eosp.solvers.fleet.PassPool`'s ``solve`` when a pool has it)."""
+    """The passes of a price round solved by Ray actors: a :class:`eosp.kinds.fleet.pool.PassPool`."""
 
     def __init__(self, prob, cfg: FleetConfig):
         import ray
@@ -149,7 +148,7 @@ class RayPassPool:
         import ray
         from ray.exceptions import RayActorError
 
-        from eosp.solvers.fleet import PassResult, solve_pass
+        from eosp.kinds.fleet.problem import PassResult, priced, solve_pass
 
         self.calls += 1
         ids = np.asarray(passes, dtype=np.int64)
@@ -175,8 +174,7 @@ class RayPassPool:
             except RayActorError:
                 self.faults += 1
                 for p in mine.tolist():
-                    tasks = self.prob.passes[p].tasks
-                    out[p] = solve_pass(self.prob, p, w[tasks] - lam[tasks], self.cfg)
+                    out[p] = solve_pass(self.prob, p, priced(w, lam, self.prob.passes[p].tasks), self.cfg)
                 continue
             for i, p in enumerate(got.tolist()):
                 b = float(bound[i])
@@ -196,7 +194,7 @@ def _load_state(run: Path, fleet, fp: str):
     checked (a truncated, edited or foreign state file is one line, never a traceback or a wrong resume)."""
     from eosp.errors import InputError
     from eosp.fleet.io import read_schedule
-    from eosp.solvers.fleet import Resume
+    from eosp.kinds.fleet.solve import Resume
 
     meta_path = run / META
     if not meta_path.exists():
@@ -264,7 +262,8 @@ class Checkpoint:
 
         with atomic_path(self.run / STATE) as tmp:
             with open(tmp, "wb") as fh:
-                np.savez(fh, lam=coord.lam, step=np.float64(coord.step), best_bound=np.float64(coord.best_bound),
+                np.savez(fh, lam=coord.prices.lam, step=np.float64(coord.prices.factor),
+                         best_bound=np.float64(coord.best_bound),
                          bound_source=np.str_(coord.bound_source), rounds_done=np.int64(coord.rounds_done))
         if coord.best.value != self.last_value:
             write_schedule(coord.schedule(coord.best), self.fleet, self.run / BEST, overwrite=True,
@@ -302,13 +301,15 @@ def run(job: SolveFleetJob) -> dict:
     from eosp.jobs.preflight import make_run_dir
     from eosp.jobs.ray_init import init_ray
     from eosp.jobs.tracking import use_experiment
-    from eosp.solvers.fleet import Problem, solve
+    from eosp.kinds.fleet.problem import Problem
+    from eosp.kinds.fleet.solve import solve
 
     import logging
 
     logging.getLogger("mlflow").setLevel(logging.WARNING)  # its INFO lines (creating tables, experiments) are noise
     t0 = time.perf_counter()
     fleet, opps = read_fleet(job.fleet_dir)
+    t_read = time.perf_counter()  # --fleet.time-limit counts from here
     fp = fingerprint(fleet)
     run_dir = Path(job.run_dir)
     saved = _load_state(run_dir, fleet, fp) if run_dir.is_dir() else None
@@ -331,7 +332,8 @@ def run(job: SolveFleetJob) -> dict:
         ckpt = Checkpoint(run_dir, fleet, mlflow, prob.total_weight)
         resume, initial = (saved if saved is not None else (None, None))
         try:
-            sol = solve(fleet, opps, job.fleet, problem=prob, initial=initial, pool=pool, on_round=ckpt, resume=resume)
+            sol = solve(fleet, opps, job.fleet, problem=prob, initial=initial, pool=pool, on_round=ckpt, resume=resume,
+                        t0=t_read)
         finally:
             if pool is not None:
                 pool.close()
@@ -389,6 +391,10 @@ def _main(argv: list[str] | None) -> int:
         require_findable(value, flag)
     if not is_fleet_dir(job.fleet_dir):
         raise InputError(f"--fleet-dir {job.fleet_dir}", "not a fleet directory (eosp import / eosp generate --fleet)")
+    try:
+        job.fleet.validate()  # the rules across its fields (a time limit or a number of rounds), set by the flags
+    except ValueError as exc:
+        raise InputError("--fleet", str(exc)) from None
     if job.fleet.pass_solver == "policy":
         raise InputError("--fleet.pass-solver", "policy: no model trained on fleet passes is shipped yet")
     run_dir = Path(job.run_dir)

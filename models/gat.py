@@ -88,8 +88,10 @@ class EdgeStructure:
 
 
 @numba.njit(cache=True, fastmath=True)
-def _forward(indptr, src, types, attr, xl, xr, w_edge, att, out, alpha, score):
-    """`w_edge` here [N_BASIS, H * C] (rows contiguous over the hidden units, for SIMD)."""
+def _forward(edges, xl, xr, w_edge, att, out, alpha, score):
+    """`edges`: (indptr, src, types, attr) (:meth:`EdgeStructure.arrays`); `w_edge` here [N_BASIS, H * C] (rows
+    contiguous over the hidden units, for SIMD)."""
+    indptr, src, types, attr = edges
     n, n_heads, c_dim = xl.shape
     for i in range(n):
         lo, hi = indptr[i], indptr[i + 1]
@@ -124,12 +126,15 @@ def _forward(indptr, src, types, attr, xl, xr, w_edge, att, out, alpha, score):
 
 
 @numba.njit(cache=True, fastmath=True)
-def _backward(indptr, src, types, attr, xl, xr, w_edge, att, alpha, gout, gxl, gxr, gw, gatt, dalpha, dz):
-    """`w_edge` and `gw` [N_BASIS, H * C]; `dz` a [C] scratch row.
+def _backward(edges, xl, xr, w_edge, att, alpha, gout, grads, dalpha, dz):
+    """`edges`: (indptr, src, types, attr); `grads`: (gxl, gxr, gw, gatt), accumulated; `w_edge` and `gw`
+    [N_BASIS, H * C]; `dz` a [C] scratch row.
 
     Per edge, dL/dz goes to `dz` first and is then added to each gradient in short loops that
     store into one or two arrays each: with all six accumulations in one loop LLVM cannot rule
     out that they alias and leaves it scalar (this way the pass is ~30% faster)."""
+    indptr, src, types, attr = edges
+    gxl, gxr, gw, gatt = grads
     n, n_heads, c_dim = xl.shape
     for i in range(n):
         lo, hi = indptr[i], indptr[i + 1]
@@ -178,7 +183,7 @@ def fused_forward(xl: np.ndarray, xr: np.ndarray, w_edge_t: np.ndarray, att: np.
     out = np.zeros_like(xl)
     alpha = np.empty((edges.src.shape[0], xl.shape[1]), dtype=np.float32)
     score = np.empty(max(edges.max_degree, 1), dtype=np.float32)
-    _forward(*edges.arrays(), xl, xr, w_edge_t, att, out, alpha, score)
+    _forward(edges.arrays(), xl, xr, w_edge_t, att, out, alpha, score)
     return out, alpha
 
 
@@ -199,7 +204,7 @@ class _FusedAttention(torch.autograd.Function):
         gw, gatt = np.zeros_like(w_n), np.zeros_like(att_n)
         dalpha = np.empty(max(edges.max_degree, 1), dtype=np.float32)
         dz = np.empty(xl_n.shape[2], dtype=np.float32)
-        _backward(*edges.arrays(), xl_n, xr_n, w_n, att_n, alpha, _np(gout), gxl, gxr, gw, gatt, dalpha, dz)
+        _backward(edges.arrays(), xl_n, xr_n, w_n, att_n, alpha, _np(gout), (gxl, gxr, gw, gatt), dalpha, dz)
         return torch.from_numpy(gxl), torch.from_numpy(gxr), torch.from_numpy(gw.T.copy()), torch.from_numpy(gatt), None
 
 

@@ -8,7 +8,8 @@ float64 array so that the numba graph builder can evaluate them in its hot loop:
   time over angle breakpoints (extrapolated with the last slope).
 * ``bang_coast_bang``: ``[1, rate, accel, settle]``: accelerate at ``accel`` up
   to ``rate``, coast, decelerate, then settle.  A short slew never reaches the
-  maximum rate: ``2 sqrt(angle / accel)``.
+  maximum rate: ``2 sqrt(angle / accel)``.  The formula is written once
+  (:func:`bang_coast_bang`): the fleets' pass graphs and checker use it too.
 """
 
 from __future__ import annotations
@@ -36,8 +37,32 @@ def pack_slew_model(sat: SatelliteConfig) -> np.ndarray:
     raise ValueError(f"unknown slew model {sat.slew_model!r} (piecewise, bang_coast_bang)")
 
 
+SMALL_DEG = 1.0e-9  # a rotation this small costs no slew, only settling (the aeossp benchmark's tolerance)
+
+
+def _bang_coast_bang(angle_deg: float, rate: float, accel: float) -> float:
+    """Rest-to-rest slew time (s, settling excluded) of a rotation by `angle_deg` at most `rate` deg/s and `accel`
+    deg/s^2: accelerate, coast, decelerate; a short slew never reaches the rate (2 sqrt(angle / accel)); a rotation
+    of at most :data:`SMALL_DEG` costs nothing, any other one forever without a positive rate and acceleration.
+    The aeossp benchmark's model, its float operations in its order: the one formula of the single pass, the
+    fleet's pass graphs and the fleet checker, compiled as a scalar kernel (:data:`bang_coast_bang`) and as a
+    ufunc over arrays (:data:`bang_coast_bang_array`, broadcasting)."""
+    if angle_deg <= SMALL_DEG:
+        return 0.0
+    if rate <= 0.0 or accel <= 0.0:
+        return np.inf
+    if angle_deg <= rate * rate / accel:
+        return 2.0 * np.sqrt(angle_deg / accel)
+    return 2.0 * (rate / accel) + (angle_deg - rate * rate / accel) / rate
+
+
+bang_coast_bang = numba.njit(cache=True, fastmath=False)(_bang_coast_bang)
+bang_coast_bang_array = numba.vectorize(["float64(float64, float64, float64)"], cache=True)(_bang_coast_bang)
+
+
 @numba.njit(cache=True, fastmath=False)
 def slew_time(angle_deg: float, model: np.ndarray) -> float:
+    """Slew plus settling time of a rotation by `angle_deg` under a packed model (:func:`pack_slew_model`)."""
     if model[0] == PIECEWISE:
         k = int(model[1])
         a = model[2:2 + k]
@@ -46,22 +71,13 @@ def slew_time(angle_deg: float, model: np.ndarray) -> float:
             if angle_deg <= a[s]:
                 return t[s - 1] + (t[s] - t[s - 1]) * (angle_deg - a[s - 1]) / (a[s] - a[s - 1])
         return t[k - 1] + (t[k - 1] - t[k - 2]) * (angle_deg - a[k - 1]) / (a[k - 1] - a[k - 2])
-    rate, accel, settle = model[1], model[2], model[3]
-    if angle_deg <= rate * rate / accel:
-        return 2.0 * np.sqrt(angle_deg / accel) + settle
-    return angle_deg / rate + rate / accel + settle
+    return bang_coast_bang(angle_deg, model[1], model[2]) + model[3]
 
 
+@numba.njit(cache=True, fastmath=False)
 def slew_times(angles_deg: np.ndarray, model: np.ndarray) -> np.ndarray:
-    """Vectorized slew time (plain numpy, independent of the numba kernel; used by checks)."""
-    angles_deg = np.asarray(angles_deg, dtype=np.float64)
-    if model[0] == PIECEWISE:
-        k = int(model[1])
-        a, t = model[2:2 + k], model[2 + k:2 + 2 * k]
-        out = np.interp(angles_deg, a, t)
-        beyond = angles_deg > a[-1]
-        out[beyond] = t[-1] + (t[-1] - t[-2]) * (angles_deg[beyond] - a[-1]) / (a[-1] - a[-2])
-        return out
-    rate, accel, settle = model[1], model[2], model[3]
-    return np.where(angles_deg <= rate * rate / accel, 2.0 * np.sqrt(angles_deg / accel),
-                    angles_deg / rate + rate / accel) + settle
+    """:func:`slew_time` of every angle of an array."""
+    out = np.empty(angles_deg.shape[0])
+    for i in range(angles_deg.shape[0]):
+        out[i] = slew_time(angles_deg[i], model)
+    return out

@@ -6,9 +6,12 @@ or of :class:`LearnedConfig` for the solvers that play a trained agent) and one 
 options, so a misspelled option is an error naming the valid ones, never ignored; the
 CLI builds its flags from the same config (:func:`eosp.args.add_config_args`).
 
-Time limits: the searching solvers (ramp, exact, lns, sample, beam, mcts) honour
-``time_limit``; the one-shot constructions (random, greedy, policy) always finish in
-one pass and refuse a limit (``ONE_SHOT``), so a caller never believes it bounded them.
+Time limits mean the same for every solver of every problem kind (:class:`SolverConfig`): the searching
+solvers (ramp, exact, lns, sample, beam, mcts; the fleet and ONERA searches) honour ``time_limit``, wall-clock
+seconds of the solve after the problem is read; the one-shot constructions (random, greedy, policy; the fleet
+and ONERA greedy) always finish in one pass and refuse a limit (``ONE_SHOT``), so a caller never believes it
+bounded them; the anytime searches, which do not end by themselves, need a limit or their deterministic budget
+(``BUDGET``: the fleet's rounds, the ONERA search's moves).
 """
 
 from __future__ import annotations
@@ -57,14 +60,17 @@ class SolverConfig:
 
     mode: str = choice("utility", "utility", "unitary")
     """'utility' (sum of utilities) or 'unitary' (count acquisitions)."""
-    time_limit: float | None = ranged(None, 0, WEEK_S)
-    """Seconds the search may run (ramp, exact, lns, sample, beam, mcts); unset: no limit (0 on the command line
-    means unset).  The one-shot solvers (random, greedy, policy) always finish in one pass and refuse it."""
+    time_limit: float | None = ranged(None, 0, WEEK_S, zero_unsets=True)
+    """Wall-clock seconds of the solve after the problem is read; unset: no limit, for a search that ends by
+    itself (0 on a command line means unset).  The anytime searches (fleet, onera) default to a number and stop
+    at it or at their deterministic budget (--rounds, --moves), whichever comes first; the one-pass
+    constructions (random, greedy, policy, the fleet and ONERA greedy) refuse it."""
     seed: int = ranged(0, 0)
     """Seed of the random choices (random walk, sampled policy, sample, beam, mcts)."""
 
     NAME: ClassVar[str] = ""
     ONE_SHOT: ClassVar[bool] = False  # one pass, no search: a time limit is refused, not ignored
+    BUDGET: ClassVar[str] = ""  # an anytime search's deterministic budget (a field): it needs this or a time limit
 
     def __post_init__(self) -> None:
         self.validate()
@@ -82,6 +88,19 @@ class SolverConfig:
         if self.ONE_SHOT and self.time_limit is not None:
             raise ValueError(f"solver {self.NAME!r} takes no time_limit: it builds its schedule in one pass and "
                              f"always finishes (got {self.time_limit!r}; leave it unset)")
+        if self.BUDGET and self.time_limit is None and getattr(self, self.BUDGET) is None:
+            flag = "--" + self.BUDGET.replace("_", "-")
+            raise ValueError(f"solver {self.NAME!r} needs a time_limit or {self.BUDGET} (--time-limit or {flag}): "
+                             "it searches until one of them ends it")
+
+
+@dataclass
+class UtilityConfig(SolverConfig):
+    """Options of the solvers of the kinds that maximise the value served alone (fleets: the weight served,
+    WCR; ONERA: the plan's value)."""
+
+    mode: str = choice("utility", "utility")
+    """'utility' only: the value served (a fleet's weight, WCR; an ONERA plan's value)."""
 
 
 @dataclass

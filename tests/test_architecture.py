@@ -13,19 +13,22 @@ ROOT = Path(__file__).resolve().parents[1]
 
 # bottom first; modules of one layer may import each other
 LAYERS = [
-    {"eosp", "eosp.config", "eosp.errors", "eosp.atomic", "eosp.args", "eosp.memory", "eosp.ownership", "eosp.reward"},
+    {"eosp", "eosp.config", "eosp.errors", "eosp.atomic", "eosp.args", "eosp.memory", "eosp.ownership", "eosp.reward",
+     "eosp.problem"},
     {"eosp.sim"},
     {"eosp.graphs"},
     {"eosp.planning"},
     {"eosp.instances"},
     {"eosp.shards"},
     {"eosp.fleet"},
+    {"eosp.onera"},
     {"eosp.envs"},
     {"eosp.models"},
     {"eosp.search"},
     {"eosp.solvers"},
     {"eosp.training"},
     {"eosp.evaluation"},
+    {"eosp.kinds"},  # one folder per problem kind: its solvers above the single-pass ones, its registration
     {"eosp.jobs"},
     {"eosp.cli"},
 ]
@@ -170,32 +173,44 @@ def test_circle_check_catches_a_lazy_import_circle(tmp_path):
 
 
 MAX_PARAMETERS = 10
-KERNEL_FOLDERS = ("planning", "search", "solvers")
+# numba kernels allowed more, each with the measured reason bundling its arguments would slow a hot path
+# ("path:function": reason); none today: bundling the environment's observation kernels (options and buffers as
+# plain tuples) cost 0.15 us of dispatch per step, the GAT kernels' (edges, gradients) nothing measurable
+KERNEL_EXCEPTIONS: dict[str, str] = {}
 
 
 def parameter_counts(path: Path) -> list[tuple[str, int, int]]:
-    """(name, line, parameters) of every function and method of `path`, `self`, *args and **kwargs counted."""
+    """(name, line, parameters) of every function and method of `path`: *args and **kwargs counted, the `self` or
+    `cls` of a method not."""
     out = []
     for node in ast.walk(ast.parse(path.read_text())):
+        if isinstance(node, ast.ClassDef):
+            for f in node.body:
+                if isinstance(f, (ast.FunctionDef, ast.AsyncFunctionDef)) and f.args.args and \
+                        not any(isinstance(d, ast.Name) and d.id == "staticmethod" for d in f.decorator_list):
+                    f.bound = True  # its first parameter is self or cls
         if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
             a = node.args
             n = len(a.posonlyargs) + len(a.args) + len(a.kwonlyargs) + (a.vararg is not None) + (a.kwarg is not None)
-            out.append((node.name, node.lineno, n))
+            out.append((node.name, node.lineno, n - getattr(node, "bound", False)))
     return out
 
 
-def test_schedule_algorithms_take_few_parameters():
-    """Kernels take a graph's arrays and their other inputs as typed bundles (NamedTuples, dataclasses), not dozens
-    of positional arrays: no function of planning/, search/ or solvers/ takes more than MAX_PARAMETERS."""
-    bad = [f"{folder}/{f.name}:{line} {name} takes {n}" for folder in KERNEL_FOLDERS
-           for f in sorted((ROOT / folder).glob("*.py")) for name, line, n in parameter_counts(f) if n > MAX_PARAMETERS]
+def test_functions_take_few_parameters():
+    """Functions take a graph's arrays and their other inputs as typed bundles (NamedTuples, dataclasses, plain
+    tuples for numba's dispatcher), not dozens of positional arguments: no function of the package takes more than
+    MAX_PARAMETERS besides self, except the numba kernels listed with a measured reason."""
+    bad = [f"{path.relative_to(ROOT)}:{line} {name} takes {n}" for _, path in modules()
+           for name, line, n in parameter_counts(path)
+           if n > MAX_PARAMETERS and f"{path.relative_to(ROOT)}:{name}" not in KERNEL_EXCEPTIONS]
     assert not bad, "\n".join(bad)
 
 
 def test_parameter_count_sees_every_kind_of_parameter(tmp_path):
     f = tmp_path / "m.py"
-    f.write_text("def f(a, /, b, *c, d, e=1, **g):\n    pass\n\nclass K:\n    def m(self, x):\n        pass\n")
-    assert parameter_counts(f) == [("f", 1, 6), ("m", 5, 2)]
+    f.write_text("def f(a, /, b, *c, d, e=1, **g):\n    pass\n\nclass K:\n    def m(self, x):\n        pass\n\n"
+                 "    @staticmethod\n    def s(x, y):\n        pass\n")
+    assert parameter_counts(f) == [("f", 1, 6), ("m", 5, 1), ("s", 9, 2)]
 
 
 def test_planning_imports_only_numpy_numba_and_graphs():

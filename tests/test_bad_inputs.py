@@ -1434,7 +1434,7 @@ def test_ctrl_c_of_the_onera_search_keeps_its_plan(tmp_path):
     out = tmp_path / "o.parquet"
     rc, err, took = _interrupt([sys.executable, "-m", "eosp.cli", "solve", tmp_path / "on", "--solver", "onera",
                                 "--time-limit", "120", "--out", out], 6.0)
-    assert rc == 130 and len(err.strip().splitlines()) == 1 and "wrote the best valid plan so far" in err, err
+    assert rc == 130 and len(err.strip().splitlines()) == 1 and "wrote the best valid schedule so far" in err, err
     assert took < 15.0, took
     assert run_cli(["validate", tmp_path / "on", out]).rc == 0
 
@@ -1444,8 +1444,8 @@ def test_onera_time_limit_covers_the_bound(tmp_path):
     bound stays a bound (at least the plan's value)."""
     import time
 
-    from eosp.fleet.onera import read_pb
-    from eosp.solvers.onera import OneraConfig, solve
+    from eosp.kinds.onera.search import OneraConfig, solve
+    from eosp.onera.model import read_pb
 
     (tmp_path / "i.pb").write_text(_onera_instance(1500, seed=1))
     f = read_pb(tmp_path / "i.pb")

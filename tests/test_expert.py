@@ -8,7 +8,7 @@ import numpy as np
 import pyarrow.parquet as pq
 import pytest
 
-from eosp.config import EnvConfig, ModelConfig
+from eosp.config import EnvConfig, ImitationConfig, ModelConfig
 from eosp.envs.eosp_env import EOSPEnv
 from eosp.envs.sources import FixedSource, prepare_instance
 from eosp.errors import InputError
@@ -146,9 +146,10 @@ def test_imitation_learns_the_expert_on_a_tiny_set(demo_shard):
         return sum(len(rollout(agent, p, env_cfg)[0]) for _, _, p in data.instances)
 
     before = score()
-    first = train_epoch(agent, opt, data.samples, 16, 0.5, 1.0, rng)
+    im = ImitationConfig(batch_size=16, value_coeff=0.5, grad_clip=1.0)
+    first = train_epoch(agent, opt, data.samples, im, rng)
     for _ in range(30):
-        last = train_epoch(agent, opt, data.samples, 16, 0.5, 1.0, rng)
+        last = train_epoch(agent, opt, data.samples, im, rng)
     assert last["train/policy_loss"] < 0.2 * first["train/policy_loss"]
     assert last["train/accuracy"] > 0.95
     cloned = score()
@@ -162,7 +163,7 @@ def test_imitation_learns_the_expert_on_a_tiny_set(demo_shard):
         info = data.add_policy_states(agent, 2, 4, rng)
         assert info["dagger/states_added"] > 0 and len(data.samples) == info["dagger/dataset_states"]
         for _ in range(15):
-            train_epoch(agent, opt, data.samples, 16, 0.5, 1.0, rng)
+            train_epoch(agent, opt, data.samples, im, rng)
         scores.append(score())
         if scores[-1] == optimum:
             break

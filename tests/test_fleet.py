@@ -347,43 +347,51 @@ def test_a_task_no_satellite_can_serve_is_valid_input():
 
 # --- CLI glue -------------------------------------------------------------------------------------------
 
-def test_cli_functions(tmp_path, capsys):
-    from eosp.cli import fleet as cf
+def test_cli_commands_on_a_fleet(tmp_path, capsys):
+    from eosp.cli import main
+    from eosp.kinds import detect, detect_source
 
     case = FIXTURES / "duplicate_observation_no_bonus_valid"
-    assert cf.is_aeossp_case(case) and not cf.is_fleet_dir(case)
-    assert cf.cmd_fleet_import(case, tmp_path / "f", False) == 0
-    assert cf.is_fleet_dir(tmp_path / "f")
-    with pytest.raises(InputError, match="already exists"):
-        cf.cmd_fleet_import(case, tmp_path / "f", False)
-    assert cf.cmd_fleet_info(tmp_path / "f") == 0
+    assert detect_source(str(case))[0].name == "fleet"
+    assert main(["import", str(case), "--out", str(tmp_path / "f")]) == 0
+    assert detect(str(tmp_path / "f")).name == "fleet"
+    capsys.readouterr()
+    assert main(["import", str(case), "--out", str(tmp_path / "f")]) == 2
+    assert "already exists" in capsys.readouterr().err
+    assert main(["info", str(tmp_path / "f")]) == 0
     out = capsys.readouterr().out
     assert "conflict-free upper bound (WCR): 1.000000" in out and "tasks no satellite can serve: 0" in out
-    assert cf.cmd_fleet_solve(tmp_path / "f", "greedy", tmp_path / "s.parquet", False, None, 0) == 0
-    assert cf.cmd_fleet_validate(tmp_path / "f", tmp_path / "s.parquet") == 0
+    assert main(["solve", str(tmp_path / "f"), "--solver", "greedy", "--out", str(tmp_path / "s.parquet")]) == 0
+    assert main(["validate", str(tmp_path / "f"), str(tmp_path / "s.parquet")]) == 0
     assert "valid: WCR 1.0" in capsys.readouterr().out
-    assert cf.cmd_fleet_validate(tmp_path / "f", case / "solution.json") == 0
-    assert cf.cmd_fleet_export_schedule(tmp_path / "f", tmp_path / "s.parquet", "aeossp", tmp_path / "o.json") == 0
-    assert cf.cmd_fleet_export_schedule(tmp_path / "f", tmp_path / "s.parquet", "csv", tmp_path / "o.csv") == 0
-    with pytest.raises(InputError, match="already exists"):
-        cf.cmd_fleet_export_schedule(tmp_path / "f", tmp_path / "s.parquet", "csv", tmp_path / "o.csv")
-    with pytest.raises(InputError, match="unknown export format"):
-        cf.cmd_fleet_export_schedule(tmp_path / "f", tmp_path / "s.parquet", "xml", tmp_path / "o.xml")
+    assert main(["validate", str(tmp_path / "f"), str(case / "solution.json")]) == 0
+    for fmt, name in (("aeossp", "o.json"), ("csv", "o.csv")):
+        assert main(["export-schedule", str(tmp_path / "f"), str(tmp_path / "s.parquet"), "--format", fmt, "--out",
+                     str(tmp_path / name)]) == 0
+    capsys.readouterr()
+    assert main(["export-schedule", str(tmp_path / "f"), str(tmp_path / "s.parquet"), "--format", "csv", "--out",
+                 str(tmp_path / "o.csv")]) == 2
+    assert "already exists" in capsys.readouterr().err
+    with pytest.raises(SystemExit):  # argparse's choices
+        main(["export-schedule", str(tmp_path / "f"), str(tmp_path / "s.parquet"), "--format", "xml", "--out",
+              str(tmp_path / "o.xml")])
     bad = json.loads((case / "solution.json").read_text())
     bad["actions"][0]["end_time"] = "2025-07-17T04:12:10Z"
     (tmp_path / "bad.json").write_text(json.dumps(bad))
     capsys.readouterr()
-    assert cf.cmd_fleet_validate(tmp_path / "f", tmp_path / "bad.json") == 1
+    assert main(["validate", str(tmp_path / "f"), str(tmp_path / "bad.json")]) == 1
     assert "duration must equal required_duration_s" in capsys.readouterr().out
-    with pytest.raises(InputError):
-        cf.cmd_fleet_solve(tmp_path / "f", "magic", tmp_path / "t.parquet", False, None, 0)
-    with pytest.raises(InputError):
-        cf.cmd_fleet_import(tmp_path / "nowhere", tmp_path / "g", False)
+    with pytest.raises(SystemExit):
+        main(["solve", str(tmp_path / "f"), "--solver", "magic", "--out", str(tmp_path / "t.parquet")])
+    capsys.readouterr()
+    assert main(["import", str(tmp_path / "nowhere"), "--out", str(tmp_path / "g")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "nowhere" in err and "aeossp case" in err and ".pb" in err
 
 
 def test_cli_module_imports_light():
-    code = ("import sys, eosp.cli.fleet; heavy = [m for m in ('brahe', 'pyarrow', 'torch', 'ray', 'mlflow', 'numba') "
-            "if m in sys.modules]; print(heavy)")
+    code = ("import sys, eosp.kinds; [k.commands for k in eosp.kinds.kinds()]; heavy = [m for m in ('brahe', "
+            "'pyarrow', 'torch', 'ray', 'mlflow', 'numba') if m in sys.modules]; print(heavy)")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
     assert out.strip() == "[]"
 

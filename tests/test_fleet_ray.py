@@ -13,7 +13,7 @@ from eosp.fleet.geometry import Geometry
 from eosp.fleet.io import read_fleet, read_schedule, write_fleet
 from eosp.fleet.opportunities import compute
 from eosp.jobs import solve_fleet as job_mod
-from eosp.solvers.fleet import FleetConfig
+from eosp.kinds.fleet.config import FleetConfig
 
 ROUNDS = 2
 
@@ -43,7 +43,7 @@ def two_nodes():
 def job(fleet_dir, run_dir, workers=1, address="", rounds=ROUNDS, mlflow_dir=None):
     return job_mod.SolveFleetJob(
         fleet_dir=str(fleet_dir), run_dir=str(run_dir),
-        fleet=FleetConfig(pass_solver="exact", rounds=rounds, workers=workers, seed=0),
+        fleet=FleetConfig(pass_solver="exact", rounds=rounds, time_limit=None, workers=workers, seed=0),
         mlflow_uri=f"sqlite:///{mlflow_dir or run_dir.parent}/mlflow.db",
         ray=job_mod.RayConfig(address=address, num_cpus=2))
 
@@ -83,7 +83,7 @@ def test_a_killed_driver_resumes_from_its_run_dir(fleet_dir, tmp_path):
 
     run_dir = tmp_path / "run"
     args = [sys.executable, str(Path(job_mod.__file__)), "--fleet-dir", str(fleet_dir), "--run-dir", str(run_dir),
-            "--fleet.rounds", "3", "--mlflow-uri", f"sqlite:///{tmp_path}/mlflow.db"]
+            "--fleet.rounds", "3", "--fleet.time-limit", "0", "--mlflow-uri", f"sqlite:///{tmp_path}/mlflow.db"]
     killed = subprocess.run(args, env={**os.environ, "EOSP_FAULT_KILL_AFTER": "1"}, capture_output=True, text=True)
     assert killed.returncode == -9  # SIGKILL once round 1 was saved
     with np.load(run_dir / "state.npz", allow_pickle=False) as z:

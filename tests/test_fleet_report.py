@@ -199,9 +199,9 @@ ONERA_JS = """(async () => {
 def test_onera_fleet_page_in_headless_chromium(tmp_path, chromium, capsys):
     """An ONERA fleet has no orbits but mandatory downloads: the page draws observations, downloads and
     transitions, requests by kind, and says what it cannot draw."""
-    from eosp.fleet.onera import read_onera
-    from eosp.fleet.onera import read_schedule as read_onera_schedule
-    from eosp.fleet.onera_check import request_values
+    from eosp.onera.model import read_onera
+    from eosp.onera.model import read_schedule as read_onera_schedule
+    from eosp.onera.check import request_values
     from tests.browser import Browser
     from tests.test_onera import TINY
 

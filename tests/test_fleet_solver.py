@@ -11,7 +11,7 @@ from tests.test_fleet import synthetic_fleet
 
 
 def build(n_tasks: int, seed: int):
-    from eosp.solvers.fleet import Problem
+    from eosp.kinds.fleet.problem import Problem
 
     fleet = synthetic_fleet(n_tasks=n_tasks, seed=seed)
     return Problem.build(fleet, compute(fleet, Geometry(fleet)))
@@ -60,7 +60,8 @@ def brute_force_pass(prob, p: int) -> float:
 
 @pytest.mark.parametrize("seed", [5, 6, 7])
 def test_exact_pass_optimum_equals_brute_force_over_every_start(seed):
-    from eosp.solvers.fleet import FleetConfig, solve_pass
+    from eosp.kinds.fleet.config import FleetConfig
+    from eosp.kinds.fleet.problem import solve_pass
 
     problem = build(6, seed)
     small = [p for p, pg in enumerate(problem.passes) if 2 <= pg.n_tasks <= 7]
@@ -74,7 +75,8 @@ def test_exact_pass_optimum_equals_brute_force_over_every_start(seed):
 
 def test_fleet_schedule_is_valid_each_task_once_and_under_its_bound(problem):
     from eosp.fleet.greedy import solve as greedy
-    from eosp.solvers.fleet import FleetConfig, solve
+    from eosp.kinds.fleet.config import FleetConfig
+    from eosp.kinds.fleet.solve import solve
 
     fleet = problem.fleet
     sol = solve(fleet, problem.opps, FleetConfig(rounds=4), problem=problem)
@@ -92,16 +94,18 @@ def test_fleet_schedule_is_valid_each_task_once_and_under_its_bound(problem):
 
 
 def test_a_run_with_rounds_is_deterministic_for_a_seed(problem):
-    from eosp.solvers.fleet import FleetConfig, solve
+    from eosp.kinds.fleet.config import FleetConfig
+    from eosp.kinds.fleet.solve import solve
 
-    a, b = (solve(problem.fleet, problem.opps, FleetConfig(rounds=3, seed=7), problem=problem)
+    a, b = (solve(problem.fleet, problem.opps, FleetConfig(rounds=3, seed=7, time_limit=None), problem=problem)
             for _ in range(2))
     assert a.schedule.task.tolist() == b.schedule.task.tolist()
     assert np.array_equal(a.schedule.start_us, b.schedule.start_us) and a.bound == b.bound
 
 
 def test_ramp_passes_give_a_schedule_and_no_bound(problem):
-    from eosp.solvers.fleet import FleetConfig, solve
+    from eosp.kinds.fleet.config import FleetConfig
+    from eosp.kinds.fleet.solve import solve
 
     sol = solve(problem.fleet, problem.opps, FleetConfig(pass_solver="ramp", rounds=2),
                 problem=problem)
@@ -114,7 +118,8 @@ def test_ramp_passes_give_a_schedule_and_no_bound(problem):
 
 
 def test_replanning_keeps_the_frozen_actions_and_never_loses_the_initial_value(problem):
-    from eosp.solvers.fleet import FleetConfig, solve
+    from eosp.kinds.fleet.config import FleetConfig
+    from eosp.kinds.fleet.solve import solve
 
     fleet = problem.fleet
     first = solve(fleet, problem.opps, FleetConfig(rounds=1, seed=1), problem=problem)
@@ -132,7 +137,9 @@ def test_replanning_keeps_the_frozen_actions_and_never_loses_the_initial_value(p
 def test_a_battery_that_binds_is_repaired_and_its_tasks_go_to_other_satellites():
     import dataclasses
 
-    from eosp.solvers.fleet import FleetConfig, Problem, solve
+    from eosp.kinds.fleet.config import FleetConfig
+    from eosp.kinds.fleet.problem import Problem
+    from eosp.kinds.fleet.solve import solve
 
     fleet = synthetic_fleet(n_tasks=16, seed=5)
     b = fleet.satellites.battery
@@ -149,8 +156,10 @@ def test_a_battery_that_binds_is_repaired_and_its_tasks_go_to_other_satellites()
 
 
 def test_two_worker_processes_give_the_same_run_as_one(problem):
-    from eosp.solvers.fleet import FleetConfig, solve
+    from eosp.kinds.fleet.config import FleetConfig
+    from eosp.kinds.fleet.solve import solve
 
-    one, two = (solve(problem.fleet, problem.opps, FleetConfig(rounds=2, seed=3, workers=w), problem=problem)
+    one, two = (solve(problem.fleet, problem.opps, FleetConfig(rounds=2, seed=3, workers=w, time_limit=None),
+                      problem=problem)
                 for w in (1, 2))
     assert one.schedule.task.tolist() == two.schedule.task.tolist() and one.bound == two.bound

@@ -13,10 +13,10 @@ import numpy as np
 import pytest
 
 from eosp.cli import main
-from eosp.fleet.onera import OneraSchedule, read_onera, read_pb, read_schedule
-from eosp.fleet.onera_check import best_values, validate
-from eosp.solvers.onera import OneraConfig, solve
-from eosp.solvers.onera_bound import lp_bound
+from eosp.onera.model import OneraSchedule, read_onera, read_pb, read_schedule
+from eosp.onera.check import best_values, validate
+from eosp.kinds.onera.search import GreedyConfig, OneraConfig, solve
+from eosp.kinds.onera.bound import lp_bound
 
 STATION = "43.6,1.44,0.0"
 TINY = f"""5
@@ -194,7 +194,7 @@ def test_solver_bound_and_checker_agree_with_brute_force(tmp_path, text):
     assert check.value == pytest.approx(sol.value)
     assert sol.value == pytest.approx(opt)  # tiny: the search finds the optimum
     assert opt <= sol.bound + 1e-6 and opt <= lp_bound(f) + 1e-6 <= best_values(f).sum() + 1e-6
-    greedy = solve(f, OneraConfig(bound="none"), greedy_only=True)
+    greedy = solve(f, GreedyConfig(bound="none"))
     assert validate(f, greedy.schedule).valid and greedy.value <= opt + 1e-9
 
 

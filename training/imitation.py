@@ -29,7 +29,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from eosp.config import EnvConfig
+from eosp.config import EnvConfig, ImitationConfig
 from eosp.models.agent import EOSPAgent, batch_from_padded
 from eosp.reward import objective_mode, reward
 
@@ -251,12 +251,13 @@ def cosine_lr(lr: float, progress: float) -> float:
     return 0.5 * lr * (1.0 + math.cos(math.pi * min(max(progress, 0.0), 1.0)))
 
 
-def train_epoch(agent: EOSPAgent, opt: torch.optim.Optimizer, samples: list[Sample], batch_size: int,
-                value_coeff: float, grad_clip: float, rng: np.random.Generator,
-                deadline: float | None = None, regret_coeff: float = 0.0, average: WeightAverage | None = None,
+def train_epoch(agent: EOSPAgent, opt: torch.optim.Optimizer, samples: list[Sample], im: ImitationConfig,
+                rng: np.random.Generator, deadline: float | None = None, average: WeightAverage | None = None,
                 lr_at=None) -> dict[str, float]:
-    """One pass over `samples`.  `lr_at(fraction of this epoch done)`: the learning rate of each batch
-    (None: the optimizer's as it is); `average`: updated after every step."""
+    """One pass over `samples`, in batches of ``im.batch_size``, the loss weighted by ``im.value_coeff`` and
+    ``im.regret_coeff``, gradients clipped at ``im.grad_clip``.  `lr_at(fraction of this epoch done)`: the
+    learning rate of each batch (None: the optimizer's as it is); `average`: updated after every step."""
+    batch_size, value_coeff, grad_clip, regret_coeff = im.batch_size, im.value_coeff, im.grad_clip, im.regret_coeff
     agent.train()
     order = rng.permutation(len(samples))
     tot = {"policy_loss": 0.0, "value_loss": 0.0, "regret": 0.0, "accuracy": 0.0}

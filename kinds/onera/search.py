@@ -16,7 +16,7 @@ sequence from the start (they are mandatory) and float inside their windows like
   lowers the value is undone.  Stops at the time limit.
 
 Times are integer milliseconds: earliest starts are rounded up and latest starts down, so every plan is
-valid for :mod:`eosp.fleet.onera_check`.  The bound comes from :mod:`eosp.solvers.onera_bound`.
+valid for :mod:`eosp.onera.check`.  The bound comes from :mod:`eosp.kinds.onera.bound`.
 """
 
 from __future__ import annotations
@@ -30,8 +30,11 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from eosp.config import WEEK_S, choice, ranged
-from eosp.fleet.onera import PERIODIC, STEREO, TAU_MAX_S, OneraFleet, OneraSchedule
-from eosp.fleet.onera_check import best_values, periodic_value
+from eosp.solvers.base import UtilityConfig
+from eosp.errors import InputError
+from eosp.onera.check import best_values, periodic_value
+from eosp.onera.model import PERIODIC, STEREO, TAU_MAX_S, OneraFleet, OneraSchedule
+from eosp.problem import Result
 
 
 MS = 1000  # plan times are integer milliseconds
@@ -40,22 +43,42 @@ DENSITY_TAU_S = 3.0  # a typical transition between two targets of one pass (s),
 
 
 @dataclass
-class OneraConfig:
-    """Options of the ONERA solver (``eosp solve ONERA_DIR --solver onera``)."""
+class BoundConfig(UtilityConfig):
+    """Options of the ONERA solvers: the bound they prove."""
 
-    time_limit: float = ranged(30.0, 0, WEEK_S)
-    """Seconds of the whole solve: the greedy plan, the large-neighbourhood search and the lp bound, which gets the
-    time left, at most bound_time_limit and half of this (0: the greedy plan, and the bound in bound_time_limit)."""
-    seed: int = ranged(0, 0)
-    """Seed of the large-neighbourhood moves."""
-    span_s: float = ranged(1200.0, 1)
-    """Length of the time span of one satellite freed by one move."""
-    bound: str = choice("lp", "conflict-free", "none")
+    bound: str = choice("lp", "lp", "conflict-free", "none")
     """Upper bound: lp (the time-capacity relaxation, solved by HiGHS, certified from its duals),
     conflict-free (each request at its best), none."""
     bound_time_limit: float = ranged(30.0, 0, WEEK_S)
-    """At most this many seconds of the time limit go to the lp bound's cutting-plane rounds (the last finished
-    solve's certified bound is kept; none finished: the conflict-free bound)."""
+    """Seconds of cutting-plane rounds of the lp bound: under a time limit, at most this and half of the limit are
+    kept from the search for it (the bound gets the time left); without one, this many after the plan (the last
+    finished solve's certified bound is kept; none finished: the conflict-free bound)."""
+
+
+@dataclass
+class GreedyConfig(BoundConfig):
+    """Options of the ONERA greedy (``eosp solve ONERA_DIR --solver greedy``): one pass, then the bound."""
+
+    NAME = "greedy"
+    ONE_SHOT = True
+
+
+@dataclass
+class OneraConfig(BoundConfig):
+    """Options of the ONERA search (``eosp solve ONERA_DIR --solver onera``): the greedy plan, then
+    large-neighbourhood moves until the time limit or the move budget, then the bound."""
+
+    time_limit: float | None = ranged(30.0, 0, WEEK_S, zero_unsets=True)
+    seed: int = ranged(0, 0)
+    """Seed of the large-neighbourhood moves."""
+    moves: int | None = ranged(None, 0)
+    """Large-neighbourhood moves (a deterministic budget: the same plan for a seed on any machine, with
+    --time-limit 0 or one long enough); unset: as many as the time limit allows."""
+    span_s: float = ranged(1200.0, 1)
+    """Length of the time span of one satellite freed by one move."""
+
+    NAME = "onera"
+    BUDGET = "moves"
 
 
 @dataclass
@@ -382,12 +405,13 @@ class Search:
             if self.plan.KIND[k] == PERIODIC:
                 self.place(k)
 
-    def lns(self, deadline: float, span_s: float, trace: list, t0: float, target: float = math.inf) -> int:
-        """Destroy-and-repair moves until `deadline` or the value `target` (an upper bound); the number of moves."""
+    def lns(self, stop: Stop, span_s: float, trace: list, t0: float) -> int:
+        """Destroy-and-repair moves until `stop` (deadline, move budget or the value of an upper bound); the number
+        of moves."""
         pl = self.plan
         pl.journal = []
         try:
-            return self._moves(deadline, span_s, trace, t0, target)
+            return self._moves(stop, span_s, trace, t0)
         except KeyboardInterrupt:  # Ctrl-C: the move in flight undone, the plan as it was before it
             if pl.journal:
                 pl.undo(0)
@@ -395,12 +419,12 @@ class Search:
         finally:
             pl.journal = None
 
-    def _moves(self, deadline: float, span_s: float, trace: list, t0: float, target: float) -> int:
+    def _moves(self, stop: Stop, span_s: float, trace: list, t0: float) -> int:
         pl, rng, f = self.plan, self.rng, self.f
         n_sat = len(f.satellites)
         obj = self.objective
         moves = 0
-        while time.perf_counter() < deadline and obj < target - 1e-9:
+        while not stop.reached(moves, obj):
             moves += 1
             self.moves += 1
             s = rng.randrange(n_sat)
@@ -453,24 +477,43 @@ class Search:
         return moves
 
 
-def solve(f: OneraFleet, cfg: OneraConfig | None = None, greedy_only: bool = False) -> Solution:
-    """Greedy plan, then (unless `greedy_only`) large-neighbourhood search, then the bound, all within the time
-    limit (the search stops early by the bound's share).  Ctrl-C keeps the plan as it was before the move in flight
-    (``info["interrupted"]``, the conflict-free bound)."""
+@dataclass(frozen=True)
+class Stop:
+    """When the search stops: at `deadline` (perf_counter seconds; None: none), after `moves` moves (None: no
+    budget), or once the plan's value reaches `target` (an upper bound)."""
+
+    deadline: float | None
+    moves: int | None
+    target: float
+
+    def reached(self, done: int, value: float) -> bool:
+        return ((self.moves is not None and done >= self.moves) or value >= self.target - 1e-9
+                or (self.deadline is not None and time.perf_counter() >= self.deadline))
+
+
+def solve(f: OneraFleet, cfg: BoundConfig | None = None) -> Solution:
+    """The greedy plan, then (an :class:`OneraConfig`) large-neighbourhood search until the time limit or the move
+    budget, then the bound, all within the time limit (counted from the call: the search stops early by the lp
+    bound's share, ``bound_time_limit``).  Ctrl-C keeps the plan as it was before the move in flight (status
+    "interrupted", the conflict-free bound)."""
     cfg = cfg or OneraConfig()
+    cfg.validate()  # fields set one by one (eosp.config.apply_overrides) are checked together here
     t0 = time.perf_counter()
     search = Search(f, seed=cfg.seed)
-    search_time = cfg.time_limit if not greedy_only else 0.0
-    reserve = min(cfg.bound_time_limit, search_time / 2) if cfg.bound == "lp" else 0.0
+    limit = cfg.time_limit  # None for the greedy (one pass) and for a search bounded by its moves alone
+    reserve = min(cfg.bound_time_limit, limit / 2) if cfg.bound == "lp" and limit is not None else 0.0
     trace: list = []
-    interrupted = False
+    status = "done"
     try:
         search.greedy()
         trace.append((time.perf_counter() - t0, search.objective))
-        if search_time > 0:
-            search.lns(t0 + search_time - reserve, cfg.span_s, trace, t0, target=float(search.best.sum()))
+        if isinstance(cfg, OneraConfig):
+            stop = Stop(None if limit is None else t0 + limit - reserve, cfg.moves, float(search.best.sum()))
+            moves = search.lns(stop, cfg.span_s, trace, t0)
+            status = "optimal" if search.objective >= stop.target - 1e-9 else "budget" if moves == cfg.moves \
+                else "time_limit"
     except KeyboardInterrupt:
-        interrupted = True
+        status = "interrupted"
     if not trace:
         trace.append((time.perf_counter() - t0, search.objective))
     greedy_value = trace[0][1]
@@ -479,21 +522,42 @@ def solve(f: OneraFleet, cfg: OneraConfig | None = None, greedy_only: bool = Fal
     schedule = search.plan.schedule()
     free = float(search.best.sum())  # the conflict-free bound
     bound, source = None, cfg.bound
-    if cfg.bound == "conflict-free" or (cfg.bound == "lp" and (interrupted or value >= free - 1e-9)):
+    if cfg.bound == "conflict-free" or (cfg.bound == "lp" and (status == "interrupted" or value >= free - 1e-9)):
         bound, source = free, "conflict-free"  # the plan meets it, or Ctrl-C: no LP after it
     elif cfg.bound == "lp":
-        from eosp.solvers.onera_bound import lp_bound
+        from eosp.kinds.onera.bound import lp_bound
 
         lp_info: dict = {}
-        budget = cfg.bound_time_limit if search_time <= 0 else max(0.0, t0 + search_time - time.perf_counter())
+        budget = cfg.bound_time_limit if limit is None else \
+            min(cfg.bound_time_limit, max(0.0, t0 + limit - time.perf_counter()))
         try:
             bound = min(lp_bound(f, time_limit=budget, info=lp_info), free)
             source = f"lp ({lp_info.get('rounds', 0)} rounds, {lp_info.get('cuts', 0)} cuts)"
         except KeyboardInterrupt:
-            interrupted, bound, source = True, free, "conflict-free"
+            status, bound, source = "interrupted", free, "conflict-free"
     gap = None if bound is None else (0.0 if bound <= 0 else max(0.0, (bound - value) / bound))
     t99 = next((t for t, v in trace if v >= 0.99 * value - 1e-12), trace[-1][0])
     return Solution(schedule, value, bound, gap,
                     {"greedy_value": greedy_value, "moves": search.moves, "seconds_search": t_search,
                      "seconds": time.perf_counter() - t0, "time_to_99": t99, "bound_source": source,
-                     "trace": trace, "interrupted": interrupted})
+                     "trace": trace, "status": status})
+
+
+def solve_greedy(f: OneraFleet, cfg: GreedyConfig) -> Result:
+    """The contract's entry of ``--solver greedy`` (:mod:`eosp.kinds.onera.kind`)."""
+    return result_of(f, cfg)
+
+
+def solve_onera(f: OneraFleet, cfg: OneraConfig) -> Result:
+    """The contract's entry of ``--solver onera`` (:mod:`eosp.kinds.onera.kind`)."""
+    return result_of(f, cfg)
+
+
+def result_of(f: OneraFleet, cfg: BoundConfig) -> Result:
+    try:
+        sol = solve(f, cfg)
+    except ValueError as exc:  # an instance whose mandatory downloads do not fit
+        raise InputError(f.name or "the ONERA fleet", str(exc)) from None
+    info = dict(sol.info)
+    return Result(sol.schedule, sol.value, sol.bound, None if sol.bound is None else info["bound_source"],
+                  info.pop("status"), {"solve": info["seconds"], "search": info["seconds_search"]}, info)

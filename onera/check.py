@@ -6,7 +6,7 @@ Rules (docs/formats.md, "ONERA"), in the order they are checked:
 2. each activity starts in ``[window_start, window_end - duration]``;
 3. every download is scheduled (downloads are mandatory);
 4. one activity at a time per satellite: the next start is ``>= start + duration + tau``
-   (tau of :func:`eosp.fleet.onera.transition`);
+   (tau of :func:`eosp.onera.model.transition`);
 5. request rules: one-shot and video at most one observation; stereo none or both images of one pair;
    periodic at most one observation per time slot.
 
@@ -22,8 +22,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from eosp.fleet.onera import (KIND_SHORT, ONE_SHOT, PERIODIC, PERIODIC_ALPHA, STEREO, VIDEO, OneraFleet,
+from eosp.onera.model import (KIND_SHORT, ONE_SHOT, PERIODIC, PERIODIC_ALPHA, STEREO, VIDEO, OneraFleet,
                               OneraSchedule, transition)
+from eosp.problem import Verdict
 
 EPS = 1e-6  # seconds: transitions are irrational, starts are integers
 
@@ -35,6 +36,15 @@ class Result:
     value: float = 0.0
     served: dict = field(default_factory=dict)  # kind name -> requests satisfied
     value_by_kind: dict = field(default_factory=dict)
+
+    def verdict(self) -> Verdict:
+        """The contract's verdict (:class:`eosp.problem.Verdict`): the value and the requests served by request
+        kind (zero when invalid), with the line ``eosp validate`` prints."""
+        metrics = {"value": self.value, **{k: self.served.get(k, 0) for k in KIND_SHORT}}
+        if not self.valid:
+            return Verdict(False, metrics, self.first, f"invalid: {self.first}")
+        served = ", ".join(f"{k} {v}" for k, v in self.served.items())
+        return Verdict(True, metrics, None, f"valid: value {self.value!r}; served {served}")
 
 
 def periodic_value(classes_by_slot: np.ndarray, served: np.ndarray) -> float:

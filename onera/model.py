@@ -410,7 +410,7 @@ def write_onera(f: OneraFleet, out, overwrite: bool = False, source: str = "") -
     import pyarrow.parquet as pq
 
     from eosp.atomic import atomic_dir
-    from eosp.fleet.io import _table
+    from eosp.fleet.io import arrow_table
 
     o = f.observations
     meta = {"kind": KIND, "schema_version": SCHEMA_VERSION, "source": source, "name": f.name,
@@ -419,21 +419,21 @@ def write_onera(f: OneraFleet, out, overwrite: bool = False, source: str = "") -
             "observations": len(o), "downloads": len(f.downloads)}
     with atomic_dir(out, overwrite=overwrite, owned=is_onera_dir, names=lambda _: TABLE_FILES) as tmp:
         for name, cols in _tables(f).items():
-            pq.write_table(_table(cols), tmp / f"{name}.parquet")
+            pq.write_table(arrow_table(cols), tmp / f"{name}.parquet")
         (tmp / "meta.json").write_text(json.dumps(meta, indent=2) + "\n")
     return Path(out)
 
 
 def read_onera(path) -> OneraFleet:
     """An ONERA fleet directory, its columns checked (kinds, ranges) and its fingerprint verified."""
-    from eosp.fleet.io import _read_parquet, read_meta_json
+    from eosp.fleet.io import read_columns, read_meta_json
 
     root = Path(path)
     meta = read_meta_json(root, KIND, SCHEMA_VERSION, "an ONERA fleet directory")
-    s = _read_parquet(root / "satellites.parquet", SAT_COLUMNS)
-    r = _read_parquet(root / "requests.parquet", REQ_COLUMNS)
-    o = _read_parquet(root / "observations.parquet", OBS_COLUMNS)
-    d = _read_parquet(root / "downloads.parquet", DL_COLUMNS)
+    s = read_columns(root / "satellites.parquet", SAT_COLUMNS)
+    r = read_columns(root / "requests.parquet", REQ_COLUMNS)
+    o = read_columns(root / "observations.parquet", OBS_COLUMNS)
+    d = read_columns(root / "downloads.parquet", DL_COLUMNS)
     n_sat, n_req = len(s["satellite_id"]), len(r["request_id"])
     for file, cols, c, hi in (("observations", o, "request", n_req), ("observations", o, "satellite", n_sat),
                               ("downloads", d, "satellite", n_sat), ("requests", r, "kind", 4),

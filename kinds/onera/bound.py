@@ -25,7 +25,7 @@ import time
 
 import numpy as np
 
-from eosp.fleet.onera import PERIODIC, PERIODIC_ALPHA, STEREO, OneraFleet, transition
+from eosp.onera.model import PERIODIC, PERIODIC_ALPHA, STEREO, OneraFleet, transition
 
 L_MAX = 1200.0  # longest capacity interval (s)
 
@@ -401,7 +401,7 @@ def lp_bound(f: OneraFleet, rounds: int = 40, time_limit: float = 60.0, info: di
     if info is not None:
         info.update(rounds=n_rounds, cuts=len(m.cuts), seconds=time.perf_counter() - t0)
     if not np.isfinite(best):  # no LP solve finished: the conflict-free bound is still proven
-        from eosp.fleet.onera_check import best_values
+        from eosp.onera.check import best_values
 
         best = float(best_values(f).sum())
     return best

@@ -1,0 +1,161 @@
+"""Satellite timelines: what fits where, and the battery repair, shared by the fleet greedy, the fleet solver's
+coordinator and the reasons a task is missed.
+
+A :class:`Timeline` is one satellite's observations in time order, with their lines of sight at start and end.
+:func:`fits` says which candidate observations fit at their place in a timeline (no overlap; the slew plus
+settling from the observation before them, from nadir at the horizon start for a first one, and to the one after
+them fit in the gaps: the checker's model, :mod:`eosp.fleet.slew`), optionally once a few neighbours are removed.
+:func:`repair_battery` simulates each timeline with the checker's battery model (:mod:`eosp.fleet.battery`) and,
+while it runs dry, drops the least valuable observation started before the failure.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import NamedTuple
+
+import numpy as np
+
+from eosp.fleet.battery import Intervals, SunCache, simulate
+from eosp.fleet.check import timedelta_us
+from eosp.fleet.model import US, Fleet, Schedule, strings
+from eosp.fleet.slew import MARGIN_S, LineOfSight
+
+
+@dataclass
+class Timeline:
+    """One satellite's observations in time order, with their lines of sight at start and end."""
+
+    start: list = field(default_factory=list)
+    end: list = field(default_factory=list)
+    task: list = field(default_factory=list)
+    los0: list = field(default_factory=list)
+    los1: list = field(default_factory=list)
+
+    def insert(self, pos: int, row: tuple) -> None:
+        for col, v in zip((self.start, self.end, self.task, self.los0, self.los1), row):
+            col.insert(pos, v)
+
+    def remove(self, pos: int) -> None:
+        for col in (self.start, self.end, self.task, self.los0, self.los1):
+            del col[pos]
+
+
+class Arrays(NamedTuple):
+    """A timeline as arrays: starts and ends (s), lines of sight at start and end ([n, 3])."""
+
+    start: np.ndarray
+    end: np.ndarray
+    los0: np.ndarray
+    los1: np.ndarray
+
+    @classmethod
+    def of(cls, tl: Timeline) -> Arrays:
+        return cls(np.asarray(tl.start, dtype=np.float64), np.asarray(tl.end, dtype=np.float64),
+                   np.asarray(tl.los0, dtype=np.float64).reshape(-1, 3),
+                   np.asarray(tl.los1, dtype=np.float64).reshape(-1, 3))
+
+
+class Candidates(NamedTuple):
+    """Candidate observations of one satellite: starts and ends (s), lines of sight at start and end."""
+
+    start: np.ndarray
+    end: np.ndarray
+    los0: np.ndarray
+    los1: np.ndarray
+
+
+def fits(los: LineOfSight, sat: int, tl: Arrays, cand: Candidates, pos: np.ndarray, a: int = 0,
+         b: int = 0) -> np.ndarray:
+    """Which candidates fit at their positions `pos` of satellite `sat`'s timeline `tl` once the `a` observations
+    before and the `b` after each position are removed (see the module docstring)."""
+    st, en, l0, l1 = cand
+    n = len(tl.start)
+    p, q = pos - a - 1, pos + b
+    ok = (pos - a >= 0) & (q <= n)
+    has_p, has_n = p >= 0, q < n
+    if n:
+        pi, qi = np.clip(p, 0, n - 1), np.clip(q, 0, n - 1)
+        pe, ns = tl.end[pi], tl.start[qi]
+        frm = np.where(has_p[:, None], tl.los1[pi], los.nadir(sat, st))
+        gap = np.where(has_p, st - pe, st)
+        ok &= ~has_p | (pe <= st)
+        ok &= los.need_s(sat, frm, l0) + MARGIN_S <= gap
+        ok &= ~has_n | ((en <= ns) & (los.need_s(sat, l1, tl.los0[qi]) + MARGIN_S <= ns - en))
+    else:
+        ok &= los.need_s(sat, los.nadir(sat, st), l0) + MARGIN_S <= st
+    return ok
+
+
+def timelines(fleet: Fleet, los: LineOfSight, sat: np.ndarray, task: np.ndarray, start: np.ndarray,
+              end: np.ndarray) -> list[Timeline]:
+    """One timeline per satellite of the observations (satellite and task rows, start and end in seconds), each
+    in time order (start, then end)."""
+    tls = []
+    for k in range(len(fleet.satellites)):
+        m = np.flatnonzero(sat == k)
+        m = m[np.lexsort((end[m], start[m]))]
+        tl = Timeline()
+        if len(m):
+            l0, l1 = los.los(k, task[m], start[m]), los.los(k, task[m], end[m])
+            tl = Timeline(start[m].tolist(), end[m].tolist(), task[m].tolist(), list(l0), list(l1))
+        tls.append(tl)
+    return tls
+
+
+def recheck_slews(los: LineOfSight, tl: Timeline, sat: int) -> None:
+    """Drop observations whose slew no longer fits after a removal (first one kept)."""
+    k = 0
+    while k < len(tl.start):
+        frm = tl.los1[k - 1] if k else los.nadir(sat, tl.start[k])
+        gap = tl.start[k] - (tl.end[k - 1] if k else 0.0)
+        if float(los.need_s(sat, np.asarray(frm), np.asarray(tl.los0[k]))) + MARGIN_S > gap:
+            tl.remove(k)
+            continue
+        k += 1
+
+
+def intervals(los: LineOfSight, tl: Timeline, sat: int) -> tuple[Intervals, Intervals]:
+    """The observations and the maneuver windows before them (µs), as the battery simulation takes them."""
+    st = np.round(np.asarray(tl.start, dtype=np.float64) * US).astype(np.int64)
+    en = np.round(np.asarray(tl.end, dtype=np.float64) * US).astype(np.int64)
+    w0 = []
+    for k in range(len(st)):
+        frm = tl.los1[k - 1] if k else los.nadir(sat, tl.start[k])
+        need = float(los.need_s(sat, np.asarray(frm), np.asarray(tl.los0[k])))
+        w0.append(st[k] - timedelta_us(need))
+    return Intervals(st, en), Intervals(np.asarray(w0, dtype=np.int64), st.copy())
+
+
+def repair_battery(fleet: Fleet, los: LineOfSight, tls: list[Timeline], sats=None, sun: SunCache | None = None) -> int:
+    """Drop the least valuable observations until every battery stays above zero; returns drops.
+
+    `sats`: only these satellites' timelines (default: all); `sun`: a cache of sunlight kept between calls."""
+    sun = sun or SunCache(los.geo)
+    w, dur = fleet.tasks.weight, fleet.tasks.duration_s
+    dropped = 0
+    for sat in range(len(tls)) if sats is None else sats:
+        tl = tls[sat]
+        while True:
+            run = simulate(fleet, sun, sat, *intervals(los, tl, sat))
+            if run.ok or not tl.start:
+                break
+            before = [k for k in range(len(tl.start)) if tl.start[k] * US <= run.fail_us] or list(range(len(tl.start)))
+            k = min(before, key=lambda k: (w[tl.task[k]], w[tl.task[k]] / dur[tl.task[k]], -tl.start[k]))
+            tl.remove(k)
+            dropped += 1
+            recheck_slews(los, tl, sat)
+    return dropped
+
+
+def to_schedule(fleet: Fleet, tls: list[Timeline]) -> Schedule:
+    sat, task, st, en = [], [], [], []
+    for k, tl in enumerate(tls):
+        sat += [fleet.satellites.ids[k]] * len(tl.start)
+        task += [fleet.tasks.ids[t] for t in tl.task]
+        st += tl.start
+        en += tl.end
+    st_us = np.round(np.asarray(st, dtype=np.float64) * US).astype(np.int64)
+    order = np.lexsort((np.asarray([fleet.satellite_index()[s] for s in sat], dtype=np.int64), st_us))
+    return Schedule(strings(sat)[order], strings(task)[order], st_us[order],
+                    np.round(np.asarray(en, dtype=np.float64) * US).astype(np.int64)[order])

@@ -1,0 +1,43 @@
+"""The options of the fleet kind's solvers (``eosp solve FLEET_DIR --solver greedy|fleet``, jobs/solve_fleet.py)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from eosp.config import WEEK_S, choice, ranged
+from eosp.solvers.base import UtilityConfig
+
+PASS_SOLVERS = ("greedy", "ramp", "exact")
+LEARNED_PASS_SOLVERS = ("policy",)  # no model is trained on fleet passes yet: refused with one line
+
+
+@dataclass
+class GreedyConfig(UtilityConfig):
+    """Options of the fleet greedy (each task once, by weight): one pass, deterministic."""
+
+    NAME = "greedy"
+    ONE_SHOT = True
+
+
+@dataclass
+class FleetConfig(UtilityConfig):
+    """Options of the fleet solver (``eosp solve FLEET_DIR --solver fleet``)."""
+
+    time_limit: float | None = ranged(60.0, 0, WEEK_S, lo_open=True, zero_unsets=True)
+    seed: int = ranged(0, 0)
+    """Seed of the large-neighbourhood moves."""
+    pass_solver: str = choice("exact", *PASS_SOLVERS, *LEARNED_PASS_SOLVERS)
+    """Single-pass solver of every pass: exact (optima, hence a proven Lagrangian bound), ramp or greedy (the
+    conflict-free bound only); policy needs a model trained on fleet passes, which is not shipped yet."""
+    rounds: int | None = ranged(None, 1)
+    """Price rounds, each followed by a large-neighbourhood move (a deterministic budget: the same schedule for a
+    seed on any machine, with --time-limit 0 or one long enough); unset: as many as the time limit allows."""
+    pass_time_limit: float = ranged(5.0, 0, WEEK_S)
+    """Seconds the exact solver may spend on one pass (its bound is used when it stops early)."""
+    span_s: float = ranged(3600.0, 1)
+    """Length of the time span freed by one large-neighbourhood move."""
+    workers: int = ranged(1, 1, 256)
+    """Processes solving the passes of a price round (forked from this one, the pass graphs shared)."""
+
+    NAME = "fleet"
+    BUDGET = "rounds"

@@ -1,0 +1,151 @@
+"""A fleet as the fleet solver sees it: its pass graphs built once, a pass solved by a single-pass solver, and a
+schedule as one path per pass (:class:`Primal`)."""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from eosp.fleet.geometry import Geometry
+from eosp.fleet.model import Fleet, Schedule
+from eosp.fleet.opportunities import Opportunities
+from eosp.fleet.passgraph import PassGraph, build_passes, priced_instance
+from eosp.fleet.slew import LineOfSight
+from eosp.graphs.prune import fifo_violations
+from eosp.kinds.fleet.config import FleetConfig
+
+
+@dataclass
+class PassResult:
+    nodes: np.ndarray  # pass-graph node ids, in order
+    value: float  # under the utilities it was solved with
+    bound: float | None  # a proven upper bound of that value, None when the solver gives none
+
+
+@dataclass
+class Problem:
+    """A fleet, its opportunities and its pass graphs, built once."""
+
+    fleet: Fleet
+    opps: Opportunities
+    geo: Geometry
+    los: LineOfSight
+    passes: list[PassGraph]
+    weight: np.ndarray  # float64 [tasks]
+    task_passes: list[np.ndarray]  # passes holding each task
+    pass_time: np.ndarray  # (first start, last end) of each pass, seconds
+    fifo_violations: int = 0  # see eosp.graphs.prune.fifo_violations: 0 makes the pass optima the passes'
+    build_s: float = 0.0
+
+    @classmethod
+    def build(cls, fleet: Fleet, opps: Opportunities, geo: Geometry | None = None) -> Problem:
+        t0 = time.perf_counter()
+        geo = geo or Geometry(fleet)
+        los = LineOfSight(fleet, geo)
+        passes = build_passes(fleet, opps, los)
+        n = len(fleet.tasks)
+        holders: list[list[int]] = [[] for _ in range(n)]
+        for pg in passes:
+            for t in pg.tasks.tolist():
+                holders[t].append(pg.pass_id)
+        span = np.array([[pg.graph.node_time[1:].min(),
+                          (pg.graph.node_time[1:] + pg.duration[pg.graph.node_acq[1:]]).max()] for pg in passes])
+        span = span.reshape(-1, 2)
+        fifo = sum(fifo_violations(pg.graph) for pg in passes)
+        return cls(fleet, opps, geo, los, passes, fleet.tasks.weight.astype(np.float64),
+                   [np.asarray(h, dtype=np.int64) for h in holders], span, fifo, time.perf_counter() - t0)
+
+    @property
+    def total_weight(self) -> float:
+        return float(self.weight.sum())
+
+
+def priced(weight: np.ndarray, prices: np.ndarray, tasks: np.ndarray) -> np.ndarray:
+    """The utilities of `tasks` under task prices: weight - price (the one place they are computed, on the driver
+    and on the workers alike)."""
+    return weight[tasks] - prices[tasks]
+
+
+def solve_pass(prob: Problem, p: int, value: np.ndarray, cfg: FleetConfig) -> PassResult:
+    """Pass `p` with utility `value[a]` per local task (non-positive ones left out)."""
+    return solve_pass_graph(prob.passes[p], value, cfg)
+
+
+def solve_pass_graph(pg: PassGraph, value: np.ndarray, cfg: FleetConfig) -> PassResult:
+    """One pass graph with utility `value[a]` per local task: what a worker holding the graph runs."""
+    from eosp.solvers.base import run_solver
+
+    pp = priced_instance(pg, value)
+    if pp is None:
+        return PassResult(np.zeros(0, np.int64), 0.0, 0.0)
+    opts = {"time_limit": cfg.pass_time_limit} if cfg.pass_solver in ("exact", "ramp") else {}
+    sol = run_solver(cfg.pass_solver, pp.instance, mode="utility", **opts)
+    bound = None
+    if cfg.pass_solver == "exact":
+        bound = sol.value if sol.info.get("status") == "optimal" else float(sol.info.get("bound", math.inf))
+    return PassResult(pp.nodes[np.asarray(sol.nodes, dtype=np.int64)], float(sol.value), bound)
+
+
+def rewalk(pg: PassGraph, path: np.ndarray) -> np.ndarray:
+    """The acquisitions of `path` (pass-graph nodes, in order) followed along the graph's arcs from the source:
+    each at its earliest node after the previous one; one that cannot follow is skipped."""
+    g = pg.graph
+    out, node = [], 0
+    for acq in g.node_acq[path].tolist():
+        nxt = g.successor(node, acq)
+        if nxt >= 0:
+            out.append(nxt)
+            node = nxt
+    return np.asarray(out, dtype=np.int64)
+
+
+@dataclass
+class Primal:
+    """A schedule as pass paths; ``served[i]`` = pass serving task i, or -1."""
+
+    paths: list[np.ndarray]
+    served: np.ndarray
+    value: float = 0.0
+
+    def copy(self) -> Primal:
+        return Primal(list(self.paths), self.served.copy(), self.value)
+
+    @classmethod
+    def empty(cls, n_passes: int, n_tasks: int) -> Primal:
+        return cls([np.zeros(0, np.int64)] * n_passes, np.full(n_tasks, -1, np.int64))
+
+
+def path_tasks(prob: Problem, p: int, path: np.ndarray) -> np.ndarray:
+    pg = prob.passes[p]
+    return pg.tasks[pg.graph.node_acq[path]]
+
+
+def primal_of(prob: Problem, sched: Schedule) -> Primal:
+    """A schedule as pass paths: each action at its opportunity's node (an action that is no opportunity, or a
+    task's second observation, is left out)."""
+    f, o = prob.fleet, prob.opps
+    step_us = f.horizon.action_step_s * 1_000_000
+    row_of = {key: r for r, key in enumerate(zip(o.task.tolist(), o.satellite.tolist(), o.start.tolist()))}
+    node_of = np.zeros(len(o), dtype=np.int64)
+    for pg in prob.passes:
+        node_of[pg.rows] = np.arange(1, len(pg.rows) + 1)
+    ti, si = f.task_index(), f.satellite_index()
+    per_pass: dict[int, list[tuple[int, int]]] = {}
+    seen = set()
+    for sat, task, st in zip(sched.satellite.tolist(), sched.task.tolist(), sched.start_us.tolist()):
+        r = row_of.get((ti.get(task, -1), si.get(sat, -1), int(st // step_us)))
+        if r is None or task in seen or st % step_us:
+            continue
+        seen.add(task)
+        per_pass.setdefault(int(o.pass_id[r]), []).append((int(st), int(node_of[r])))
+    primal = Primal.empty(len(prob.passes), len(f.tasks))
+    for p, acts in per_pass.items():
+        path = np.asarray([n for _, n in sorted(acts)], dtype=np.int64)
+        tasks = path_tasks(prob, p, path)
+        primal.paths[p] = path
+        primal.served[tasks] = p
+        primal.value += float(prob.weight[tasks].sum())
+    return primal

@@ -1,0 +1,140 @@
+"""The fleet kind's solvers: the fleet solver (passes coordinated by task prices, :mod:`eosp.kinds.fleet.coordinator`)
+and the fleet greedy (:mod:`eosp.fleet.greedy`), as library calls and as the contract's entries."""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from typing import Callable
+
+import numpy as np
+
+from eosp.fleet.check import CheckResult
+from eosp.fleet.model import Fleet, Schedule
+from eosp.fleet.opportunities import Opportunities
+from eosp.kinds.fleet.config import FleetConfig, GreedyConfig
+from eosp.kinds.fleet.coordinator import Coordinator
+from eosp.kinds.fleet.pool import ForkPool, PassPool
+from eosp.kinds.fleet.prices import Prices
+from eosp.kinds.fleet.problem import Primal, Problem, primal_of
+from eosp.problem import Result
+
+
+@dataclass
+class FleetSolution:
+    """The best schedule, the value and bound as fractions of the total weight (WCR), and the run's record."""
+
+    schedule: Schedule
+    value: float
+    bound: float | None
+    history: list[tuple[float, float, float]]
+    info: dict
+    check: CheckResult | None = None  # the checker's result on `schedule`
+
+    @property
+    def gap(self) -> float | None:
+        return None if self.bound is None or self.bound <= 0 else (self.bound - self.value) / self.bound
+
+
+@dataclass
+class Resume:
+    """Where a stopped run was (saved after every round by a job): prices, step factor, best bound, rounds done.
+    Its best schedule is passed as the `initial` schedule of :func:`solve`."""
+
+    lam: np.ndarray
+    step: float
+    best_bound: float
+    bound_source: str
+    rounds_done: int
+
+
+def solve(fleet: Fleet, opps: Opportunities, cfg: FleetConfig | None = None, problem: Problem | None = None,
+          initial: Schedule | None = None, freeze_until_s: float | None = None, pool: PassPool | None = None,
+          on_round: Callable[[Coordinator], None] | None = None, resume: Resume | None = None,
+          t0: float | None = None) -> FleetSolution:
+    """Schedule a fleet (:mod:`eosp.kinds.fleet.coordinator`); the schedule is checked by the checker before it is
+    returned, and an action it rejects is dropped (never expected: the pass graphs and the battery repair use its
+    rules).
+
+    `initial`: a schedule to start from; `freeze_until_s`: the passes starting before this time (seconds from
+    the horizon start) keep the initial schedule's actions as they are (so every action before it is kept).
+    `pool`: what solves the passes of a price round (:class:`eosp.kinds.fleet.pool.PassPool`, e.g. Ray actors;
+    default: forked processes when ``cfg.workers > 1``, else this process); `on_round`: called after every round;
+    `resume`: prices and bound of a stopped run (its best schedule as `initial`); `t0`: when the fleet was read
+    (``time.perf_counter()``; default: now): ``cfg.time_limit`` counts from it."""
+    from eosp.fleet.check import validate
+
+    t0 = time.perf_counter() if t0 is None else t0
+    cfg = cfg or FleetConfig()
+    cfg.validate()  # fields set one by one (eosp.config.apply_overrides) are checked together here
+    prob = problem or Problem.build(fleet, opps)
+    start = None if initial is None else primal_of(prob, initial)
+    frozen = None
+    if freeze_until_s is not None:
+        frozen = prob.pass_time[:, 0] < freeze_until_s
+        start = start or Primal.empty(len(prob.passes), len(fleet.tasks))
+    own_pool = pool is None and cfg.workers > 1
+    pool = ForkPool(prob, cfg) if own_pool else pool
+    coord = Coordinator(prob, cfg, t0=t0, pool=pool, initial=start, frozen=frozen, on_round=on_round)
+    if resume is not None:
+        if len(resume.lam) != len(fleet.tasks):
+            raise ValueError("resume: prices of another fleet")
+        coord.prices, coord.start_round = Prices(resume.lam.astype(np.float64), resume.step), resume.rounds_done
+        if resume.best_bound < coord.best_bound:
+            coord.best_bound, coord.bound_source = resume.best_bound, resume.bound_source
+    try:
+        best = coord.run()
+    finally:
+        if own_pool:
+            pool.close()
+    sched = coord.schedule(best)
+    res = validate(fleet, sched, prob.geo)
+    dropped = 0
+    while not res.valid and len(sched):
+        bad = sorted({v.action for v in res.violations if v.action >= 0}) or [0]
+        keep = np.setdiff1d(np.arange(len(sched)), bad)
+        sched = Schedule(sched.satellite[keep], sched.task[keep], sched.start_us[keep], sched.end_us[keep])
+        dropped += len(bad)
+        res = validate(fleet, sched, prob.geo)
+    W = prob.total_weight
+    bound = coord.bound
+    info = {"pass_solver": cfg.pass_solver, "rounds": coord.rounds_done, "pass_solves": coord.pass_solves,
+            "passes": len(prob.passes), "build_s": round(prob.build_s, 3), "checker_drops": dropped,
+            "battery_barred": int(coord.barred.sum()), "metrics": res.metrics, "interrupted": coord.interrupted,
+            "bound_source": coord.bound_source, "price_round_s": [round(x, 4) for x in coord.round_s],
+            "no_lagrangian_bound_because": None if coord.bound_source == "lagrangian" else (
+                f"pass solver {cfg.pass_solver} proves no pass bound" if cfg.pass_solver != "exact"
+                else "a pass graph is not FIFO" if prob.fifo_violations
+                else "none was lower than the conflict-free bound" if coord.rounds_done
+                else "none needed: the conflict-free bound is met" if coord.best_bound <= coord.best.value + 1e-9
+                else "no price round finished")}
+    hist = [(t, v / W, b / W) for t, v, b in coord.history]
+    return FleetSolution(sched, float(res.metrics.get("WCR", 0.0)), min(1.0, bound / W) if W > 0 else 0.0, hist, info,
+                         res)
+
+
+def solve_fleet(data, cfg: FleetConfig, initial: Schedule | None = None,
+                freeze_until_s: float | None = None) -> Result:
+    """The contract's entry of ``--solver fleet`` (:mod:`eosp.kinds.fleet.kind`): `data` a fleet directory read."""
+    t0 = time.perf_counter()
+    cfg.validate()  # before the pass graphs are built
+    prob = Problem.build(data.fleet, data.opps, data.geo)  # the Geometry the kind's checks built, when they did
+    sol = solve(data.fleet, data.opps, cfg, problem=prob, initial=initial, freeze_until_s=freeze_until_s, t0=t0)
+    status = "interrupted" if sol.info["interrupted"] else "optimal" if sol.gap == 0 else \
+        "budget" if cfg.rounds is not None and sol.info["rounds"] >= cfg.rounds else "time_limit"
+    return Result(sol.schedule, sol.value, sol.bound, sol.info["bound_source"], status,
+                  {"solve": time.perf_counter() - t0, "build": sol.info["build_s"]}, sol.info, sol.check.verdict())
+
+
+def solve_greedy(data, cfg: GreedyConfig) -> Result:
+    """The contract's entry of the fleet greedy: each task once, by weight (:mod:`eosp.fleet.greedy`); checked."""
+    from eosp.fleet.check import validate
+    from eosp.fleet.geometry import Geometry
+    from eosp.fleet.greedy import solve as greedy
+
+    t0 = time.perf_counter()
+    geo = data.geo or Geometry(data.fleet)
+    sched = greedy(data.fleet, data.opps, geo)
+    verdict = validate(data.fleet, sched, geo).verdict()
+    return Result(sched, float(verdict.metrics["WCR"]), None, None, "done", {"solve": time.perf_counter() - t0},
+                  {}, verdict)
