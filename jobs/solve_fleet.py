@@ -91,7 +91,7 @@ class PassWorker:
         """Every pass of `passes` under task prices `lam` (utility weight - price), packed in a few arrays
         (a round of thousands of passes costs thousands of small objects otherwise): pass ids, values, bounds
         (NaN: none), CSR offsets and nodes of the paths, seconds per pass."""
-        from eosp.kinds.fleet.problem import priced, solve_pass_graph
+        from eosp.kinds.fleet.problem import priced, solve_round_pass
 
         n = len(passes)
         value, bound, secs = np.zeros(n), np.full(n, np.nan), np.zeros(n)
@@ -99,7 +99,7 @@ class PassWorker:
         for i, p in enumerate(passes.tolist()):
             pg = self.graphs[p]
             t = time.perf_counter()
-            res = solve_pass_graph(pg, priced(self.weight, lam, pg.tasks), self.cfg)
+            res = solve_round_pass(pg, priced(self.weight, lam, pg.tasks), self.cfg)
             secs[i] = time.perf_counter() - t
             value[i] = res.value
             if res.bound is not None:
@@ -148,7 +148,7 @@ class RayPassPool:
         import ray
         from ray.exceptions import RayActorError
 
-        from eosp.kinds.fleet.problem import PassResult, priced, solve_pass
+        from eosp.kinds.fleet.problem import PassResult, priced, solve_round_pass
 
         self.calls += 1
         ids = np.asarray(passes, dtype=np.int64)
@@ -174,7 +174,8 @@ class RayPassPool:
             except RayActorError:
                 self.faults += 1
                 for p in mine.tolist():
-                    out[p] = solve_pass(self.prob, p, priced(w, lam, self.prob.passes[p].tasks), self.cfg)
+                    pg = self.prob.passes[p]
+                    out[p] = solve_round_pass(pg, priced(w, lam, pg.tasks), self.cfg)
                 continue
             for i, p in enumerate(got.tolist()):
                 b = float(bound[i])

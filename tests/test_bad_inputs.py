@@ -950,6 +950,23 @@ def test_every_search_reports_its_incumbent(solver, options):
     assert INCUMBENT.take(generated("uniform", 12, 0, 2.0)) is None  # another instance's: never written for this one
 
 
+def opened_instance(pid: int, directory: Path, timeout: float) -> None:
+    """Wait until process `pid` has a file of `directory` open (polled every 20 ms through /proc)."""
+    import os
+    import time
+
+    end = time.monotonic() + timeout
+    fds = Path(f"/proc/{pid}/fd")
+    while time.monotonic() < end:
+        try:
+            if any(os.readlink(f).startswith(str(directory)) for f in fds.iterdir()):
+                return
+        except OSError:  # a descriptor closed while listed
+            pass
+        time.sleep(0.02)
+    raise AssertionError(f"process {pid} did not open {directory} within {timeout} s")
+
+
 @pytest.mark.parametrize("solver", ["lns"])
 def test_ctrl_c_of_a_real_search_writes_its_best_schedule(base, tmp_path, solver):
     """SIGINT to `eosp solve --solver lns --time-limit 60` once it searches: one line, exit 130, a valid schedule."""
@@ -969,7 +986,8 @@ def test_ctrl_c_of_a_real_search_writes_its_best_schedule(base, tmp_path, solver
                          # a test run in the background inherits an ignored SIGINT: the solve must not
                          preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     t0 = time.monotonic()
-    time.sleep(8.0)
+    opened_instance(p.pid, r / "big", timeout=120)  # past the imports (seconds on a loaded machine): solving now
+    time.sleep(3.0)
     p.send_signal(signal.SIGINT)
     out, err = p.communicate(timeout=60)
     if p.returncode == 0:  # finished (proved optimal) before the signal: nothing to test on this machine

@@ -222,3 +222,37 @@ def test_the_bound_holds_for_any_prices_on_bridge_fleets(duration, gap, east, no
         lam = rng.uniform(0, 1.5, n_chain) * fleet.tasks.weight * (rng.random(n_chain) < 0.7)
         total, _ = lagrangian(fleet, lam)
         assert total >= best - 1e-9, (lam, total, best)
+
+
+def test_the_fleet_solver_bounds_its_own_schedules_on_a_bridge_fleet():
+    """The fleet solver on a fleet where B is a bridge and contested: its Lagrangian bound, with the bridge
+    pass's bound problem, stays above the schedule it found and above the brute force."""
+    from eosp.kinds.fleet.config import FleetConfig
+    from eosp.kinds.fleet.solve import solve
+
+    fleet = bridge_fleet(shared=True, weights=[1.0, 3.0, 1.0])
+    sol = solve(fleet, compute(fleet, Geometry(fleet)), FleetConfig(rounds=8, time_limit=None))
+    assert sol.info["bound_graphs"] >= 1 and sol.info["bound_refused"] == []
+    best = brute_force(fleet) / fleet.tasks.weight.sum()
+    assert sol.bound >= best - 1e-9 >= sol.value - 2e-9
+
+
+def test_a_bound_below_a_schedule_is_refused(monkeypatch):
+    """Were the pass terms wrong (here made to answer 0), the solver would not report a bound below the schedule
+    it found: it refuses it, says so and keeps the conflict-free bound."""
+    from eosp.kinds.fleet import pool
+    from eosp.kinds.fleet.config import FleetConfig
+    from eosp.kinds.fleet.problem import PassResult, solve_round_pass
+    from eosp.kinds.fleet.solve import solve
+    from tests.test_fleet import synthetic_fleet
+
+    def wrong(pg, value, cfg):
+        res = solve_round_pass(pg, value, cfg)
+        return PassResult(res.nodes, res.value, 0.0)
+
+    monkeypatch.setattr(pool, "solve_round_pass", wrong)
+    fleet = synthetic_fleet(n_tasks=40, seed=3)  # not every task can be served: price rounds run
+    sol = solve(fleet, compute(fleet, Geometry(fleet)), FleetConfig(rounds=2, time_limit=None))
+    assert sol.info["bound_refused"] and "below the schedule found" in sol.info["bound_refused"][0]
+    assert sol.info["bound_source"] == "conflict-free" and sol.bound >= sol.value
+    assert sol.info["no_lagrangian_bound_because"].startswith("refused:")

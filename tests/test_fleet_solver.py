@@ -132,6 +132,8 @@ def test_replanning_keeps_the_frozen_actions_and_never_loses_the_initial_value(p
               if a < cut * 1e6}
     after = set(zip(again.schedule.satellite, again.schedule.task, again.schedule.start_us))
     assert before and before <= after
+    # what its bound bounds is named: with passes frozen, the schedules that keep them
+    assert again.info["bound_source"] in ("conflict-free", "lagrangian, frozen passes as given")
 
 
 def test_a_battery_that_binds_is_repaired_and_its_tasks_go_to_other_satellites():

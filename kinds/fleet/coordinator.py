@@ -55,6 +55,7 @@ class Coordinator:
     rounds_done: int = 0
     interrupted: bool = False
     bound_source: str = "conflict-free"  # until a proven Lagrangian bound is lower
+    refused: list[str] = field(default_factory=list)  # Lagrangian bounds refused, and why (see price_round)
 
     pool: PassPool | None = None  # what solves the passes of a price round (default: this process)
     on_round: Callable[[Coordinator], None] | None = None  # called after every round (checkpoints, MLflow)
@@ -74,9 +75,7 @@ class Coordinator:
             self.frozen = np.zeros(len(self.prob.passes), dtype=bool)
         self.sun = SunCache(self.prob.geo)  # sunlight, computed once for every battery simulation
         self.battery_ok: dict[int, tuple] = {}  # satellite -> the timeline last found to hold its battery
-        # the conflict-free bound: every task that has an opportunity, served once
-        served_somewhere = np.array([len(h) > 0 for h in self.prob.task_passes], dtype=bool)
-        self.best_bound = float(self.prob.weight[served_somewhere].sum())
+        self.best_bound = self.conflict_free()
 
     # ------------------------------------------------------------------ pass solves
     def _solve(self, p: int, util: np.ndarray) -> PassResult:
@@ -159,8 +158,13 @@ class Coordinator:
             terms.append(res.value if res.bound is None else res.bound)
             count[path_tasks(self.prob, p, res.nodes)] += 1
         total = self.prices.dual(terms)
-        if proven and self.prob.fifo_violations == 0 and total < self.best_bound:
-            self.best_bound, self.bound_source = total, "lagrangian"
+        if proven and total < self.best_bound:
+            if total < self.best.value - 1e-9 * max(1.0, self.best.value):
+                # a theorem cannot fall below a schedule: some pass term was wrong; keep the bound known
+                self.refused.append(f"round {self.rounds_done + 1}: L(lam) = {total:.6f} below the schedule found "
+                                    f"({self.best.value:.6f})")
+            else:
+                self.best_bound, self.bound_source = total, "lagrangian"
         self.prices.step_towards(count, total, self.best.value)
         return total
 
@@ -238,10 +242,22 @@ class Coordinator:
         """Keep `primal` (after battery repair) when it serves more than the best."""
         self.battery_repair(primal, deadline)
         if primal.value > self.best.value + 1e-9:
-            self.best = primal
-            self.record()
+            self.keep(primal)
             return True
         return False
+
+    def keep(self, primal: Primal) -> None:
+        """`primal` is the best schedule now; a Lagrangian bound below it was wrong: refused (the conflict-free
+        bound, which every schedule respects, takes its place), and said."""
+        self.best = primal
+        if self.bound_source == "lagrangian" and primal.value > self.best_bound + 1e-9 * max(1.0, primal.value):
+            self.refused.append(f"a schedule of {primal.value:.6f} above the Lagrangian bound {self.best_bound:.6f}")
+            self.best_bound, self.bound_source = self.conflict_free(), "conflict-free"
+        self.record()
+
+    def conflict_free(self) -> float:
+        """Every task that has an opportunity, served once."""
+        return float(self.prob.weight[np.array([len(h) > 0 for h in self.prob.task_passes], dtype=bool)].sum())
 
     def neighbourhood(self, rng: np.random.Generator, deadline: float | None) -> None:
         """Free the passes meeting a random time span, rebuild them in a price-perturbed order, descend."""
@@ -264,10 +280,10 @@ class Coordinator:
         if trial.value >= self.best.value - 1e-9:
             self.battery_repair(trial)
             if trial.value >= self.best.value - 1e-9:
-                improved = trial.value > self.best.value + 1e-9
-                self.best = trial
-                if improved:
-                    self.record()
+                if trial.value > self.best.value + 1e-9:
+                    self.keep(trial)
+                else:
+                    self.best = trial
 
     def run(self) -> Primal:
         cfg, prob = self.cfg, self.prob
@@ -323,6 +339,8 @@ class Coordinator:
     @property
     def bound(self) -> float:
         """The best proven bound: the Lagrangian one when every pass term of a price round was proven (exact pass
-        solver) and every pass graph is FIFO (:func:`eosp.graphs.prune.fifo_violations`), else the
-        conflict-free bound (every task that has an opportunity, served once)."""
+        solver; each pass's term its priced optimum where its graph serves the bound, else its bound problem, see
+        :func:`eosp.fleet.passgraph.bound_problem`), else the conflict-free bound (every task that has an
+        opportunity, served once).  Energy is relaxed.  With frozen passes the Lagrangian bound holds for the
+        schedules that keep them as given."""
         return self.best_bound

@@ -16,7 +16,7 @@ from typing import Protocol
 import numpy as np
 
 from eosp.kinds.fleet.config import FleetConfig
-from eosp.kinds.fleet.problem import PassResult, Problem, priced, solve_pass
+from eosp.kinds.fleet.problem import PassResult, Problem, priced, solve_round_pass
 
 
 class PassPool(Protocol):
@@ -24,8 +24,9 @@ class PassPool(Protocol):
 
     def solve_priced(self, passes: list[int], prices: np.ndarray,
                      deadline: float | None) -> dict[int, PassResult] | None:
-        """Every pass of `passes` with utilities weight - price of its tasks; None when the deadline (a
-        ``time.perf_counter()`` instant) came first."""
+        """Every pass of `passes` with utilities weight - price of its tasks
+        (:func:`eosp.kinds.fleet.problem.solve_round_pass`: its path and its term of the bound); None when the
+        deadline (a ``time.perf_counter()`` instant) came first."""
         ...
 
     def close(self) -> None: ...
@@ -43,7 +44,8 @@ class InProcessPool:
         for p in passes:
             if deadline is not None and time.perf_counter() > deadline:
                 return None
-            out[p] = solve_pass(self.prob, p, priced(self.prob.weight, prices, self.prob.passes[p].tasks), self.cfg)
+            pg = self.prob.passes[p]
+            out[p] = solve_round_pass(pg, priced(self.prob.weight, prices, pg.tasks), self.cfg)
         return out
 
     def close(self) -> None:
@@ -64,7 +66,7 @@ def _ignore_sigint() -> None:
 def _solve_chunk(args: tuple[list[int], np.ndarray]) -> list[PassResult]:
     passes, prices = args
     prob, cfg = _FORKED
-    return [solve_pass(prob, p, priced(prob.weight, prices, prob.passes[p].tasks), cfg) for p in passes]
+    return [solve_round_pass(prob.passes[p], priced(prob.weight, prices, prob.passes[p].tasks), cfg) for p in passes]
 
 
 class ForkPool:

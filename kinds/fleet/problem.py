@@ -12,7 +12,7 @@ import numpy as np
 from eosp.fleet.geometry import Geometry
 from eosp.fleet.model import Fleet, Schedule
 from eosp.fleet.opportunities import Opportunities
-from eosp.fleet.passgraph import PassGraph, build_passes, priced_instance
+from eosp.fleet.passgraph import PassGraph, bound_problem, build_passes, priced_instance
 from eosp.fleet.slew import LineOfSight
 from eosp.graphs.prune import fifo_violations
 from eosp.kinds.fleet.config import FleetConfig
@@ -39,6 +39,16 @@ class Problem:
     pass_time: np.ndarray  # (first start, last end) of each pass, seconds
     fifo_violations: int = 0  # see eosp.graphs.prune.fifo_violations: 0 makes the pass optima the passes'
     build_s: float = 0.0
+
+    @property
+    def bound_graphs(self) -> int:
+        """Passes whose bound term needs their bound problem (bridges, repeats, transitions between the margins)."""
+        return sum(pg.bound_graph is not None for pg in self.passes)
+
+    @property
+    def unprovable(self) -> int:
+        """Passes on which no bound can be proven (their bound graph is not FIFO): no Lagrangian bound then."""
+        return sum(not pg.bound_provable for pg in self.passes)
 
     @classmethod
     def build(cls, fleet: Fleet, opps: Opportunities, geo: Geometry | None = None) -> Problem:
@@ -87,6 +97,19 @@ def solve_pass_graph(pg: PassGraph, value: np.ndarray, cfg: FleetConfig) -> Pass
     if cfg.pass_solver == "exact":
         bound = sol.value if sol.info.get("status") == "optimal" else float(sol.info.get("bound", math.inf))
     return PassResult(pp.nodes[np.asarray(sol.nodes, dtype=np.int64)], float(sol.value), bound)
+
+
+def solve_round_pass(pg: PassGraph, value: np.ndarray, cfg: FleetConfig) -> PassResult:
+    """A pass of a price round: its priced problem solved (the path moves the prices and seeds the recovery), with
+    its term of the Lagrangian bound as `bound`: the priced optimum where the pass graph serves the bound, else
+    the pass's bound problem (:func:`eosp.fleet.passgraph.bound_problem`: bridges and repeats kept, the verifier's
+    tolerance); None when no bound is proven (a pass solver that proves none, a bound graph that is not FIFO, a
+    bound problem cut by the pass time limit)."""
+    res = solve_pass_graph(pg, value, cfg)
+    if pg.bound_graph is None or res.bound is None:
+        return res
+    b = bound_problem(pg, value, cfg.pass_time_limit)
+    return PassResult(res.nodes, res.value, max(b, res.bound) if math.isfinite(b) else None)
 
 
 def rewalk(pg: PassGraph, path: np.ndarray) -> np.ndarray:

@@ -97,20 +97,27 @@ def solve(fleet: Fleet, opps: Opportunities, cfg: FleetConfig | None = None, pro
         dropped += len(bad)
         res = validate(fleet, sched, prob.geo)
     W = prob.total_weight
+    value = float(res.metrics.get("WCR", 0.0))
+    if coord.bound_source == "lagrangian" and W > 0 and value > coord.bound / W + 1e-9:
+        coord.keep(coord.best)  # the checked schedule above the bound: the bound was wrong, refused (never expected)
     bound = coord.bound
+    source = coord.bound_source
+    if source == "lagrangian" and coord.frozen.any():
+        source = "lagrangian, frozen passes as given"  # what it bounds: the schedules that keep them
     info = {"pass_solver": cfg.pass_solver, "rounds": coord.rounds_done, "pass_solves": coord.pass_solves,
             "passes": len(prob.passes), "build_s": round(prob.build_s, 3), "checker_drops": dropped,
             "battery_barred": int(coord.barred.sum()), "metrics": res.metrics, "interrupted": coord.interrupted,
-            "bound_source": coord.bound_source, "price_round_s": [round(x, 4) for x in coord.round_s],
+            "bound_source": source, "price_round_s": [round(x, 4) for x in coord.round_s],
+            "bound_graphs": prob.bound_graphs, "bound_refused": list(coord.refused),
             "no_lagrangian_bound_because": None if coord.bound_source == "lagrangian" else (
                 f"pass solver {cfg.pass_solver} proves no pass bound" if cfg.pass_solver != "exact"
-                else "a pass graph is not FIFO" if prob.fifo_violations
+                else f"{prob.unprovable} passes' bound graphs are not FIFO" if prob.unprovable
+                else f"refused: {coord.refused[-1]}" if coord.refused
                 else "none was lower than the conflict-free bound" if coord.rounds_done
                 else "none needed: the conflict-free bound is met" if coord.best_bound <= coord.best.value + 1e-9
                 else "no price round finished")}
     hist = [(t, v / W, b / W) for t, v, b in coord.history]
-    return FleetSolution(sched, float(res.metrics.get("WCR", 0.0)), min(1.0, bound / W) if W > 0 else 0.0, hist, info,
-                         res)
+    return FleetSolution(sched, value, min(1.0, bound / W) if W > 0 else 0.0, hist, info, res)
 
 
 def solve_fleet(data, cfg: FleetConfig, initial: Schedule | None = None,
