@@ -32,7 +32,7 @@ class FleetConfig(UtilityConfig):
     rounds: int | None = ranged(None, 1)
     """Price rounds, each followed by a large-neighbourhood move (a deterministic budget: the same schedule for a
     seed on any machine, with --time-limit 0 or one long enough); unset: as many as the time limit allows."""
-    pass_time_limit: float = ranged(5.0, 0)
+    pass_time_limit: float = ranged(5.0, 0, WEEK_S)
     """Seconds the exact solver may spend on one pass (its bound is used when it stops early)."""
     span_s: float = ranged(3600.0, 1)
     """Length of the time span freed by one large-neighbourhood move."""

@@ -124,7 +124,9 @@ def solve_fleet(data, cfg: FleetConfig, initial: Schedule | None = None,
                 freeze_until_s: float | None = None) -> Result:
     """The contract's entry of ``--solver fleet`` (:mod:`eosp.kinds.fleet.kind`): `data` a fleet directory read."""
     t0 = time.perf_counter()
-    sol = solve(data.fleet, data.opps, cfg, initial=initial, freeze_until_s=freeze_until_s, t0=t0)
+    cfg.validate()  # before the pass graphs are built
+    prob = Problem.build(data.fleet, data.opps, data.geo)  # the Geometry the kind's checks built, when they did
+    sol = solve(data.fleet, data.opps, cfg, problem=prob, initial=initial, freeze_until_s=freeze_until_s, t0=t0)
     status = "interrupted" if sol.info["interrupted"] else "optimal" if sol.gap == 0 else \
         "budget" if cfg.rounds is not None and sol.info["rounds"] >= cfg.rounds else "time_limit"
     return Result(sol.schedule, sol.value, sol.bound, sol.info["bound_source"], status,
@@ -138,7 +140,7 @@ def solve_greedy(data, cfg: GreedyConfig) -> Result:
     from eosp.fleet.greedy import solve as greedy
 
     t0 = time.perf_counter()
-    geo = Geometry(data.fleet)
+    geo = data.geo or Geometry(data.fleet)
     sched = greedy(data.fleet, data.opps, geo)
     verdict = validate(data.fleet, sched, geo).verdict()
     return Result(sched, float(verdict.metrics["WCR"]), None, None, "done", {"solve": time.perf_counter() - t0},
