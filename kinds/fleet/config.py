@@ -38,6 +38,12 @@ class FleetConfig(UtilityConfig):
     """Length of the time span freed by one large-neighbourhood move."""
     workers: int = ranged(1, 1, 256)
     """Processes solving the passes of a price round (forked from this one, the pass graphs shared)."""
+    warm_start: str = choice("none", "none", "heuristic", "learned")
+    """Where the task prices start: none (0), heuristic (weight x (1 - 1/satellites that can serve the task)) or
+    learned (the shipped price network over the task-opportunity graph, eosp.kinds.fleet.warmstart)."""
+    price_model: str = ""
+    """Directory of the price network used by --warm-start learned (prices.pt, prices.json from
+    jobs/train_prices.py); empty: the shipped one."""
 
     NAME = "fleet"
     BUDGET = "rounds"

@@ -76,6 +76,10 @@ def solve(fleet: Fleet, opps: Opportunities, cfg: FleetConfig | None = None, pro
     own_pool = pool is None and cfg.workers > 1
     pool = ForkPool(prob, cfg) if own_pool else pool
     coord = Coordinator(prob, cfg, t0=t0, pool=pool, initial=start, frozen=frozen, on_round=on_round)
+    if resume is None and cfg.warm_start != "none":
+        from eosp.kinds.fleet.warmstart import start_prices
+
+        coord.prices = Prices(start_prices(prob, cfg.warm_start, cfg.price_model or None))
     if resume is not None:
         if len(resume.lam) != len(fleet.tasks):
             raise ValueError("resume: prices of another fleet")
