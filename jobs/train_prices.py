@@ -11,7 +11,9 @@
    model is judged by the bound its prices give (L(lam), below), not by its distance to that point.
 2. Training: the network of :mod:`eosp.models.prices`, full batch per fleet, weighted squared error between the
    predicted and reference price fractions (weights: the task weights, since an error on a heavy task moves
-   L most); the last ``--val`` fleets are held out; MLflow logs the losses per epoch.
+   L most); then, with ``--dual-epochs``, descent on the dual itself: L is convex in the prices with subgradient
+   1 - (times served), one price round per fleet gives it, and the network follows it through the prices it
+   predicts.  The last ``--val`` fleets are held out; MLflow logs the losses and L/W per epoch.
 3. Judged on the held-out fleets by the dual itself: L(lam)/W for the learned, heuristic and zero prices, one
    price round each (the pass solves of :func:`eosp.kinds.fleet.problem.solve_round_pass`), logged to MLflow.
 The model is written to ``--out`` (prices.pt + prices.json).
@@ -48,6 +50,12 @@ class PriceTrainConfig:
     """Passes over the training fleets."""
     lr: float = ranged(3e-3, 0.0, 1.0, lo_open=True)
     """Adam's learning rate."""
+    dual_epochs: int = ranged(0, 0, 100_000)
+    """Epochs of descent on the dual itself after the fit: each prices every training fleet with the network, one
+    price round per fleet (Ray actors holding the fleets) gives L's subgradient 1 - served, and the network's
+    weights follow it (the best epoch by the training fleets' mean L/W is kept)."""
+    dual_lr: float = ranged(1e-3, 0.0, 1.0, lo_open=True)
+    """Adam's learning rate of the dual epochs."""
     val: int = ranged(1, 0)
     """Fleets held out (the last ones of --fleets) to judge the model by the bound its prices give."""
     seed: int = ranged(0, 0)
@@ -196,6 +204,66 @@ def train(graphs: list, targets: list, cfg: PriceTrainConfig, log) -> object:
     return model
 
 
+class DualRound:
+    """A Ray actor holding one fleet's Problem: L(lam)/W and the tasks' serve counts of one price round."""
+
+    def __init__(self, path: str):
+        import torch
+
+        torch.set_num_threads(1)
+        self.prob = read_problem(path)
+
+    def round(self, lam):
+        import numpy as np
+
+        from eosp.kinds.fleet.config import FleetConfig
+        from eosp.kinds.fleet.problem import path_tasks, priced, solve_round_pass
+
+        prob, cfg = self.prob, FleetConfig()
+        count = np.zeros(len(prob.weight))
+        total = float(lam.sum())
+        for pg in prob.passes:
+            res = solve_round_pass(pg, priced(prob.weight, lam, pg.tasks), cfg)
+            total += res.bound if res.bound is not None else res.value
+            count[path_tasks(prob, pg.pass_id, res.nodes)] += 1
+        return total / prob.total_weight, count
+
+
+def dual_descent(model, graphs: list, actors: list, cfg: PriceTrainConfig, log) -> object:
+    """The network's weights moved along L's subgradient (see --dual-epochs); the best epoch's weights kept."""
+    import copy
+
+    import numpy as np
+    import ray
+    import torch
+
+    from eosp.models.prices import tensors
+
+    opt = torch.optim.Adam(model.parameters(), lr=cfg.dual_lr)
+    xs = [tensors(g) for g in graphs]
+    best, best_state = np.inf, copy.deepcopy(model.state_dict())
+    for epoch in range(cfg.dual_epochs + 1):
+        model.train()
+        sig = [torch.sigmoid(model(x)).double() * torch.from_numpy(g.contested.astype(np.float64))
+               for x, g in zip(xs, graphs)]
+        lams = [(s.detach().numpy() * g.weight) for s, g in zip(sig, graphs)]
+        got = ray.get([a.round.remote(lam) for a, lam in zip(actors, lams)])
+        mean_L = float(np.mean([v for v, _ in got]))
+        log(cfg.epochs + epoch, {"train_L_over_W": mean_L})
+        if mean_L < best:
+            best, best_state = mean_L, copy.deepcopy(model.state_dict())
+        if epoch == cfg.dual_epochs:
+            break
+        opt.zero_grad()
+        # dL/dlam = 1 - served: the surrogate sum(lam * (1 - served)) / W has L's subgradient in lam
+        loss = sum((s * torch.from_numpy(g.weight) * torch.from_numpy(1.0 - c)).sum() / float(g.weight.sum())
+                   for s, g, (_, c) in zip(sig, graphs, got)) / len(graphs)
+        loss.backward()
+        opt.step()
+    model.load_state_dict(best_state)
+    return model
+
+
 def run(cfg: PriceTrainConfig) -> dict:
     import ray
 
@@ -240,10 +308,19 @@ def run(cfg: PriceTrainConfig) -> dict:
     pairs = [read_graph(data / n) for n in names]
     with mlflow.start_run() as run_:
         mlflow.log_params({"fleets": len(names), "val": cfg.val, "rounds": cfg.rounds, "epochs": cfg.epochs,
+                           "dual_epochs": cfg.dual_epochs, "dual_lr": cfg.dual_lr,
                            "lr": cfg.lr, "hidden": cfg.model.hidden, "layers": cfg.model.layers})
         t0 = time.perf_counter()
         model = train([g for g, _ in pairs], [y for _, y in pairs], cfg,
                       lambda step, m: mlflow.log_metrics(m, step=step))
+        if cfg.dual_epochs:
+            n_train = len(pairs) - cfg.val if len(pairs) > cfg.val else len(pairs)
+            actor = ray.remote(num_cpus=1)(DualRound)
+            actors = [actor.remote(str(Path(f).resolve())) for f in cfg.fleets[:n_train]]
+            model = dual_descent(model, [g for g, _ in pairs[:n_train]], actors, cfg,
+                                 lambda step, m: mlflow.log_metrics(m, step=step))
+            for a in actors:
+                ray.kill(a)
         train_s = time.perf_counter() - t0
         from eosp.models.prices import predict
 

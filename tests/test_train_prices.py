@@ -37,7 +37,7 @@ def test_data_training_mlflow_resume_and_refusal(tmp_path):
     uri = f"sqlite:///{tmp_path / 'm.db'}"
     common = ["--fleets", *fleets, "--data", tmp_path / "data", "--rounds", 2, "--epochs", 10, "--val", 1,
               "--model.hidden", 8, "--model.layers", 1, "--ray.num-cpus", 2, "--mlflow-uri", uri]
-    r = job(*common, "--out", tmp_path / "model", cwd=tmp_path)
+    r = job(*common, "--out", tmp_path / "model", "--dual-epochs", 1, cwd=tmp_path)
     assert r.returncode == 0, r.stderr[-2000:]
     assert "held out" in r.stdout and "model ->" in r.stdout
     tables = sorted((tmp_path / "data").glob("*/tasks.parquet"))
@@ -46,6 +46,7 @@ def test_data_training_mlflow_resume_and_refusal(tmp_path):
     client = mlflow.MlflowClient(uri)
     run = client.search_runs([client.get_experiment_by_name("eosp-prices").experiment_id])[0]
     assert len(client.get_metric_history(run.info.run_id, "train_loss")) == 1  # epochs 10: logged every 10
+    assert len(client.get_metric_history(run.info.run_id, "train_L_over_W")) == 2  # before and after one step
     assert {"val_L_over_W_learned", "val_L_over_W_heuristic", "val_L_over_W_none"} <= set(run.data.metrics)
 
     # a rerun keeps the data; an --out that holds a model is refused in one line, nothing written
