@@ -51,7 +51,6 @@ def run(cfg: PretrainConfig) -> dict:
     import numpy as np
     import torch
 
-    from eosp.config import default_mlflow_uri
     from eosp.jobs.ray_init import init_ray
     from eosp.models.agent import EOSPAgent
     from eosp.training.imitation import DemoData, fit
@@ -83,8 +82,9 @@ def run(cfg: PretrainConfig) -> dict:
 
     if agent is None:
         agent = EOSPAgent(cfg.model)
-    mlflow.set_tracking_uri(default_mlflow_uri(im.mlflow_uri))
-    mlflow.set_experiment(im.experiment)
+    from eosp.jobs.tracking import use_experiment
+
+    use_experiment(im.mlflow_uri, im.experiment)
     mlflow.start_run(run_name=im.run_name)
     mlflow.log_params({k: (json.dumps(v) if isinstance(v, (list, tuple)) else v) for k, v in flatten(cfg).items()})
     mlflow.log_dict(to_dict(cfg), "config.json")

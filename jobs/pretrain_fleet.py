@@ -58,7 +58,6 @@ def run(cfg: FleetPretrainConfig) -> dict:
     import numpy as np
     import torch
 
-    from eosp.config import default_mlflow_uri
     from eosp.envs.constellation_obs import N_FLEET_FEATURES
     from eosp.jobs.preflight import make_run_dir
     from eosp.jobs.ray_init import init_ray
@@ -94,8 +93,9 @@ def run(cfg: FleetPretrainConfig) -> dict:
     make_run_dir(run_dir, im.overwrite)
     if agent is None:
         agent = EOSPAgent(cfg.model, N_FLEET_FEATURES)
-    mlflow.set_tracking_uri(default_mlflow_uri(im.mlflow_uri))
-    mlflow.set_experiment(im.experiment)
+    from eosp.jobs.tracking import use_experiment
+
+    use_experiment(im.mlflow_uri, im.experiment)
     mlflow.start_run(run_name=im.run_name)
     mlflow.set_tags({"env_kind": "fleet", "reward": cfg.env.reward})
     mlflow.log_params({k: (json.dumps(v) if isinstance(v, (list, tuple)) else v) for k, v in flatten(cfg).items()})

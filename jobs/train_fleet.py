@@ -55,7 +55,6 @@ def run(cfg: FleetRunConfig) -> dict:
     import torch
 
     from eosp.atomic import atomic_path
-    from eosp.config import default_mlflow_uri
     from eosp.jobs.preflight import make_run_dir
     from eosp.jobs.ray_init import init_ray
     from eosp.models.checkpoint import load_fleet_agent, save_agent
@@ -76,8 +75,9 @@ def run(cfg: FleetRunConfig) -> dict:
     run_dir = Path(t.run_dir) / t.run_name
     make_run_dir(run_dir, t.overwrite)
     ckpt = run_dir / "checkpoints"
-    mlflow.set_tracking_uri(default_mlflow_uri(t.mlflow_uri))
-    mlflow.set_experiment(t.experiment)
+    from eosp.jobs.tracking import use_experiment
+
+    use_experiment(t.mlflow_uri, t.experiment)
     active = mlflow.start_run(run_name=t.run_name)
     mlflow.set_tags({"env_kind": "fleet", "reward": cfg.env.reward})
     mlflow.log_params({k: (json.dumps(v) if isinstance(v, (list, tuple)) else v) for k, v in flatten(cfg).items()})

@@ -90,7 +90,9 @@ def sweep(trainable, space: dict, tc: TuneConfig, sweep_dir: Path, experiment: s
 
     from eosp.ownership import kind_of, mark_dir
 
-    exp = mlflow.set_experiment(experiment)
+    from eosp.jobs.tracking import use_experiment
+
+    exp = use_experiment(uri, experiment)  # the database and the experiment created here, not by racing trials
     sweep_dir.mkdir(parents=True, exist_ok=True)
     if kind_of(sweep_dir) != SWEEP_KIND:
         mark_dir(sweep_dir, SWEEP_KIND)
@@ -126,7 +128,6 @@ def sweep(trainable, space: dict, tc: TuneConfig, sweep_dir: Path, experiment: s
 
 
 def run(cfg: RunConfig, tc: TuneConfig) -> dict:
-    import mlflow
     import ray
     from ray import tune
 
@@ -150,7 +151,6 @@ def run(cfg: RunConfig, tc: TuneConfig) -> dict:
     # baselines once, in the driver, before the trials hold the CPUs
     if cfg.train.val_data:
         baseline_values(cfg.train.val_data, objective_mode(cfg.env))
-    mlflow.set_tracking_uri(uri)
     space = {"run": to_dict(cfg), "hidden_dim": tune.grid_search(list(tc.hidden_dims)),
              "n_layers": tune.grid_search(list(tc.n_layers)), "lr": tune.grid_search(list(tc.lrs))}
     gpus = cfg.train.num_gpus_per_learner  # a trial's learner runs in the trial's actor: Ray gives it the GPU

@@ -70,7 +70,6 @@ def trial(config: dict) -> None:
 
 
 def run(cfg: FleetPretrainConfig, tc: TuneConfig) -> dict:
-    import mlflow
     import ray
     from ray import tune
 
@@ -85,7 +84,6 @@ def run(cfg: FleetPretrainConfig, tc: TuneConfig) -> dict:
     im.val_data = str(Path(im.val_data).resolve())
     uri = default_mlflow_uri(im.mlflow_uri)
     sweep_dir = (Path(im.run_dir) / "tune").resolve() / tc.name
-    mlflow.set_tracking_uri(uri)
     space = {"run": to_dict(cfg), "hidden_dim": tune.grid_search(list(tc.hidden_dims)),
              "n_layers": tune.grid_search(list(tc.n_layers)), "lr": tune.grid_search(list(tc.lrs))}
     results, best, ck, parent_id, client = sweep(trial, space, tc, sweep_dir, im.experiment, uri, im.epochs,
