@@ -2,6 +2,7 @@
 against the fleet solver's): the tasks only one of them serves, by weight, by how many passes could observe them
 (contention) and by satellite.
 
+    eosp import AEOSSP_CASE --out CASE
     eosp solve CASE --solver fleet-policy --polish none --out policy.parquet
     eosp solve CASE --solver fleet --time-limit 30 --out fleet.parquet
     python experiments/fleet_policy_losses.py CASE policy.parquet fleet.parquet
@@ -31,11 +32,16 @@ def main() -> None:
     from eosp.envs.constellation import read_fleet_dir
     from eosp.fleet.io import read_schedule
 
-    fleet, opps = read_fleet_dir(a.fleet)
+    from eosp.errors import InputError
+
+    try:
+        fleet, opps = read_fleet_dir(a.fleet)
+        sched, ref = (read_schedule(x, fleet)[0] for x in (a.schedule, a.reference))
+    except InputError as exc:
+        raise SystemExit(f"error: {exc}") from None
     w = fleet.tasks.weight.astype(float)
     total = w.sum()
     index = fleet.task_index()
-    sched, ref = (read_schedule(x, fleet)[0] for x in (a.schedule, a.reference))
     mine, theirs = served(sched, index), served(ref, index)
     only_ref, only_mine = np.setdiff1d(theirs, mine), np.setdiff1d(mine, theirs)
     passes = np.zeros(len(w), np.int64)  # passes that can observe each task: its contention
