@@ -57,7 +57,7 @@ def read(path: Path):
 
     t0 = time.perf_counter()
     fleet, opps = read_fleet_dir(path)
-    return FleetData(fleet, opps), time.perf_counter() - t0
+    return FleetData(fleet, opps, Path(path) / "meta.json"), time.perf_counter() - t0
 
 
 def verify(astro: str, case: Path, schedule, fleet, out: Path) -> tuple[bool, float | None]:
