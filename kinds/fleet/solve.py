@@ -46,6 +46,13 @@ class Resume:
     best_bound: float
     bound_source: str
     rounds_done: int
+    mu: np.ndarray | None = None  # the energy windows' multipliers (None: a run dir from before they existed)
+
+
+def resume_mu(resume: Resume, prob: Problem) -> np.ndarray | None:
+    """The saved multipliers of the energy windows, when they are this problem's (else they start at 0)."""
+    mu = resume.mu
+    return None if mu is None or len(mu) != len(prob.windows) else np.asarray(mu, dtype=np.float64)
 
 
 def solve(fleet: Fleet, opps: Opportunities, cfg: FleetConfig | None = None, problem: Problem | None = None,
@@ -79,7 +86,8 @@ def solve(fleet: Fleet, opps: Opportunities, cfg: FleetConfig | None = None, pro
     if resume is not None:
         if len(resume.lam) != len(fleet.tasks):
             raise ValueError("resume: prices of another fleet")
-        coord.prices, coord.start_round = Prices(resume.lam.astype(np.float64), resume.step), resume.rounds_done
+        coord.prices = Prices(resume.lam.astype(np.float64), prob.windows, resume_mu(resume, prob), resume.step)
+        coord.start_round = resume.rounds_done
         if resume.best_bound < coord.best_bound:
             coord.best_bound, coord.bound_source = resume.best_bound, resume.bound_source
     try:
@@ -106,7 +114,9 @@ def solve(fleet: Fleet, opps: Opportunities, cfg: FleetConfig | None = None, pro
         source = "lagrangian, frozen passes as given"  # what it bounds: the schedules that keep them
     info = {"pass_solver": cfg.pass_solver, "rounds": coord.rounds_done, "pass_solves": coord.pass_solves,
             "passes": len(prob.passes), "build_s": round(prob.build_s, 3), "checker_drops": dropped,
-            "battery_barred": int(coord.barred.sum()), "metrics": res.metrics, "interrupted": coord.interrupted,
+            "battery_barred": int(coord.barred.sum()), "repair_removed": coord.repair_drops,
+            "repair_first": coord.first_repair_drops, "energy_windows": len(prob.windows),
+            "metrics": res.metrics, "interrupted": coord.interrupted,
             "bound_source": source, "price_round_s": [round(x, 4) for x in coord.round_s],
             "bound_graphs": prob.bound_graphs, "bound_refused": list(coord.refused),
             "no_lagrangian_bound_because": None if coord.bound_source == "lagrangian" else (
