@@ -30,6 +30,7 @@ from typing import Callable
 
 import numpy as np
 
+from eosp.fleet.check import validate
 from eosp.fleet.timeline import Timeline, repair_battery, timelines, to_schedule
 from eosp.fleet.model import Schedule
 from eosp.kinds.fleet.config import FleetConfig
@@ -37,6 +38,9 @@ from eosp.kinds.fleet.pool import InProcessPool, PassPool
 from eosp.kinds.fleet.prices import Prices
 from eosp.kinds.fleet.problem import (PassResult, Primal, Problem, path_tasks, path_wh, priced, rewalk,
                                       solve_pass)
+
+CHECK_MARGIN = 1.5  # the final check's estimate times this (a better schedule has more actions, a loaded machine)
+CHECK_SLACK_S = 0.2  # seconds added to it (the time the first steps after the deadline take)
 
 
 @dataclass
@@ -55,6 +59,8 @@ class Coordinator:
     repair_drops: int = 0  # observations the battery repair took out, over the whole run
     first_repair_drops: int | None = None  # those it took out of the first schedule
     rounds_done: int = 0
+    first_s: float | None = None  # seconds from t0 to the first schedule (repaired)
+    check_s: float = 0.0  # seconds kept before the deadline for the final check (check_estimate)
     interrupted: bool = False
     bound_source: str = "conflict-free"  # until a proven Lagrangian bound is lower
     refused: list[str] = field(default_factory=list)  # Lagrangian bounds refused, and why (see price_round)
@@ -216,18 +222,20 @@ class Coordinator:
         return primal
 
     # ------------------------------------------------------------------ battery
-    def battery_repair(self, primal: Primal, deadline: float | None = None) -> int | None:
+    def battery_repair(self, primal: Primal, deadline: float | None = None, whole: bool = False) -> int | None:
         """Drop observations until every battery holds (checker's model); a dropped task is barred from that
         satellite, and the passes of other satellites that could serve it are solved again once (then the
         batteries are checked and repaired again).  Returns the number dropped (also counted in
         :attr:`repair_drops`), or None when `deadline` came first: `primal` is then not repaired and must not be
-        kept."""
+        kept.  `whole` (the first schedule): the repair runs to its end whatever the deadline (the re-solves
+        still stop at it)."""
         total = 0
         for attempt in range(2):  # the last attempt only repairs: what it returns holds
             tls = self.timelines(primal)
             keys = [tuple(zip(tl.task, tl.start)) for tl in tls]
             todo = [k for k, key in enumerate(keys) if self.battery_ok.get(k) != key]  # satellites not seen as is
-            dropped = repair_battery(self.prob.fleet, self.prob.los, tls, sats=todo, sun=self.sun, deadline=deadline)
+            dropped = repair_battery(self.prob.fleet, self.prob.los, tls, sats=todo, sun=self.sun,
+                                     deadline=None if whole else deadline)
             if dropped is None:
                 return None
             for k in todo:
@@ -331,14 +339,42 @@ class Coordinator:
         else:
             first = self.construct(order, primal=self.empty(), deadline=deadline, whole=True)
         self.descend(first, list(range(len(prob.passes))), deadline)
-        self.first_repair_drops = self.battery_repair(first)  # the first schedule is repaired whole
+        self.first_repair_drops = self.battery_repair(first, deadline, whole=True)  # the first schedule: whole
         if first.value > self.best.value + 1e-9:
             self.keep(first)
+        self.first_s = time.perf_counter() - self.t0
+        if deadline is not None:  # what is left after the rounds: the final check of a schedule like this one
+            self.check_s = self.check_estimate(first)
+            deadline -= self.check_s
         try:
             self._rounds(deadline, rng)
         except KeyboardInterrupt:  # Ctrl-C: the best schedule so far is the answer
             self.interrupted = True
         return self.best
+
+    def check_estimate(self, primal: Primal) -> float:
+        """Seconds the final steps will take on a schedule like `primal` (its timelines and the checker on it,
+        :func:`eosp.fleet.check.validate`), with a margin: the checker's fixed cost (timed on no action) plus its
+        cost per action, timed on the actions of the first satellites (a tenth of the actions, at least 40),
+        scaled to all (the checker's work is per satellite and per action)."""
+        t = time.perf_counter()
+        sched = self.schedule(primal)
+        n = len(sched)
+        t_fixed = time.perf_counter()
+        validate(self.prob.fleet, Schedule(*(np.zeros(0, a.dtype) for a in
+                                             (sched.satellite, sched.task, sched.start_us, sched.end_us))),
+                 self.prob.geo)
+        t_sub = time.perf_counter()
+        fixed = t_sub - t_fixed
+        per_action = 0.0
+        if n:
+            sats, counts = np.unique(sched.satellite, return_counts=True)
+            upto = int(np.searchsorted(np.cumsum(counts), max(0.1 * n, min(n, 40)))) + 1
+            keep = np.isin(sched.satellite, sats[:upto])
+            validate(self.prob.fleet, Schedule(sched.satellite[keep], sched.task[keep], sched.start_us[keep],
+                                               sched.end_us[keep]), self.prob.geo)
+            per_action = max(0.0, time.perf_counter() - t_sub - fixed) / int(keep.sum())
+        return CHECK_MARGIN * ((t_fixed - t) + fixed + per_action * n) + CHECK_SLACK_S
 
     def _rounds(self, deadline: float | None, rng: np.random.Generator) -> None:
         cfg = self.cfg

@@ -279,7 +279,9 @@ class FleetKind(KindBase):
                 "bound": res.bound, "gap": res.gap, "bound_source": res.bound_kind}
         why = res.info["no_lagrangian_bound_because"]
         source = res.bound_kind + ("" if why is None else f": {why}")
-        stop = " (interrupted: the best schedule so far)" if res.status == "interrupted" else ""
+        stop = " (interrupted: the best schedule so far)" if res.status == "interrupted" else \
+            (f" (the first schedule, found after the time limit at {res.info['first_schedule_s']:.1f} s)"
+             if res.status == "first_schedule" else "")
         return info, (f"{out}: {n} observations, WCR {res.value:.6f}, bound {res.bound:.6f} ({source}), "
                       f"gap {res.gap:.4%}; {res.info['rounds']} rounds, {res.info['pass_solves']} pass solves "
                       f"({seconds:.1f} s){stop}")

@@ -68,7 +68,10 @@ def solve(fleet: Fleet, opps: Opportunities, cfg: FleetConfig | None = None, pro
     `pool`: what solves the passes of a price round (:class:`eosp.kinds.fleet.pool.PassPool`, e.g. Ray actors;
     default: forked processes when ``cfg.workers > 1``, else this process); `on_round`: called after every round;
     `resume`: prices and bound of a stopped run (its best schedule as `initial`); `t0`: when the fleet was read
-    (``time.perf_counter()``; default: now): ``cfg.time_limit`` counts from it."""
+    (``time.perf_counter()``; default: now): ``cfg.time_limit`` counts from it and bounds everything after it
+    (the pass graphs when `problem` is not given, the rounds, the battery repairs, the final check: the rounds
+    stop early by the final check's estimate, :meth:`Coordinator.check_estimate`); when the first schedule comes
+    after the limit, it is returned as soon as it is repaired and checked (``info["first_after_limit"]``)."""
     from eosp.fleet.check import validate
 
     t0 = time.perf_counter() if t0 is None else t0
@@ -116,6 +119,9 @@ def solve(fleet: Fleet, opps: Opportunities, cfg: FleetConfig | None = None, pro
             "passes": len(prob.passes), "build_s": round(prob.build_s, 3), "checker_drops": dropped,
             "battery_barred": int(coord.barred.sum()), "repair_removed": coord.repair_drops,
             "repair_first": coord.first_repair_drops, "energy_windows": len(prob.windows),
+            "first_schedule_s": None if coord.first_s is None else round(coord.first_s, 3),
+            "first_after_limit": cfg.time_limit is not None and coord.first_s is not None
+            and coord.first_s > cfg.time_limit, "check_reserve_s": round(coord.check_s, 3),
             "metrics": res.metrics, "interrupted": coord.interrupted,
             "bound_source": source, "price_round_s": [round(x, 4) for x in coord.round_s],
             "bound_graphs": prob.bound_graphs, "bound_refused": list(coord.refused),
@@ -136,7 +142,7 @@ def solve_fleet(data, cfg: FleetConfig, initial: Schedule | None = None,
     t0 = time.perf_counter()
     sol = solve(data.fleet, data.opps, cfg, initial=initial, freeze_until_s=freeze_until_s, t0=t0)
     status = "interrupted" if sol.info["interrupted"] else "optimal" if sol.gap == 0 else \
-        "budget" if cfg.rounds is not None and sol.info["rounds"] >= cfg.rounds else "time_limit"
+        "first_schedule" if sol.info["first_after_limit"] else "budget" if cfg.rounds is not None and sol.info["rounds"] >= cfg.rounds else "time_limit"
     return Result(sol.schedule, sol.value, sol.bound, sol.info["bound_source"], status,
                   {"solve": time.perf_counter() - t0, "build": sol.info["build_s"]}, sol.info, sol.check.verdict())
 
