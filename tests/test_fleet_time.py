@@ -22,7 +22,7 @@ SLACK_S = 2.0  # a loaded machine; the promise is T + 1 s
 @pytest.fixture(scope="module")
 def data():
     fleet = generate(FleetGenConfig(satellites=6, tasks=1000, hours=4.0, seed=5))
-    return SimpleNamespace(fleet=fleet, opps=compute(fleet))
+    return SimpleNamespace(fleet=fleet, opps=compute(fleet), geo=None)
 
 
 def test_the_limit_bounds_the_whole_solve_and_the_schedule_is_valid(data):

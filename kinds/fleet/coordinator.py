@@ -275,7 +275,7 @@ class Coordinator:
     def record(self) -> None:
         self.history.append((time.perf_counter() - self.t0, self.best.value, self.best_bound))
 
-    def offer(self, primal: Primal, deadline: float | None) -> bool:
+    def offer(self, primal: Primal, deadline: float | None = None) -> bool:
         """Keep `primal` (after battery repair) when it serves more than the best (not when the deadline cut its
         repair)."""
         if self.battery_repair(primal, deadline) is None:
@@ -330,26 +330,32 @@ class Coordinator:
         deadline = None if cfg.time_limit is None else self.t0 + cfg.time_limit
         rng = np.random.default_rng(cfg.seed if self.start_round == 0 else [cfg.seed, self.start_round])
         order = np.argsort(prob.pass_time[:, 0], kind="stable")
-        if self.initial is not None:  # start from the given schedule (its paths re-walked unless frozen)
-            first = self.empty()
-            for p in np.flatnonzero(~self.frozen).tolist():
-                path = self.initial.paths[p]
-                free = self._available(first, p)[prob.passes[p].graph.node_acq[path]] if len(path) else path
-                self._assign(first, p, rewalk(prob.passes[p], path[free]) if len(path) else path)
-        else:
-            first = self.construct(order, primal=self.empty(), deadline=deadline, whole=True)
-        self.descend(first, list(range(len(prob.passes))), deadline)
-        self.first_repair_drops = self.battery_repair(first, deadline, whole=True)  # the first schedule: whole
+        first = self.empty()
+        try:  # Ctrl-C while the first schedule is built: the passes built so far are the answer
+            if self.initial is not None:  # start from the given schedule (its paths re-walked unless frozen)
+                for p in np.flatnonzero(~self.frozen).tolist():
+                    path = self.initial.paths[p]
+                    free = self._available(first, p)[prob.passes[p].graph.node_acq[path]] if len(path) else path
+                    self._assign(first, p, rewalk(prob.passes[p], path[free]) if len(path) else path)
+            else:  # every pass, each solve cut short past the deadline
+                self.construct(order, primal=first, deadline=deadline, whole=True)
+            self.descend(first, list(range(len(prob.passes))), deadline)
+        except KeyboardInterrupt:
+            self.interrupted = True
+        # the first schedule is repaired whole (its re-solves stop at the deadline; none after Ctrl-C)
+        self.first_repair_drops = self.battery_repair(first, time.perf_counter() if self.interrupted else deadline,
+                                                      whole=True)
         if first.value > self.best.value + 1e-9:
             self.keep(first)
         self.first_s = time.perf_counter() - self.t0
-        if deadline is not None:  # what is left after the rounds: the final check of a schedule like this one
-            self.check_s = self.check_estimate(first)
-            deadline -= self.check_s
-        try:
-            self._rounds(deadline, rng)
-        except KeyboardInterrupt:  # Ctrl-C: the best schedule so far is the answer
-            self.interrupted = True
+        if not self.interrupted:
+            if deadline is not None:  # what is left after the rounds: the final check of a schedule like this one
+                self.check_s = self.check_estimate(first)
+                deadline -= self.check_s
+            try:
+                self._rounds(deadline, rng)
+            except KeyboardInterrupt:  # Ctrl-C: the best schedule so far is the answer
+                self.interrupted = True
         return self.best
 
     def check_estimate(self, primal: Primal) -> float:

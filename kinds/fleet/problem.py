@@ -91,12 +91,13 @@ def most_wh(fleet: Fleet, pg: PassGraph) -> float:
     return min(float(pg.energy_wh.sum()), busy + float(pg.energy_wh.max(initial=0.0)))
 
 
-def priced(weight: np.ndarray, prices: np.ndarray, tasks: np.ndarray, energy_wh: np.ndarray,
-           pass_price: float) -> np.ndarray:
+def priced(weight: np.ndarray, prices: np.ndarray, tasks: np.ndarray, energy_wh: np.ndarray | None = None,
+           pass_price: float = 0.0) -> np.ndarray:
     """The utilities of `tasks` under task prices and the pass's price of a Wh: weight - price - pass_price *
-    energy (`energy_wh` the tasks' least energy on the pass's satellite, :attr:`PassGraph.energy_wh`); the one
-    place utilities are computed, on the driver and on the workers alike."""
-    return weight[tasks] - prices[tasks] - pass_price * energy_wh
+    energy (`energy_wh` the tasks' least energy on the pass's satellite, :attr:`PassGraph.energy_wh`; none: task
+    prices only); the one place utilities are computed, on the driver and on the workers alike."""
+    util = weight[tasks] - prices[tasks]
+    return util if energy_wh is None or pass_price == 0 else util - pass_price * energy_wh
 
 
 def pass_limit(cfg: FleetConfig, deadline: float | None) -> float:
