@@ -1,10 +1,10 @@
 """The fleet solver's coordinator: a constellation's passes solved by the project's single-pass solvers, held
 together by task prices (:mod:`eosp.kinds.fleet.prices`), with an upper bound.
 
-A constellation-day is hundreds of passes (:mod:`eosp.fleet.passgraph`) coupled by one constraint: a task is
-served at most once (and each satellite's battery runs from one pass to the next).  Relaxing "at most once"
-with prices separates the passes; a price round solves every pass under the prices on a pass pool
-(:mod:`eosp.kinds.fleet.pool`), proves the Lagrangian bound when every pass term is an optimum or a bound the
+A constellation-day is hundreds of passes (:mod:`eosp.fleet.passgraph`) coupled by two constraints: a task is
+served at most once, and each satellite's battery runs from one pass to the next (its consequences as energy
+windows over runs of passes, :mod:`eosp.fleet.energy`).  Relaxing both with prices separates the passes; a
+price round solves every pass under the prices on a pass pool (:mod:`eosp.kinds.fleet.pool`), proves the Lagrangian bound when every pass term is an optimum or a bound the
 exact solver proved, and moves the prices.
 
 Schedules come from the same pass solver with true weights:
@@ -390,7 +390,7 @@ class Coordinator:
             if deadline is not None and time.perf_counter() > deadline:
                 break
             if self.best_bound <= self.best.value + 1e-9:
-                break  # proven optimal (energy relaxed in the bound, kept in the schedule)
+                break  # proven optimal
             if cfg.pass_solver == "exact" or rounds == 0:
                 before = self.best_bound
                 t_round = time.perf_counter()
@@ -413,6 +413,7 @@ class Coordinator:
         """The best proven bound: the Lagrangian one when every pass term of a price round was proven (exact pass
         solver; each pass's term its priced optimum where its graph serves the bound, else its bound problem, see
         :func:`eosp.fleet.passgraph.bound_problem`), else the conflict-free bound (every task that has an
-        opportunity, served once).  Energy is relaxed.  With frozen passes the Lagrangian bound holds for the
+        opportunity, served once).  Energy enters the Lagrangian bound through the battery's energy windows
+        (:mod:`eosp.fleet.energy`, their multipliers in :mod:`eosp.kinds.fleet.prices`).  With frozen passes the Lagrangian bound holds for the
         schedules that keep them as given."""
         return self.best_bound
