@@ -66,6 +66,7 @@ def run_case(case: Path, split: str, args: argparse.Namespace) -> dict:
            "CR": verdict["metrics"].get("CR"), "our_WCR": sol.value, "bound": sol.bound, "gap": sol.gap,
            "opportunities_s": round(t_opp, 1), "build_s": round(t_build, 1), "wall_s": round(wall, 1),
            "solve_s": round(solve_s, 2), "first_schedule_s": sol.info["first_schedule_s"],
+           "check_reserve_s": sol.info["check_reserve_s"], "final_check_s": sol.info["final_check_s"],
            "rounds": sol.info["rounds"], "battery_barred": sol.info["battery_barred"],
            "repair_removed": sol.info["repair_removed"], "repair_first": sol.info["repair_first"],
            "energy_windows": sol.info["energy_windows"],

@@ -4,8 +4,8 @@ together by task prices (:mod:`eosp.kinds.fleet.prices`), with an upper bound.
 A constellation-day is hundreds of passes (:mod:`eosp.fleet.passgraph`) coupled by two constraints: a task is
 served at most once, and each satellite's battery runs from one pass to the next (its consequences as energy
 windows over runs of passes, :mod:`eosp.fleet.energy`).  Relaxing both with prices separates the passes; a
-price round solves every pass under the prices on a pass pool (:mod:`eosp.kinds.fleet.pool`), proves the Lagrangian bound when every pass term is an optimum or a bound the
-exact solver proved, and moves the prices.
+price round solves every pass under the prices on a pass pool (:mod:`eosp.kinds.fleet.pool`), proves the
+Lagrangian bound when every pass term is an optimum or a bound the exact solver proved, and moves the prices.
 
 Schedules come from the same pass solver with true weights:
 

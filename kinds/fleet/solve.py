@@ -102,6 +102,7 @@ def solve(fleet: Fleet, opps: Opportunities, cfg: FleetConfig | None = None, pro
     finally:
         if own_pool:
             pool.close()
+    t_final = time.perf_counter()
     sched = coord.schedule(best)
     res = validate(fleet, sched, prob.geo)
     dropped = 0
@@ -126,6 +127,7 @@ def solve(fleet: Fleet, opps: Opportunities, cfg: FleetConfig | None = None, pro
             "first_schedule_s": None if coord.first_s is None else round(coord.first_s, 3),
             "first_after_limit": cfg.time_limit is not None and coord.first_s is not None
             and coord.first_s > cfg.time_limit, "check_reserve_s": round(coord.check_s, 3),
+            "final_check_s": round(time.perf_counter() - t_final, 3),
             "metrics": res.metrics, "interrupted": coord.interrupted,
             "bound_source": source, "price_round_s": [round(x, 4) for x in coord.round_s],
             "bound_graphs": prob.bound_graphs, "bound_refused": list(coord.refused),
