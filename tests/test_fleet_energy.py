@@ -184,7 +184,7 @@ def test_energy_makes_the_bound_tighter_than_any_energy_blind_bound():
     W = float(fleet.tasks.weight.sum())
     assert best < blind - 1  # the battery binds
     prob = problem_of(fleet)
-    sol = solve(fleet, prob.opps, FleetConfig(rounds=30, time_limit=None), problem=prob)
+    sol = solve(fleet, prob.opps, FleetConfig(rounds=30, time_limit=None, energy_bound=True), problem=prob)
     assert sol.info["bound_source"] == "lagrangian"
     assert best / W - 1e-9 <= sol.bound < blind / W
     assert validate(fleet, sol.schedule).valid and sol.value <= best / W + 1e-9

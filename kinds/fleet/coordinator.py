@@ -31,6 +31,7 @@ from typing import Callable
 import numpy as np
 
 from eosp.fleet.check import validate
+from eosp.fleet.energy import EnergyWindows
 from eosp.fleet.timeline import Timeline, repair_battery, timelines, to_schedule
 from eosp.fleet.model import Schedule
 from eosp.kinds.fleet.config import FleetConfig
@@ -74,7 +75,8 @@ class Coordinator:
 
     def __post_init__(self) -> None:
         n = len(self.prob.fleet.tasks)
-        self.prices = Prices.zero(n, self.prob.windows)
+        self.windows = self.prob.windows if self.cfg.energy_bound else EnergyWindows.none(len(self.prob.passes))
+        self.prices = Prices.zero(n, self.windows)
         self.spend = np.zeros(len(self.prob.passes))  # price of a Wh in each pass for the schedules (energy_price)
         self.pool = self.pool or InProcessPool(self.prob, self.cfg)
         self.round_paths = [np.zeros(0, np.int64)] * len(self.prob.passes)

@@ -23,7 +23,7 @@ p (repeats allowed, each credited once; E_p(x) the sum of e_o over all its obser
 A price round gives the pass terms (:meth:`Prices.dual`); the prices then take one projected subgradient step
 by Polyak's rule towards the best schedule known (:meth:`Prices.step_towards`): a task's component is 1 - (the
 passes serving it), a window's ``(R_w - energy of the round's paths in w) / scale_w`` (each window's inequality
-measured in typical observations of its satellite, so that energy and tasks weigh alike in the step); the
+measured in typical observations of its satellite), each part with its own Polyak norm; the
 step factor is halved when the bound stalls for three rounds (:meth:`Prices.stalled`).
 """
 
@@ -36,6 +36,7 @@ import numpy as np
 from eosp.fleet.energy import EnergyWindows
 
 STALL_ROUNDS = 3  # rounds without a better bound before the step factor is halved
+ENERGY_SHARE = 0.5  # the multipliers' Polyak step, as a share of the one that alone would close the gap
 
 
 @dataclass
@@ -72,17 +73,21 @@ class Prices:
     def step_towards(self, served: np.ndarray, pass_wh: np.ndarray, dual: float, best: float) -> None:
         """Move the prices by a subgradient step: `served[i]` is how many passes of the round serve task i, and
         `pass_wh[p]` the energy (sum of e_o) of pass p's path of the round; the step Polyak's towards the best
-        value known `best` from the dual value `dual`; a price or multiplier at 0 cannot go lower."""
+        value known `best` from the dual value `dual`, taken by the task prices and the multipliers each with
+        its own norm (the multipliers :data:`ENERGY_SHARE` of theirs): one norm over both let thousands of
+        windows shrink the task prices' steps until the bound stalled above the conflict-free one (test_hard);
+        any nonnegative prices give a valid bound, so the step rule is a matter of speed only; a price or
+        multiplier at 0 cannot go lower."""
         g = 1.0 - served
         g[(self.lam <= 0) & (g > 0)] = 0.0
         win = self.windows
         h = (win.rhs_wh - win.used(pass_wh)) / win.scale_wh
         h[(self.mu <= 0) & (h > 0)] = 0.0
-        norm2 = float(g @ g) + float(h @ h)
-        if norm2 > 0:
-            step = self.factor * max(dual - best, 1e-6 * dual) / norm2
-            self.lam = np.maximum(0.0, self.lam - step * g)
-            self.mu = np.maximum(0.0, self.mu - step * h)
+        target = self.factor * max(dual - best, 1e-6 * dual)
+        if float(g @ g) > 0:
+            self.lam = np.maximum(0.0, self.lam - target / float(g @ g) * g)
+        if float(h @ h) > 0:
+            self.mu = np.maximum(0.0, self.mu - ENERGY_SHARE * target / float(h @ h) * h)
 
     def stalled(self, improved: bool) -> None:
         """Count the rounds without a better bound; halve the step factor after :data:`STALL_ROUNDS` of them."""

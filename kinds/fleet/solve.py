@@ -10,6 +10,7 @@ from typing import Callable
 import numpy as np
 
 from eosp.fleet.check import CheckResult
+from eosp.fleet.energy import EnergyWindows
 from eosp.fleet.model import Fleet, Schedule
 from eosp.fleet.opportunities import Opportunities
 from eosp.kinds.fleet.config import FleetConfig, GreedyConfig
@@ -49,10 +50,10 @@ class Resume:
     mu: np.ndarray | None = None  # the energy windows' multipliers (None: a run dir from before they existed)
 
 
-def resume_mu(resume: Resume, prob: Problem) -> np.ndarray | None:
+def resume_mu(resume: Resume, windows: EnergyWindows) -> np.ndarray | None:
     """The saved multipliers of the energy windows, when they are this problem's (else they start at 0)."""
     mu = resume.mu
-    return None if mu is None or len(mu) != len(prob.windows) else np.asarray(mu, dtype=np.float64)
+    return None if mu is None or len(mu) != len(windows) else np.asarray(mu, dtype=np.float64)
 
 
 def solve(fleet: Fleet, opps: Opportunities, cfg: FleetConfig | None = None, problem: Problem | None = None,
@@ -89,11 +90,12 @@ def solve(fleet: Fleet, opps: Opportunities, cfg: FleetConfig | None = None, pro
     if resume is None and cfg.warm_start != "none":
         from eosp.kinds.fleet.warmstart import start_prices
 
-        coord.prices = Prices(start_prices(prob, cfg.warm_start, cfg.price_model or None), prob.windows)
+        coord.prices = Prices(start_prices(prob, cfg.warm_start, cfg.price_model or None), coord.windows)
     if resume is not None:
         if len(resume.lam) != len(fleet.tasks):
             raise ValueError("resume: prices of another fleet")
-        coord.prices = Prices(resume.lam.astype(np.float64), prob.windows, resume_mu(resume, prob), resume.step)
+        coord.prices = Prices(resume.lam.astype(np.float64), coord.windows, resume_mu(resume, coord.windows),
+                              resume.step)
         coord.start_round = resume.rounds_done
         if resume.best_bound < coord.best_bound:
             coord.best_bound, coord.bound_source = resume.best_bound, resume.bound_source
@@ -123,7 +125,7 @@ def solve(fleet: Fleet, opps: Opportunities, cfg: FleetConfig | None = None, pro
     info = {"pass_solver": cfg.pass_solver, "rounds": coord.rounds_done, "pass_solves": coord.pass_solves,
             "passes": len(prob.passes), "build_s": round(prob.build_s, 3), "checker_drops": dropped,
             "battery_barred": int(coord.barred.sum()), "repair_removed": coord.repair_drops,
-            "repair_first": coord.first_repair_drops, "energy_windows": len(prob.windows),
+            "repair_first": coord.first_repair_drops, "energy_windows": len(coord.windows),
             "first_schedule_s": None if coord.first_s is None else round(coord.first_s, 3),
             "first_after_limit": cfg.time_limit is not None and coord.first_s is not None
             and coord.first_s > cfg.time_limit, "check_reserve_s": round(coord.check_s, 3),
