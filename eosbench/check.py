@@ -78,7 +78,8 @@ def metrics(scenario: Scenario, schedule: Schedule) -> dict:
     horizon = scenario.horizon_us / US
     last = np.full(n, -1, dtype=np.int64)
     last[schedule.task] = np.arange(len(schedule))  # fancy assignment: the last write wins, as their dict does
-    dt = np.where(last >= 0, np.maximum(0.0, schedule.start_us[np.maximum(last, 0)] / US), horizon)
+    start_of_last = schedule.start_us[np.maximum(last, 0)] / US if len(schedule) else np.zeros(n)
+    dt = np.where(last >= 0, np.maximum(0.0, start_of_last), horizon)
     tm = _seq(dt) / (horizon * n) if n and horizon > 0 else 0.0
     n_sat = len(scenario.satellites)
     load = np.zeros(n_sat)
@@ -230,8 +231,30 @@ def _generator_reason(scenario: Scenario, schedule: Schedule, i: int, windows: d
     inside = [int(r) for r in rows if w.start_us[r] <= start and end <= w.end_us[r]]
     if not inside:
         return "not inside an observation window of its task on its satellite"
+    # windows of one task and satellite may overlap: the assignment is the generator's if it is one of them
     same_orbit = [r for r in inside if w.orbit[r] == schedule.orbit[i]]
-    r = (same_orbit or inside)[0]
+    ranked = same_orbit + [r for r in inside if r not in same_orbit]
+    reasons = [_window_reason(scenario, schedule, i, r) for r in ranked]
+    if all(why is not None for why in reasons):
+        return reasons[0]
+    g = int(schedule.station[i])
+    if g >= 0:
+        c = scenario.comm
+        ok = (c.satellite == s) & (c.station == g) & (c.start_us <= schedule.gs_start_us[i]) & \
+             (schedule.gs_end_us[i] <= c.end_us)
+        if not ok.any():
+            return "downlink not inside a communication window of its satellite and station"
+        want = int(np.rint(scenario.tasks.duration_s[t] * rules.downlink_ratio * US))
+        if abs(int(schedule.gs_end_us[i] - schedule.gs_start_us[i]) - want) > 1:
+            return f"downlink lasts {(schedule.gs_end_us[i] - schedule.gs_start_us[i]) / US:g} s, not {want / US:g} s"
+    return None
+
+
+def _window_reason(scenario: Scenario, schedule: Schedule, i: int, r: int) -> str | None:
+    """What breaks assignment i being the generator's candidate in window row r, None if nothing."""
+    w, sats = scenario.windows, scenario.satellites
+    t, s = int(schedule.task[i]), int(schedule.satellite[i])
+    start, end = int(schedule.start_us[i]), int(schedule.end_us[i])
     step_us = int(round(w.step_s[r] * US))
     k = int(round((start - w.start_us[r]) / step_us))
     if w.start_us[r] + int(np.rint(k * w.step_s[r] * US)) != start:
@@ -266,16 +289,6 @@ def _generator_reason(scenario: Scenario, schedule: Schedule, i: int, windows: d
             return "attitude is not its window's samples from its start"
     elif not np.allclose(schedule.fixed[i], w.fixed[r], rtol=1e-12, atol=1e-12, equal_nan=True):
         return "attitude is not its window's fixed attitude"
-    g = int(schedule.station[i])
-    if g >= 0:
-        c = scenario.comm
-        ok = (c.satellite == s) & (c.station == g) & (c.start_us <= schedule.gs_start_us[i]) & \
-             (schedule.gs_end_us[i] <= c.end_us)
-        if not ok.any():
-            return "downlink not inside a communication window of its satellite and station"
-        want = int(np.rint(scenario.tasks.duration_s[t] * rules.downlink_ratio * US))
-        if abs(int(schedule.gs_end_us[i] - schedule.gs_start_us[i]) - want) > 1:
-            return f"downlink lasts {(schedule.gs_end_us[i] - schedule.gs_start_us[i]) / US:g} s, not {want / US:g} s"
     return None
 
 

@@ -1,8 +1,9 @@
 """EOS-Bench's own code, driven from its own environment: scenarios from its generator with the randomness pinned,
 and its checker's verdict and metrics on schedule files.
 
-Runs under EOS-Bench's interpreter (``experiments/eosbench_compare.py`` sets that environment up), with the
-working directory a fetched copy of their repository; it imports their modules and none of eosp.
+Runs under EOS-Bench's interpreter (an environment with their requirements), in a fetched copy of their repository
+with that copy on the path: ``cd THEIR_REPO && PYTHONPATH=. THEIR_PYTHON .../experiments/eosbench_theirs.py ...``;
+it imports their modules and none of eosp.
 
 ``generate``: their ``main_generate._run_single_scenario_task`` (random targets, ``ensure_each_mission_has_window``
 as their random mode sets it), with two things pinned so that a scenario can be made again:
@@ -23,7 +24,6 @@ import argparse
 import json
 import random
 import shutil
-import sys
 import time
 from datetime import datetime, timezone
 from pathlib import Path
@@ -46,7 +46,6 @@ def _pin_epoch() -> None:
 
 
 def generate(ns: argparse.Namespace) -> None:
-    sys.path.insert(0, str(Path.cwd()))
     random.seed(ns.seed)
     _pin_epoch()
     import main_generate as mg
@@ -87,7 +86,6 @@ def _schedule(problem, path: str):
 
 
 def check(ns: argparse.Namespace) -> None:
-    sys.path.insert(0, str(Path.cwd()))
     from schedulers.constraint_model import ConstraintModel, Schedule
     from schedulers.evaluation_metrics import compute_evaluation_metrics
     from schedulers.scenario_loader import load_scheduling_problem_from_json

@@ -180,10 +180,11 @@ OFFSETS_NB = OFFSETS.copy()
 
 
 @numba.njit(cache=True)
-def _arcs(acq_ptr, start, end, first, last, allowed, release, code, v, non_agile_us, agile):
-    """CSR arcs over the allowed nodes: from the source to each acquisition's first allowed node starting at or
-    after `release`; from each allowed node to the earliest allowed node of every other acquisition that can
-    follow it."""
+def _arcs(acq_ptr, nodes, allowed, release, code, v, non_agile_us, agile):
+    """CSR arcs over the allowed nodes (`nodes`: start, end, first and last attitudes): from the source to each
+    acquisition's first allowed node starting at or after `release`; from each allowed node to the earliest
+    allowed node of every other acquisition that can follow it."""
+    start, end, first, last = nodes
     n = start.shape[0]
     k = acq_ptr.shape[0] - 1
     indptr = np.zeros(n + 1, dtype=np.int64)
@@ -226,7 +227,7 @@ def graph(p: Pass, rules: Rules, agile: bool, allowed: np.ndarray | None = None,
     if allowed is None:
         allowed = np.ones(p.n_nodes, dtype=bool)
     v = np.asarray(PROFILES[rules.agility], dtype=np.float64)
-    indptr, dst = _arcs(p.acq_ptr, p.start_us, p.end_us, p.first, p.last, allowed, np.int64(release_us),
+    indptr, dst = _arcs(p.acq_ptr, (p.start_us, p.end_us, p.first, p.last), allowed, np.int64(release_us),
                         rules.transition == "code", v, np.int64(np.rint(rules.non_agile_s * US)), agile)
     return DiscreteGraph(p.node_acq, p.start_us.astype(np.float64) / US, indptr, dst, p.acq_ptr)
 

@@ -255,16 +255,17 @@ def bound_round(st: State, lam: np.ndarray, graphs: list) -> tuple[float, np.nda
         nodes, val, done = best_path(g, pos, st.cfg.pass_time_limit)
         exact = val if done else math.inf
         capped = float(top.sum()) if top is not None else math.inf
-        if exact <= capped:
+        if math.isinf(exact) and math.isinf(capped):  # an unfinished search without a cap: every positive utility
+            total += float(pos.sum())
+            np.add.at(taken, np.unique(p.tasks[pos > 0]), 1.0)
+            proven = False
+        elif exact <= capped:
             total += exact
             np.add.at(taken, np.unique(p.tasks[p.node_acq[nodes]]), 1.0)
         else:
             total += capped
             take = np.argsort(-pos, kind="stable")[:p.cap]
             np.add.at(taken, p.tasks[take[pos[take] > 0]], 1.0)
-        if math.isinf(min(exact, capped)):
-            total = math.inf if not (pos > 0).any() else total - math.inf + float(pos.sum())
-            proven = False
     return total, taken, proven
 
 
@@ -285,25 +286,31 @@ def to_schedule(st: State) -> Schedule:
     return Schedule.build(st.scenario, [(r, s) for _, r, s in rows])
 
 
-def _lns(st: State, rng: np.random.Generator, deadline: float | None) -> None:
-    """Empty the passes meeting a random time span, solve them again in a random order, keep the result when the
-    profit does not fall."""
+def _lns(st: State, rng: np.random.Generator, lam: np.ndarray, deadline: float | None) -> None:
+    """Empty the passes meeting a random time span (one that meets a random pass) and solve them again in a random
+    order, each task's utility lowered by a random share of its price (a contested task is left to the passes that
+    need it most), then coordinate descent with the true priorities; kept when the profit does not fall."""
     span = st.cfg.span_s * 1_000_000
-    t = rng.uniform(0, max(1.0, st.scenario.horizon_us - span))
+    t = st.span[int(rng.integers(len(st.passes))), 0] - rng.uniform(0, span)  # a span meeting a random pass
     hit = np.flatnonzero((st.span[:, 1] >= t) & (st.span[:, 0] <= t + span)).tolist()
     if not hit:
         return
-    before = (st.value, [st.paths[k] for k in hit], st.served.copy())
+    before = (st.value, list(st.paths), st.served.copy())  # commit replaces a path, never edits one in place
     for k in hit:
         st.commit(k, np.zeros(0, np.int64))
     order = rng.permutation(hit).tolist()
+    share = rng.uniform(0.0, 1.0)
     for k in order:
-        improve(st, k, deadline)
+        if deadline is not None and time.perf_counter() > deadline:
+            break
+        p = st.passes[k]
+        util = np.where(st.served[p.tasks] < 0, st.prio[p.tasks] - share * lam[p.tasks], 0.0)
+        path = solve_pass(st, k, util, deadline)
+        if len(path):
+            st.commit(k, path)
     descend(st, order, deadline)
-    if st.value < before[0] - 1e-9:
-        for k, path in zip(hit, before[1]):
-            st.paths[k] = path
-        st.served = before[2]
+    if st.value < before[0] - 1e-9:  # the descent may have moved passes outside the span too: all restored
+        st.paths, st.served = before[1], before[2]
 
 
 def solve(scenario: Scenario, cfg: EosBenchConfig) -> Result:
@@ -346,7 +353,7 @@ def solve(scenario: Scenario, cfg: EosBenchConfig) -> Result:
         prices.step_towards(taken, dual if math.isfinite(dual) else bound, best_value)
         if deadline is not None and time.perf_counter() > deadline:
             break
-        _lns(st, rng, deadline)
+        _lns(st, rng, prices.lam, deadline)
         if st.value > best_value + 1e-9:
             best_value, best_paths, best_served = st.value, list(st.paths), st.served.copy()
     st.paths, st.served = best_paths, best_served
