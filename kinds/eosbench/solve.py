@@ -350,6 +350,8 @@ def solve(scenario: Scenario, cfg: EosBenchConfig) -> Result:
             prices.stalled(True)
         else:
             prices.stalled(False)
+        if bound <= best_value + 1e-9:  # proven optimal: nothing left to search
+            break
         prices.step_towards(taken, dual if math.isfinite(dual) else bound, best_value)
         if deadline is not None and time.perf_counter() > deadline:
             break
@@ -367,7 +369,8 @@ def solve(scenario: Scenario, cfg: EosBenchConfig) -> Result:
     if bound < value - 1e-6:  # never report a bound below a schedule found
         raise AssertionError(f"bound {bound} below the schedule's profit {value}")
     timings["solve"] = time.perf_counter() - t0
-    status = "budget" if cfg.rounds is not None and rounds >= cfg.rounds else "time_limit"
+    status = "optimal" if bound <= value + 1e-9 else \
+        "budget" if cfg.rounds is not None and rounds >= cfg.rounds else "time_limit"
     info = {"rounds": rounds, "passes": len(passes), "pass_solves": st.pass_solves, "metrics": rep.metrics,
             "transition": cfg.transition, "agility": cfg.agility}
     return Result(sched, value, bound, kind, status, timings, info)
