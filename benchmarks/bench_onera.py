@@ -41,7 +41,7 @@ def run_one(path: Path, time_limit: float, bound_time: float, seed: int) -> dict
     info: dict = {}
     t2 = time.perf_counter()
     # a plan at the conflict-free bound needs no LP
-    lp = cf if check.value >= cf - 1e-9 else lp_bound(f, time_limit=bound_time, info=info)
+    lp = cf if check.value >= cf - 1e-9 else lp_bound(f, time_limit=bound_time, info=info, finish_first=True)
     t_bound = time.perf_counter() - t2
     bound = min(lp, cf)
     value = check.value if check.valid else float("nan")

@@ -2,8 +2,9 @@
 it.
 
 Owns the solver's options on the command line (:func:`solver_of`, :func:`solve_options`, :func:`unknown_option`)
-and what Ctrl-C writes (:func:`interrupted_solve`); the kind (:mod:`eosp.kinds`) reads, solves, checks and words
-the result.
+and what Ctrl-C writes (:func:`interrupted_solve`, or a search's own best schedule when it returns with status
+"interrupted": checked, written, one line, exit 130); the kind (:mod:`eosp.kinds`) reads, solves, checks and
+words the result.
 """
 
 from __future__ import annotations
@@ -78,14 +79,27 @@ def cmd_solve(kind, ns: argparse.Namespace) -> int:
             return interrupted_solve(kind, ns, problem)
         raise
     elapsed = time.perf_counter() - t0
+    stopped = res.status == "interrupted"  # a search that kept its best schedule when Ctrl-C stopped it
+    if stopped:
+        import signal
+
+        signal.signal(signal.SIGINT, signal.SIG_IGN)  # a second Ctrl-C must not leave a half-written file
     if res.verdict is None:
         res.verdict = kind.check(problem, res.schedule)
     if not res.verdict.valid:  # never write a schedule that the checker refuses
+        if stopped:
+            print(f"eosp {ns.command}: interrupted: the best schedule so far is refused by the checker "
+                  f"({res.verdict.first}), nothing written", file=sys.stderr)
+            return 130
         print(f"solver {ns.solver} produced an invalid schedule: {res.verdict.first}", file=sys.stderr)
         return 3
     info, line = kind.solved(ns.out, ns.solver, cfg, res, elapsed)
     kind.write_schedule(res.schedule, problem, out, overwrite=ns.overwrite, info=info)
     print(line)
+    if stopped:
+        print(f"eosp {ns.command}: interrupted: wrote the best valid schedule so far to {out} (value "
+              f"{res.value:.6f})", file=sys.stderr)
+        return 130
     return 0
 
 

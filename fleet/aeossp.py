@@ -17,12 +17,11 @@ from pathlib import Path
 import numpy as np
 
 from eosp.errors import InputError
-from eosp.fleet.model import (Attitude, Battery, Fleet, Horizon, Satellites, Schedule, Tasks, Tles,
-                              iso_z, parse_utc, strings)
+from eosp.fleet.model import (NORAD_MAX, SENSORS, Attitude, Battery, Fleet, Horizon, Satellites, Schedule, Tasks,
+                              Tles, iso_z, parse_utc, satellite_fault, strings, task_fault)
 
 SOURCE = "aeossp_standard"
 SOURCE_COMMIT = "ffd1e89"
-SENSORS = ("visible", "infrared")
 EPS = 1.0e-9
 
 MISSION_KEYS = {"case_id", "horizon_start", "horizon_end", "action_time_step_s", "geometry_sample_step_s",
@@ -129,8 +128,8 @@ def _read_mission(path: Path) -> tuple[Horizon, str]:
     steps = []
     for key in ("action_time_step_s", "geometry_sample_step_s", "resource_sample_step_s"):
         step = d.integer(m, key, "mission")
-        if step <= 0:
-            d.fail("mission", f"{key} must be > 0, got {step}")
+        if not 0 < step <= seconds:
+            d.fail("mission", f"{key} must be > 0 and at most the horizon ({seconds:g} s), got {step}")
         if not _aligned(seconds, step):
             d.fail("mission", f"the horizon ({seconds:g} s) is not a multiple of {key} ({step} s)")
         steps.append(step)
@@ -148,6 +147,8 @@ def _read_satellites(path: Path) -> Satellites:
     bh = brahe_module()
     d = _Doc(path)
     rows = d.items(d.load("satellites"), "satellites")
+    if not rows:
+        d.fail("satellites", "the list is empty (a fleet needs a satellite)")
     seen: dict[str, int] = {}
     cols: dict[str, list] = {k: [] for k in ("id", "sensor", "l1", "l2", "norad", *ATTITUDE_KEYS, *RESOURCE_KEYS)}
     for i, raw in enumerate(rows):
@@ -178,21 +179,16 @@ def _read_satellites(path: Path) -> Satellites:
             cols[key].append(d.number(att, key, f"{where}.attitude_model"))
         for key in RESOURCE_KEYS:
             cols[key].append(d.number(res, key, f"{where}.resource_model"))
-        for key in (*ATTITUDE_KEYS, *RESOURCE_KEYS[2:]):
-            if cols[key][-1] < -EPS:
-                d.fail(where, f"{key} must be >= 0, got {cols[key][-1]}")
-        cap, init = cols["battery_capacity_wh"][-1], cols["initial_battery_wh"][-1]
-        if cap <= 0:
-            d.fail(where, f"battery_capacity_wh must be > 0, got {cap}")
-        if init < -EPS or init > cap + EPS:
-            d.fail(where, f"initial_battery_wh {init} must lie within [0, battery_capacity_wh {cap}]")
+        norad = d.integer(raw, "norad_catalog_id", where)
+        if not 0 <= norad <= NORAD_MAX:
+            d.fail(where, f"norad_catalog_id must lie in [0, {NORAD_MAX}], got {norad}")
         cols["id"].append(sid)
         cols["sensor"].append(stype)
         cols["l1"].append(l1)
         cols["l2"].append(l2)
-        cols["norad"].append(d.integer(raw, "norad_catalog_id", where))
+        cols["norad"].append(norad)
     f = {k: np.asarray(v, dtype=float) for k, v in cols.items() if k in ATTITUDE_KEYS or k in RESOURCE_KEYS}
-    return Satellites(
+    sats = Satellites(
         ids=strings(cols["id"]), sensor=strings(cols["sensor"]),
         tle=Tles(strings(cols["l1"]), strings(cols["l2"]), np.asarray(cols["norad"], dtype=np.int64)),
         attitude=Attitude(f["max_off_nadir_deg"], f["max_slew_velocity_deg_per_s"],
@@ -200,11 +196,19 @@ def _read_satellites(path: Path) -> Satellites:
         battery=Battery(f["battery_capacity_wh"], f["initial_battery_wh"], f["idle_power_w"],
                         f["imaging_power_w"], f["slew_power_w"], f["sunlit_charge_power_w"]),
     )
+    fault = satellite_fault(sats)  # the ranges every fleet's satellites share (eosp.fleet.model)
+    if fault is not None:
+        r, key, reason = fault
+        part = ".attitude_model" if key in ATTITUDE_KEYS else ".resource_model" if key in RESOURCE_KEYS else ""
+        d.fail(f"satellite {cols['id'][r]!r} (satellites[{r}]){part}", f"{key} {reason}")
+    return sats
 
 
 def _read_tasks(path: Path, horizon: Horizon) -> Tasks:
     d = _Doc(path)
     rows = d.items(d.load("tasks"), "tasks")
+    if not rows:
+        d.fail("tasks", "the list is empty (a fleet needs a task)")
     seen: dict[str, int] = {}
     cols: dict[str, list] = {k: [] for k in ("id", "name", "lat", "lon", "alt", "rel", "due", "dur", "w", "sensor")}
     step = horizon.action_step_s
@@ -252,8 +256,15 @@ def _read_tasks(path: Path, horizon: Horizon) -> Tasks:
         cols["w"].append(float(w))
         cols["sensor"].append(stype)
     fl = {k: np.asarray(cols[k], dtype=float) for k in ("lat", "lon", "alt", "rel", "due", "dur", "w")}
-    return Tasks(strings(cols["id"]), strings(cols["name"]), fl["lat"], fl["lon"], fl["alt"], fl["rel"],
-                 fl["due"], fl["dur"], fl["w"], strings(cols["sensor"]))
+    tasks = Tasks(strings(cols["id"]), strings(cols["name"]), fl["lat"], fl["lon"], fl["alt"], fl["rel"],
+                  fl["due"], fl["dur"], fl["w"], strings(cols["sensor"]))
+    fault = task_fault(tasks, horizon)  # the ranges every fleet's tasks share (eosp.fleet.model)
+    if fault is not None:
+        r, key, reason = fault
+        key = {"release_s": "release_time", "due_s": "due_time", "duration_s": "required_duration_s",
+               "sensor_type": "required_sensor_type"}.get(key, key)
+        d.fail(f"task {cols['id'][r]!r} (tasks[{r}])", f"{key} {reason}")
+    return tasks
 
 
 def is_case_dir(path: str | os.PathLike) -> bool:
@@ -286,9 +297,10 @@ def read_solution(path: str | os.PathLike, horizon: Horizon) -> Schedule:
         raise InputError(path, "file not found") from None
     except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
         raise InputError(path, f"not valid JSON: {exc}") from None
-    if not isinstance(payload, dict):
-        raise InputError(path, "must be a JSON object with the key 'actions'")
-    actions = payload.get("actions", [])
+    if not isinstance(payload, dict) or "actions" not in payload:
+        raise InputError(path, "must be a JSON object with the key 'actions' (an aeossp solution; an empty schedule "
+                               "is {\"actions\": []})")
+    actions = payload["actions"]
     if not isinstance(actions, list):
         raise InputError(path, "'actions' must be a list")
     sat, task, st, en = [], [], [], []

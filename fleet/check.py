@@ -313,3 +313,13 @@ def validate(fleet: Fleet, schedule: Schedule, geo: Geometry | None = None) -> C
         return CheckResult(False, zero_metrics(), tuple(c.violations))
     all_acc = [i for k in sorted(accepted) for i in accepted[k]]
     return CheckResult(True, metrics(fleet, schedule, all_acc, pc), ())
+
+
+def require_feasible(fleet: Fleet, where: object, geo: Geometry | None = None) -> None:
+    """Refuse (one-line InputError) a fleet that has no valid schedule at all, not even the empty one (a battery that
+    idling alone runs dry within the horizon), instead of solvers that cannot succeed."""
+    from eosp.errors import InputError
+
+    res = validate(fleet, Schedule.empty(), geo)
+    if not res.valid:
+        raise InputError(where, f"no schedule of this fleet is valid, not even the empty one: {res.first}")

@@ -64,7 +64,7 @@ class FleetGenConfig:
     """Imaging tasks."""
     placement: str = choice("land", *PLACEMENTS)
     """Where tasks are: land (uniform on land), cities (by population) or clusters (around a few land centres)."""
-    clusters: int = ranged(20, 1)
+    clusters: int = ranged(20, 1, 1_000_000)
     """Cluster centres (placement clusters)."""
     cluster_km: float = ranged(300.0, 1.0)
     """Standard deviation of the distance of a task to its cluster centre (placement clusters)."""
@@ -92,9 +92,15 @@ def _checksum(line: str) -> int:
     return sum(int(c) if c.isdigit() else (1 if c == "-" else 0) for c in line) % 10
 
 
+TLE_YEARS = (1957, 2056)  # a TLE's two-digit epoch year: 57-99 is 19xx, 00-56 is 20xx
+
+
 def tle_lines(norad: int, epoch, inclination_deg: float, raan_deg: float, mean_anomaly_deg: float,
               mean_motion_rev_day: float) -> tuple[str, str]:
-    """A two-line element set of a circular orbit (eccentricity 0, no drag terms) at `epoch` (UTC datetime)."""
+    """A two-line element set of a circular orbit (eccentricity 0, no drag terms) at `epoch` (UTC datetime), whose
+    year must lie in :data:`TLE_YEARS` (any other would be read back a century off)."""
+    if not TLE_YEARS[0] <= epoch.year <= TLE_YEARS[1]:
+        raise ValueError(f"a TLE epoch must lie in {TLE_YEARS[0]}-{TLE_YEARS[1]}, got {epoch.year}")
     year = epoch.year % 100
     start_of_year = epoch.replace(month=1, day=1, hour=0, minute=0, second=0, microsecond=0)
     day = 1.0 + (epoch - start_of_year).total_seconds() / 86400.0
@@ -108,8 +114,6 @@ def walker(cfg: FleetGenConfig, rng: np.random.Generator, start) -> Satellites:
     """The constellation: Walker-delta orbits and templates drawn with the benchmark's fractions."""
     n = cfg.satellites
     planes = cfg.planes or default_planes(n)
-    if n % planes:
-        raise ValueError(f"FleetGenConfig.planes: {planes} planes do not divide {n} satellites")
     per_plane = n // planes
     a = R_EARTH_M + cfg.altitude_km * 1000.0
     rev_day = np.sqrt(MU_EARTH / a ** 3) * 86400.0 / (2.0 * np.pi)
@@ -219,16 +223,32 @@ def tasks(cfg: FleetGenConfig, rng: np.random.Generator, horizon: Horizon) -> Ta
                  release, due, duration, weight, strings(sensor))
 
 
-def generate(cfg: FleetGenConfig) -> Fleet:
-    """The fleet `cfg` describes, reproducible from its seed."""
+def check(cfg: FleetGenConfig):
+    """The request checked as a whole before any work (each field's own range is checked by the config): a
+    ValueError ``FleetGenConfig.FIELD: reason`` naming the first problem; the horizon start otherwise."""
     if cfg.window_min_h > cfg.window_max_h:
         raise ValueError("FleetGenConfig.window_min_h: must not exceed window_max_h")
     if cfg.window_min_h * 3600.0 < 5.0:
         raise ValueError("FleetGenConfig.window_min_h: windows must hold at least one 5 s action")
+    if cfg.window_min_h > cfg.hours:
+        raise ValueError(f"FleetGenConfig.window_min_h: {cfg.window_min_h:g} h is longer than the horizon "
+                         f"(hours {cfg.hours:g}): no window could have its length")
+    planes = cfg.planes or default_planes(cfg.satellites)
+    if cfg.satellites % planes:
+        raise ValueError(f"FleetGenConfig.planes: {planes} planes do not divide {cfg.satellites} satellites")
     try:
         start = parse_utc(cfg.start)
-    except ValueError as exc:
+    except (ValueError, OverflowError) as exc:
         raise ValueError(f"FleetGenConfig.start: not an ISO 8601 UTC time ({exc})") from None
+    if not TLE_YEARS[0] <= start.year <= TLE_YEARS[1]:
+        raise ValueError(f"FleetGenConfig.start: {cfg.start} is the orbits' TLE epoch, whose two-digit year covers "
+                         f"{TLE_YEARS[0]}-{TLE_YEARS[1]} only")
+    return start
+
+
+def generate(cfg: FleetGenConfig) -> Fleet:
+    """The fleet `cfg` describes, reproducible from its seed."""
+    start = check(cfg)
     end = start + timedelta(seconds=round(cfg.hours * 3600.0 / 5.0) * 5)
     horizon = Horizon(start, end, action_step_s=5, geometry_step_s=5, resource_step_s=10)
     rng = np.random.default_rng(cfg.seed)
@@ -239,19 +259,15 @@ def generate(cfg: FleetGenConfig) -> Fleet:
     return Fleet(horizon, sats, tk, source="eosp-generator", source_commit="", case_id=case)
 
 
-def estimate_bytes(cfg: FleetGenConfig) -> int:
-    """Peak memory of generating the fleet and computing its opportunities, estimated before any work.
+LAND_MASK_BYTES = 900 * 1024 ** 2  # global-land-mask's 1 km grid, loaded by the land and clusters placements
 
-    Dominant terms: satellite positions on the 5 s grid (24 bytes a sample), the per-satellite candidate
-    arrays of the opportunity scan (about 60 bytes per (task, grid sample) pair inside the reach of one
-    satellite at one time, bounded by the tasks' windows), the opportunities themselves (16 bytes each,
-    about 2 % of the satellite-task pairs over a day seen for a minute each) and the pass graphs built from
-    them (about 400 bytes an opportunity).
-    """
-    samples = int(cfg.hours * 3600 / 5) + 1
-    positions = cfg.satellites * samples * 24
-    mean_window = 0.5 * (cfg.window_min_h + cfg.window_max_h) * 3600.0
-    # opportunities: each satellite sees a given task about once per 12 h for ~60 s (12 starts), within its window
-    visits = cfg.satellites * cfg.tasks * max(mean_window, 3600.0) / 43200.0
-    opps = visits * 12
-    return int(positions + 500 * 1024 ** 2 + opps * (16 + 400))
+
+def estimate_bytes(cfg: FleetGenConfig) -> int:
+    """Peak memory of generating the fleet and computing its opportunities, estimated before any work
+    (:func:`eosp.fleet.opportunities.scan_bytes`: the horizon's instants on the 5 s grid times the satellites, and
+    the opportunities expected from the tasks' windows; the land mask when tasks are placed on land)."""
+    from eosp.fleet.opportunities import instants, scan_bytes
+
+    mean_window = 0.5 * (cfg.window_min_h + min(cfg.window_max_h, cfg.hours)) * 3600.0
+    mask = LAND_MASK_BYTES if cfg.placement in ("land", "clusters") else 0
+    return mask + scan_bytes(cfg.satellites, cfg.tasks, instants(cfg.hours * 3600.0, 5), mean_window)

@@ -3,7 +3,10 @@
 A fleet directory holds ``satellites.parquet``, ``tasks.parquet``, ``opportunities.parquet``,
 ``meta.json`` and, for other sources, ``extra_<name>.parquet`` tables; it round-trips losslessly.
 ``meta.json`` carries a fingerprint of the fleet's content (satellites, tasks, horizon, grids,
-extras), which a schedule file records so that a schedule is never checked against another fleet.
+extras), which a schedule file records so that a schedule is never checked against another fleet, and one of
+the opportunities (every table of the directory is thus covered: an edited opportunities.parquet is refused,
+not solved).  Values are checked where they enter (:func:`eosp.fleet.model.satellite_fault`,
+:func:`eosp.fleet.model.task_fault`), as the aeossp reader checks them.
 Everything is written through :mod:`eosp.atomic`: no reader sees a half-written file, and an
 existing output is only replaced when asked (and, for a directory, when it is a fleet directory).
 docs/formats.md ("Fleets") is the reference.
@@ -14,13 +17,14 @@ from __future__ import annotations
 import hashlib
 import json
 import os
+import re
 from pathlib import Path
 
 import numpy as np
 
 from eosp.errors import InputError
 from eosp.fleet.model import (US, Attitude, Battery, Fleet, Horizon, Satellites, Schedule, Tasks, Tles, iso_z,
-                              parse_utc, strings)
+                              parse_utc, satellite_fault, strings, task_fault)
 from eosp.fleet.opportunities import Opportunities
 from eosp.instances.interchange import read_parquet
 
@@ -51,7 +55,9 @@ TASK_COLUMNS = {
     "weight": ("float", lambda t: t.weight), "sensor_type": ("str", lambda t: t.sensor),
 }
 OPP_COLUMNS = ("task", "satellite", "start", "pass")
-SCHEDULE_COLUMNS = ("satellite", "task", "start_utc", "end_utc", "start_s", "end_s")
+SCHEDULE_COLUMNS = {"satellite": "str", "task": "str", "start_utc": "timestamp", "end_utc": "timestamp",
+                    "start_s": "float", "end_s": "float"}
+EXTRA_NAME = re.compile(r"[A-Za-z0-9_-]{1,64}")  # an extra table's name: a file name part, never a path
 
 
 def _canon(v):
@@ -68,6 +74,27 @@ def fingerprint(fleet: Fleet) -> str:
         "extras": {name: {c: _canon(v) for c, v in sorted(t.items())} for name, t in sorted(fleet.extras.items())},
     }
     return hashlib.sha256(json.dumps(doc, sort_keys=True, separators=(",", ":")).encode()).hexdigest()
+
+
+def opportunities_fingerprint(opps: Opportunities) -> str:
+    """sha256 of the opportunity columns (int32 bytes, in file order)."""
+    h = hashlib.sha256()
+    for c in (opps.task, opps.satellite, opps.start, opps.pass_id):
+        h.update(np.ascontiguousarray(c, dtype=np.int32).tobytes())
+    return h.hexdigest()
+
+
+def written_names(path: str | os.PathLike) -> set[str]:
+    """The entries :func:`write_fleet` wrote in an existing fleet directory (the fixed tables, meta.json and the
+    extra tables its meta.json lists): what ``--overwrite`` may replace."""
+    names = {"meta.json", "satellites.parquet", "tasks.parquet", "opportunities.parquet"}
+    try:
+        extras = json.loads((Path(path) / "meta.json").read_text()).get("extras", [])
+    except (OSError, ValueError, AttributeError):
+        extras = []
+    if isinstance(extras, list):
+        names |= {f"extra_{e}.parquet" for e in extras if isinstance(e, str) and EXTRA_NAME.fullmatch(e)}
+    return names
 
 
 def is_fleet_dir(path: str | os.PathLike) -> bool:
@@ -106,31 +133,37 @@ def write_fleet(fleet: Fleet, opps: Opportunities, out: str | os.PathLike, overw
         "action_step_s": h.action_step_s, "geometry_step_s": h.geometry_step_s, "resource_step_s": h.resource_step_s,
         "fingerprint": fingerprint(fleet), "satellites": len(fleet.satellites), "tasks": len(fleet.tasks),
         "opportunities": len(opps), "passes": opps.n_passes, "extras": sorted(fleet.extras),
+        "opportunities_fingerprint": opportunities_fingerprint(opps),
     }
-    with atomic_dir(out, overwrite=overwrite, owned=is_fleet_dir) as tmp:
+    bad = next((e for e in fleet.extras if not EXTRA_NAME.fullmatch(e)), None)
+    if bad is not None:
+        raise ValueError(f"extra table name {bad!r}: letters, digits, '_' and '-' only")
+    with atomic_dir(out, overwrite=overwrite, owned=is_fleet_dir, names=written_names) as tmp:
         pq.write_table(arrow_table({k: get(fleet.satellites) for k, (_, get) in SAT_COLUMNS.items()}),
                        tmp / "satellites.parquet")
         pq.write_table(arrow_table({k: get(fleet.tasks) for k, (_, get) in TASK_COLUMNS.items()}),
                        tmp / "tasks.parquet")
         pq.write_table(arrow_table({"task": opps.task, "satellite": opps.satellite, "start": opps.start,
-                               "pass": opps.pass_id}), tmp / "opportunities.parquet")
+                                    "pass": opps.pass_id}), tmp / "opportunities.parquet")
         for name, cols in fleet.extras.items():
             pq.write_table(arrow_table(dict(cols)), tmp / f"extra_{name}.parquet")
         (tmp / "meta.json").write_text(json.dumps(meta, indent=2) + "\n")
     return Path(out)
 
 
-def read_columns(path: Path, expected: dict) -> dict:
-    """Columns of a Parquet file, checked: present, nothing unexpected, right kind, no nulls/NaN."""
+def read_columns(path: Path, expected: dict, table=None, extra_ok: bool = False) -> dict:
+    """Columns of a Parquet file, checked: present, nothing unexpected (unless `extra_ok`), right kind ("str", "int",
+    "float": a finite number, "timestamp"), no nulls/NaN.  `table`: already read."""
     import pyarrow as pa
 
-    table = read_parquet(path)  # the project's checked reader: one line for a missing or unreadable file
+    if table is None:
+        table = read_parquet(path)  # the project's checked reader: one line for a missing or unreadable file
     names = set(table.column_names)
     for c in expected:
         if c not in names:
             raise InputError(path, "missing column", column=c)
     for c in table.column_names:
-        if c not in expected:
+        if c not in expected and not extra_ok:
             raise InputError(path, "unexpected column", column=c)
     out = {}
     for c, kind in expected.items():
@@ -145,7 +178,14 @@ def read_columns(path: Path, expected: dict) -> dict:
         elif kind == "int":
             if not pa.types.is_integer(t):
                 raise InputError(path, f"expected integers, got {t}", column=c)
-            out[c] = col.to_numpy().astype(np.int64)
+            v = col.to_numpy()
+            if v.dtype == np.uint64 and len(v) and v.max() > np.iinfo(np.int64).max:
+                raise InputError(path, "integer too large", column=c, row=int(np.argmax(v)))
+            out[c] = v.astype(np.int64)
+        elif kind == "timestamp":
+            if not pa.types.is_timestamp(t):
+                raise InputError(path, f"expected UTC timestamps, got {t}", column=c)
+            out[c] = col.to_numpy().astype("datetime64[us]")
         else:
             if not (pa.types.is_floating(t) or pa.types.is_integer(t)):
                 raise InputError(path, f"expected numbers, got {t}", column=c)
@@ -188,7 +228,43 @@ def read_meta(root: Path) -> dict:
     for k in need:
         if k not in meta:
             raise InputError(path, f"missing key {k!r}")
+    extras = meta.get("extras", [])
+    if not isinstance(extras, list) or not all(isinstance(e, str) and EXTRA_NAME.fullmatch(e) for e in extras):
+        raise InputError(path, f"extras must be a list of table names (letters, digits, '_', '-'), got {extras!r}")
+    if len(set(extras)) != len(extras):
+        raise InputError(path, f"extras names a table twice: {extras!r}")
     return meta
+
+
+def _read_extra(path: Path) -> dict[str, np.ndarray]:
+    """An extra table (carried untouched): its columns as strings or numbers, no nulls."""
+    import pyarrow as pa
+
+    table = read_parquet(path)
+    kinds = {}
+    for c in table.column_names:
+        t = table.schema.field(c).type
+        if pa.types.is_string(t) or pa.types.is_large_string(t):
+            kinds[c] = "str"
+        elif pa.types.is_integer(t):
+            kinds[c] = "int"
+        elif pa.types.is_floating(t):
+            kinds[c] = "number"
+        else:
+            raise InputError(path, f"unsupported column type {t} (strings and numbers only)", column=c)
+    for c, kind in kinds.items():
+        col = table.column(c)
+        if col.null_count:
+            raise InputError(path, "null value", column=c,
+                             row=int(np.flatnonzero(col.is_null().to_numpy(zero_copy_only=False))[0]))
+    return {c: (strings(table.column(c).to_pylist()) if kind == "str" else table.column(c).to_numpy())
+            for c, kind in kinds.items()}
+
+
+def _check_values(path: Path, fault: tuple[int, str, str] | None) -> None:
+    if fault is not None:
+        row, column, reason = fault
+        raise InputError(path, reason, column=column, row=row)
 
 
 def read_fleet(path: str | os.PathLike, with_opportunities: bool = True) -> tuple[Fleet, Opportunities | None]:
@@ -201,10 +277,14 @@ def read_fleet(path: str | os.PathLike, with_opportunities: bool = True) -> tupl
     try:
         h = Horizon(parse_utc(meta["horizon_start"]), parse_utc(meta["horizon_end"]), int(meta["action_step_s"]),
                     int(meta["geometry_step_s"]), int(meta["resource_step_s"]))
-    except (ValueError, TypeError) as exc:
+    except (ValueError, TypeError, OverflowError) as exc:
         raise InputError(root / "meta.json", f"bad horizon: {exc}") from None
+    if min(h.action_step_s, h.geometry_step_s, h.resource_step_s) <= 0 or h.end <= h.start:
+        raise InputError(root / "meta.json", "bad horizon: the steps must be > 0 and the end after the start")
     sp = root / "satellites.parquet"
     s = read_columns(sp, {k: kind for k, (kind, _) in SAT_COLUMNS.items()})
+    if len(s["satellite_id"]) == 0:
+        raise InputError(sp, "no satellite (a fleet needs one)")
     _unique(sp, s["satellite_id"], "satellite_id")
     sats = Satellites(
         s["satellite_id"], s["sensor_type"], Tles(s["tle_line1"], s["tle_line2"], s["norad_catalog_id"]),
@@ -212,18 +292,16 @@ def read_fleet(path: str | os.PathLike, with_opportunities: bool = True) -> tupl
                  s["settling_time_s"]),
         Battery(s["battery_capacity_wh"], s["initial_battery_wh"], s["idle_power_w"], s["imaging_power_w"],
                 s["slew_power_w"], s["sunlit_charge_power_w"]))
+    _check_values(sp, satellite_fault(sats))
     tp = root / "tasks.parquet"
     t = read_columns(tp, {k: kind for k, (kind, _) in TASK_COLUMNS.items()})
+    if len(t["task_id"]) == 0:
+        raise InputError(tp, "no task (a fleet needs one)")
     _unique(tp, t["task_id"], "task_id")
     tasks = Tasks(t["task_id"], t["name"], t["latitude_deg"], t["longitude_deg"], t["altitude_m"], t["release_s"],
                   t["due_s"], t["duration_s"], t["weight"], t["sensor_type"])
-    extras = {}
-    for name in meta.get("extras", []):
-        import pyarrow.parquet as pq
-
-        tab = pq.read_table(root / f"extra_{name}.parquet")
-        extras[name] = {c: (strings(tab.column(c).to_pylist()) if tab.column(c).type == "string"
-                            else tab.column(c).to_numpy()) for c in tab.column_names}
+    _check_values(tp, task_fault(tasks, h))
+    extras = {name: _read_extra(root / f"extra_{name}.parquet") for name in meta.get("extras", [])}
     fleet = Fleet(h, sats, tasks, source=str(meta.get("source", "")), source_commit=str(meta.get("source_commit", "")),
                   case_id=str(meta.get("case_id", "")), extras=extras)
     if fingerprint(fleet) != meta["fingerprint"]:
@@ -240,6 +318,12 @@ def read_fleet(path: str | os.PathLike, with_opportunities: bool = True) -> tupl
         raise InputError(op, "rows must be sorted by pass", column="pass")
     opps = Opportunities(o["task"].astype(np.int32), o["satellite"].astype(np.int32), o["start"].astype(np.int32),
                          o["pass"].astype(np.int32))
+    want = meta.get("opportunities_fingerprint")
+    if want is None:
+        raise InputError(root / "meta.json", "no opportunities_fingerprint (written by an older eosp): import or "
+                                             "generate the fleet again")
+    if opportunities_fingerprint(opps) != want:
+        raise InputError(op, "does not match its fingerprint in meta.json (edited or mixed with another fleet's)")
     return fleet, opps
 
 
@@ -279,21 +363,18 @@ def write_schedule(schedule: Schedule, fleet: Fleet, path: str | os.PathLike, ov
     return path
 
 
-def read_schedule_table(path: Path, kind: bytes, fleet_fingerprint: str, columns, what: str):
-    """The Parquet table of a schedule eosp wrote (`what`: "a fleet schedule"), checked: its `kind` mark, the
-    fingerprint of the fleet it was written for, and `columns` present without nulls; with its metadata as text."""
+def read_schedule_table(path: Path, kind: bytes, fleet_fingerprint: str, columns: dict, what: str):
+    """The columns of a schedule eosp wrote (`what`: "a fleet schedule"), checked: its `kind` mark, the fingerprint of
+    the fleet it was written for, and `columns` (name -> kind, as :func:`read_columns`) present, of their kind,
+    without nulls; with its metadata as text."""
     table = read_parquet(path)
     md = table.schema.metadata or {}
     if md.get(b"kind") != kind:
         raise InputError(path, f"not {what} (no {kind.decode()} metadata)")
-    if md.get(b"fleet_fingerprint", b"").decode() != fleet_fingerprint:
+    if md.get(b"fleet_fingerprint", b"").decode(errors="replace") != fleet_fingerprint:
         raise InputError(path, "written for another fleet (fingerprint differs)")
-    for c in columns:
-        if c not in table.column_names:
-            raise InputError(path, "missing column", column=c)
-        if table.column(c).null_count:
-            raise InputError(path, "null value", column=c)
-    return table, {k.decode(): v.decode() for k, v in md.items()}
+    cols = read_columns(path, columns, table=table, extra_ok=True)
+    return cols, {k.decode(errors="replace"): v.decode(errors="replace") for k, v in md.items()}
 
 
 def read_schedule(path: str | os.PathLike, fleet: Fleet) -> tuple[Schedule, dict]:
@@ -306,12 +387,11 @@ def read_schedule(path: str | os.PathLike, fleet: Fleet) -> tuple[Schedule, dict
         return read_solution(path, fleet.horizon), {}
     if path.suffix.lower() != ".parquet":
         raise InputError(path, "unknown extension: a schedule is a .parquet (fleet schedule) or .json (aeossp solution)")
-    table, info = read_schedule_table(path, SCHEDULE_KIND, fingerprint(fleet), SCHEDULE_COLUMNS, "a fleet schedule")
+    cols, info = read_schedule_table(path, SCHEDULE_KIND, fingerprint(fleet), SCHEDULE_COLUMNS, "a fleet schedule")
     start = np.datetime64(fleet.horizon.start.replace(tzinfo=None), "us")
-    st = (table.column("start_utc").to_numpy().astype("datetime64[us]") - start).astype(np.int64)
-    en = (table.column("end_utc").to_numpy().astype("datetime64[us]") - start).astype(np.int64)
-    return Schedule(strings(table.column("satellite").to_pylist()), strings(table.column("task").to_pylist()),
-                    st, en), info
+    st = (cols["start_utc"] - start).astype(np.int64)
+    en = (cols["end_utc"] - start).astype(np.int64)
+    return Schedule(cols["satellite"], cols["task"], st, en), info
 
 
 def write_csv(schedule: Schedule, fleet: Fleet, path: str | os.PathLike, overwrite: bool = False) -> Path:

@@ -154,6 +154,78 @@ class Schedule:
                         np.zeros(0, np.int64), np.zeros(0, np.int64))
 
 
+SENSORS = ("visible", "infrared")
+NORAD_MAX = 999_999_999  # the largest catalog number kept (int64 column; TLEs' alpha-5 numbers reach 339,999)
+EPS = 1.0e-9  # the benchmark's tolerance on values that must not be negative
+ALTITUDE_M = (-11_000.0, 100_000.0)  # a target on (or above) the Earth's surface: the ocean floor to the Karman line
+
+
+def satellite_fault(sats: Satellites) -> tuple[int, str, str] | None:
+    """The first satellite whose parameters are out of range: (row, field, reason), fields named as the fleet
+    directory's columns (= the aeossp keys); None when all are in range.  Checked where a fleet enters (the aeossp
+    reader, the fleet directory reader), so that no solver divides by a zero slew rate or looks past the horizon."""
+    a, b = sats.attitude, sats.battery
+    return _first_fault((
+        ("norad_catalog_id", sats.tle.norad, lambda v: (v >= 0) & (v <= NORAD_MAX), f"must lie in [0, {NORAD_MAX}]"),
+        ("max_off_nadir_deg", a.max_off_nadir_deg, lambda v: (v >= -EPS) & (v <= 90), "must lie in [0, 90]"),
+        ("max_slew_velocity_deg_per_s", a.max_rate_deg_s, lambda v: v > 0, "must be > 0"),
+        ("max_slew_acceleration_deg_per_s2", a.max_acc_deg_s2, lambda v: v > 0, "must be > 0"),
+        ("settling_time_s", a.settling_s, lambda v: v >= -EPS, "must be >= 0"),
+        ("battery_capacity_wh", b.capacity_wh, lambda v: v > 0, "must be > 0"),
+        ("initial_battery_wh", b.initial_wh, lambda v: (v >= -EPS) & (v <= b.capacity_wh + EPS),
+         "must lie within [0, battery_capacity_wh]"),
+        ("idle_power_w", b.idle_w, lambda v: v >= -EPS, "must be >= 0"),
+        ("imaging_power_w", b.imaging_w, lambda v: v >= -EPS, "must be >= 0"),
+        ("slew_power_w", b.slew_w, lambda v: v >= -EPS, "must be >= 0"),
+        ("sunlit_charge_power_w", b.sunlit_w, lambda v: v >= -EPS, "must be >= 0"),
+        ("sensor_type", sats.sensor, lambda v: np.isin(v.astype(str), SENSORS),
+         f"must be one of {', '.join(SENSORS)}"),
+    ))
+
+
+def task_fault(tasks: Tasks, horizon: Horizon) -> tuple[int, str, str] | None:
+    """The first task out of range (place, window inside the horizon and on the action grid, duration, weight,
+    sensor), as :func:`satellite_fault`; also the sum of the weights must be finite (two weights of 1e308 are
+    each finite, their sum is not, and every metric is that sum's fraction)."""
+    step, h = horizon.action_step_s, horizon.seconds
+
+    def on_grid(v: np.ndarray) -> np.ndarray:
+        return np.abs(v / step - np.round(v / step)) <= 1e-9
+
+    fault = _first_fault((
+        ("latitude_deg", tasks.lat_deg, lambda v: (v >= -90) & (v <= 90), "must lie in [-90, 90]"),
+        ("longitude_deg", tasks.lon_deg, lambda v: (v >= -180) & (v <= 180), "must lie in [-180, 180]"),
+        ("altitude_m", tasks.alt_m, lambda v: (v >= ALTITUDE_M[0]) & (v <= ALTITUDE_M[1]),
+         f"must lie in [{ALTITUDE_M[0]:g}, {ALTITUDE_M[1]:g}] (a place on the Earth)"),
+        ("release_s", tasks.release_s, lambda v: (v >= 0) & (v <= h) & on_grid(v),
+         f"must lie in the horizon [0, {h}] on the {step} s action grid"),
+        ("due_s", tasks.due_s, lambda v: (v > tasks.release_s) & (v <= h) & on_grid(v),
+         f"must lie after release_s, in the horizon [0, {h}], on the {step} s action grid"),
+        ("duration_s", tasks.duration_s, lambda v: (v > 0) & (v <= tasks.due_s - tasks.release_s) & on_grid(v),
+         f"must be > 0, a multiple of {step} s and fit in the window"),
+        ("weight", tasks.weight, lambda v: v > 0, "must be > 0"),
+        ("sensor_type", tasks.sensor, lambda v: np.isin(v.astype(str), SENSORS),
+         f"must be one of {', '.join(SENSORS)}"),
+    ))
+    with np.errstate(over="ignore"):
+        total = np.sum(tasks.weight)
+    if fault is None and len(tasks) and not np.isfinite(total):
+        return len(tasks) - 1, "weight", "makes the sum of the weights overflow (every metric divides by it)"
+    return fault
+
+
+def _first_fault(checks) -> tuple[int, str, str] | None:
+    """The first (row, name, reason) of `checks`, each (name, values, ok(values) -> bool mask, reason)."""
+    with np.errstate(invalid="ignore", over="ignore"):
+        for name, values, ok, reason in checks:
+            rows = np.flatnonzero(~ok(values))
+            if len(rows):
+                r = int(rows[0])
+                got = values[r]
+                return r, name, f"{reason}, got {got.item() if hasattr(got, 'item') else got!r}"
+    return None
+
+
 def strings(values) -> np.ndarray:
     """A 1-D object array of Python strings (numpy's fixed-width unicode would truncate nothing but
     pads and compares differently)."""

@@ -64,6 +64,74 @@ class PassView:
     end_s: np.ndarray
 
 
+# Memory of the scan, measured with eosp import on aeossp cases stretched to 30 days and a year (2-16 satellites,
+# peak RSS): the process itself, then per base-grid instant brahe's epochs and the frame rotations, and per satellite
+# and instant its ITRF positions (kept) and propagated states (transient); per opportunity its candidate arrays
+# and row.
+BASE_BYTES = 300 * 1024 ** 2
+INSTANT_BYTES = 320
+SATELLITE_INSTANT_BYTES = 48
+OPPORTUNITY_BYTES = 416
+
+
+def expected_opportunities(n_sat: int, n_tasks: int, mean_window_s: float) -> float:
+    """Opportunities to expect before the scan: a satellite sees a given task about once per 12 h for about a
+    minute (12 starts on the 5 s grid), within the task's window."""
+    return n_sat * n_tasks * max(mean_window_s, 3600.0) / 43200.0 * 12
+
+
+def instants(horizon_s: float, base_step_s: float) -> int:
+    """Base-grid instants of a horizon (both ends)."""
+    return int(horizon_s // max(base_step_s, 1e-9)) + 1
+
+
+def scan_bytes(n_sat: int, n_tasks: int, n_instants: int, mean_window_s: float) -> int:
+    """Peak memory of propagating the satellites over the horizon and scanning their opportunities, estimated
+    before any work (the horizon's length counts as much as the fleet's size: a year at 5 s is 6.3 M instants)."""
+    return int(BASE_BYTES + n_instants * (INSTANT_BYTES + SATELLITE_INSTANT_BYTES * n_sat)
+               + expected_opportunities(n_sat, n_tasks, mean_window_s) * OPPORTUNITY_BYTES)
+
+
+# Memory of the geometry a check or a solve keeps over the whole horizon (frame rotations on the base grid, sunlight,
+# battery simulations), measured with eosp validate of a 30-day, 2-satellite fleet (860 bytes an instant).
+HORIZON_INSTANT_BYTES = 1000
+
+
+def horizon_bytes(fleet: Fleet, processes: int = 1) -> tuple[int, int]:
+    """(bytes, base-grid instants) of the whole-horizon geometry of a check or a solve: per process the instants'
+    rotations and sunlight, once the satellites' positions."""
+    from math import gcd
+
+    h = fleet.horizon
+    n = instants(h.seconds, gcd(h.action_step_s, h.geometry_step_s))
+    return processes * (BASE_BYTES + n * HORIZON_INSTANT_BYTES) + n * SATELLITE_INSTANT_BYTES * len(fleet.satellites), n
+
+
+def require_check_memory(fleet: Fleet, where: object) -> None:
+    """Refuse (one line with the estimate) a fleet whose checker (battery and sunlight over the horizon) cannot fit
+    in memory: before validating, reporting or exporting a schedule of it."""
+    from eosp.memory import require_memory
+
+    need, n = horizon_bytes(fleet)
+    require_memory(where, need, f"checking {len(fleet.satellites)} satellites over {fleet.horizon.seconds:,} s "
+                                f"({n:,} instants)")
+
+
+def require_scan_memory(fleet: Fleet, where: object) -> None:
+    """Refuse (one line with the estimate, :func:`eosp.memory.require_memory`) a fleet whose opportunity scan cannot
+    fit in memory, before any propagation."""
+    from math import gcd
+
+    from eosp.memory import require_memory
+
+    h, tk = fleet.horizon, fleet.tasks
+    n = instants(h.seconds, gcd(h.action_step_s, h.geometry_step_s))
+    window = float(np.mean(tk.due_s - tk.release_s)) if len(tk) else 0.0
+    require_memory(where, scan_bytes(len(fleet.satellites), len(tk), n, window),
+                   f"the opportunities of {len(fleet.satellites)} satellites and {len(tk)} tasks over {h.seconds:,} s "
+                   f"({n:,} instants of the {gcd(h.action_step_s, h.geometry_step_s)} s grid)")
+
+
 def pass_view(fleet: Fleet, opps: Opportunities, p: int, offsets: np.ndarray | None = None) -> PassView:
     off = opps.pass_offsets() if offsets is None else offsets
     rows = np.arange(off[p], off[p + 1])

@@ -40,6 +40,40 @@ from eosp.planning.labels import label_search
 from eosp.sim.slew import bang_coast_bang
 
 
+# Memory of a fleet's pass graphs (Problem.build, a worker's graphs), on top of the whole horizon's geometry
+# (eosp.fleet.opportunities.horizon_bytes): per opportunity its graph (nodes, arcs, lines of sight: 1.1 GB in all for
+# 766,306 opportunities of 200 satellites over 24 h, docs/results.md).
+GRAPH_BYTES = 1000
+
+
+def require_solve_memory(fleet: Fleet, n_opportunities: int, where: object, processes: int = 1) -> None:
+    """Refuse (one line with the estimate) a fleet whose pass graphs cannot fit in memory, before building them.
+    `processes`: processes on this machine that each build the geometry of the whole horizon and a share of the
+    graphs (the driver and local Ray actors; forked workers share the driver's)."""
+    from eosp.fleet.opportunities import horizon_bytes
+    from eosp.memory import require_memory
+
+    geometry, n = horizon_bytes(fleet, processes)
+    need = geometry + n_opportunities * GRAPH_BYTES * (2 if processes > 1 else 1)
+    on = f" in {processes} processes" if processes > 1 else ""
+    require_memory(where, int(need), f"the pass graphs of {n_opportunities:,} opportunities of "
+                                     f"{len(fleet.satellites)} satellites over {fleet.horizon.seconds:,} s "
+                                     f"({n:,} instants){on}")
+
+
+def require_solvable(fleet: Fleet, opps: Opportunities, where: object, geo=None, processes: int = 1):
+    """Before solving: the pass graphs' memory estimated and checked (:func:`require_solve_memory`), then the fleet
+    feasible (:func:`eosp.fleet.check.require_feasible`); returns the Geometry it checked with (`geo`, or a new one
+    built once the memory is known to suffice)."""
+    from eosp.fleet.check import require_feasible
+    from eosp.fleet.geometry import Geometry
+
+    require_solve_memory(fleet, len(opps), where, processes)
+    geo = geo or Geometry(fleet)
+    require_feasible(fleet, where, geo)
+    return geo
+
+
 @dataclass(frozen=True, eq=False)
 class PassGraph:
     """One pass as a discrete graph over its opportunities.

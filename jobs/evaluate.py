@@ -35,7 +35,7 @@ from pathlib import Path
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 
 from eosp.args import Parser, add_config_args, config_from_args, prefixed_config, run_job  # noqa: E402
-from eosp.config import EvalConfig, RayConfig, default_mlflow_uri, flatten  # noqa: E402
+from eosp.config import EvalConfig, RayConfig, flatten  # noqa: E402
 
 
 class SolverWorker:
@@ -225,8 +225,9 @@ def run(cfg: EvalConfig, ray_cfg: RayConfig) -> "object":
     with atomic_path(out / "report.md") as tmp:
         tmp.write_text(report)
     counts_png = plot_class_counts(results, out / "class_counts.png")
-    mlflow.set_tracking_uri(default_mlflow_uri(cfg.mlflow_uri))
-    mlflow.set_experiment(cfg.experiment)
+    from eosp.jobs.tracking import use_experiment
+
+    use_experiment(cfg.mlflow_uri, cfg.experiment)
     with mlflow.start_run(run_name=out.name):
         mlflow.log_params({k: str(v) for k, v in flatten(cfg).items()})
         for (group, solver), sub in results.groupby(["group", "solver"]):

@@ -19,7 +19,7 @@ import time
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
-from eosp.args import Parser, add_config_args, config_from_args, run_job  # noqa: E402
+from eosp.args import Parser, add_config_args, add_memory_arg, config_from_args, run_job  # noqa: E402
 from eosp.config import RayConfig, ranged, to_dict  # noqa: E402
 from eosp.fleet.generate import FleetGenConfig  # noqa: E402
 
@@ -68,6 +68,9 @@ def existing(cfg: FleetSetConfig, k: int) -> dict | None:
     want = to_dict(replace(cfg.gen, seed=cfg.gen.seed + k))
     if not isinstance(rec, dict) or rec.get("generator") != want:
         raise InputError(rec_path, "a fleet of other settings: use another --out")
+    if rec.get("fleet") != f"fleet-{k:05d}":  # a record eosp wrote names its own fleet directory, nothing else
+        raise InputError(rec_path, f"names fleet {rec.get('fleet')!r}, not fleet-{k:05d}: not a fleet record eosp "
+                                   "wrote (use another --out)")
     from eosp.fleet.io import is_fleet_dir
 
     return rec if is_fleet_dir(Path(cfg.out) / rec["fleet"]) else None
@@ -78,7 +81,7 @@ def run(cfg: FleetSetConfig) -> dict:
 
     from eosp.atomic import atomic_path
     from eosp.errors import InputError
-    from eosp.fleet.generate import estimate_bytes
+    from eosp.fleet.generate import check, estimate_bytes
     from eosp.jobs.ray_init import init_ray
     from eosp.memory import require_memory
     from eosp.ownership import check_output, json_mark, kind_of, mark_dir
@@ -87,9 +90,15 @@ def run(cfg: FleetSetConfig) -> dict:
         out = check_output(cfg.out, KIND, directory=True, reuse=True)
     except InputError as exc:
         raise InputError(f"--out {cfg.out}", exc.message) from None
+    try:
+        check(cfg.gen)  # the request as a whole (start, windows, planes), before anything is created
+    except ValueError as exc:  # "FleetGenConfig.start: reason" -> "--gen.start: reason"
+        name, _, reason = str(exc).partition(": ")
+        raise InputError("--gen." + name.rpartition(".")[2].replace("_", "-"), reason) from None
     parallel = max(1, min(cfg.count, cfg.ray.num_cpus))
-    require_memory("--gen.satellites/--gen.tasks", estimate_bytes(cfg.gen) * parallel,
-                   f"{parallel} fleet(s) of {cfg.gen.satellites} satellites and {cfg.gen.tasks} tasks at once")
+    require_memory("--gen.satellites/--gen.tasks/--gen.hours", estimate_bytes(cfg.gen) * parallel,
+                   f"{parallel} fleet(s) of {cfg.gen.satellites} satellites and {cfg.gen.tasks} tasks over "
+                   f"{cfg.gen.hours:g} h at once")
     out.mkdir(parents=True, exist_ok=True)
     if kind_of(out) != KIND:
         mark_dir(out, KIND)
@@ -128,11 +137,16 @@ def _main(argv: list[str] | None) -> int:
 
     p = Parser(prog=errors.PROG, description=__doc__.splitlines()[0])
     add_config_args(p, FleetSetConfig)
-    cfg = config_from_args(FleetSetConfig, p.parse_args(argv))
+    add_memory_arg(p)
+    ns = p.parse_args(argv)
+    cfg = config_from_args(FleetSetConfig, ns)
     if not cfg.out:
         raise InputError("--out", "required")
     require_findable(cfg.out, "--out")
-    m = run(cfg)
+    from eosp.memory import memory_ceiling
+
+    with memory_ceiling(ns.max_memory_gb):
+        m = run(cfg)
     print(f"[generate_fleets] {len(m['fleets'])} fleets -> {cfg.out} ({m['wall_seconds']:.1f} s)")
     return 0
 

@@ -56,6 +56,14 @@ def check_mlflow(uri: str, flag: str = "--mlflow-uri", timeout: float = 5.0) -> 
                           "copy of the working dir: pass a tracking server (http://...) or "
                           f"{flag} sqlite:////shared/mlflow.db")
         return
+    scheme = uri.partition("://")[0].lower() if "://" in uri else ""
+    if scheme not in TRACKING_SCHEMES:
+        what = f"scheme {scheme!r}" if scheme else "no scheme"
+        raise Refused(f"{flag} {uri}: not a tracking URI MLflow can use ({what}; use http(s)://HOST:PORT, "
+                      f"sqlite:///PATH/mlflow.db or a database URI: {', '.join(TRACKING_SCHEMES)})")
+    if scheme == "sqlite":
+        _check_sqlite(uri, flag)
+        return
     if not uri.startswith(("http://", "https://")):
         return
     try:
@@ -67,6 +75,34 @@ def check_mlflow(uri: str, flag: str = "--mlflow-uri", timeout: float = 5.0) -> 
         reason = getattr(exc, "reason", exc)
         raise Refused(f"MLflow tracking server {uri} unreachable ({reason}): start it, or pass another "
                       f"{flag} (e.g. sqlite:///$PWD/mlflow.db)") from None
+
+
+TRACKING_SCHEMES = ("http", "https", "sqlite", "postgresql", "mysql", "mssql", "databricks")
+SQLITE_MAGIC = b"SQLite format 3\x00"
+
+
+def _check_sqlite(uri: str, flag: str) -> None:
+    """A sqlite store: its file, when it exists, must be an SQLite database (never a user's other file), and its
+    directory writable."""
+    from eosp.jobs.tracking import sqlite_path
+
+    db = sqlite_path(uri)
+    if db is None or not db.name:
+        raise Refused(f"{flag} {uri}: a sqlite URI names a database file (sqlite:////abs/path/mlflow.db)")
+    if db.exists():
+        try:
+            with open(db, "rb") as fh:
+                head = fh.read(len(SQLITE_MAGIC))
+        except OSError as exc:
+            raise Refused(f"{flag} {uri}: cannot read {db} ({exc.strerror or exc})") from None
+        if head and head != SQLITE_MAGIC:
+            raise Refused(f"{flag} {uri}: {db} exists and is not an SQLite database: refusing to use it")
+        return
+    for parent in db.resolve().parents:
+        if parent.exists():
+            if not parent.is_dir() or not os.access(parent, os.W_OK | os.X_OK):
+                raise Refused(f"{flag} {uri}: cannot create {db} (no writable directory {parent})")
+            return
 
 
 # --------------------------------------------------------------------------- what the Ray cluster offers

@@ -52,7 +52,6 @@ def run(cfg: PretrainConfig) -> dict:
     import torch
 
     from eosp.atomic import atomic_path
-    from eosp.config import default_mlflow_uri
     from eosp.jobs.ray_init import init_ray
     from eosp.models.agent import EOSPAgent
     from eosp.models.checkpoint import save_agent
@@ -89,8 +88,9 @@ def run(cfg: PretrainConfig) -> dict:
     if agent is None:
         agent = EOSPAgent(cfg.model)
     opt = torch.optim.Adam(agent.parameters(), lr=im.lr, weight_decay=im.weight_decay)
-    mlflow.set_tracking_uri(default_mlflow_uri(im.mlflow_uri))
-    mlflow.set_experiment(im.experiment)
+    from eosp.jobs.tracking import use_experiment
+
+    use_experiment(im.mlflow_uri, im.experiment)
     mlflow.start_run(run_name=im.run_name)
     mlflow.log_params({k: (json.dumps(v) if isinstance(v, (list, tuple)) else v) for k, v in flatten(cfg).items()})
     mlflow.log_dict(to_dict(cfg), "config.json")

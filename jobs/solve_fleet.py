@@ -34,7 +34,7 @@ from pathlib import Path
 
 import numpy as np
 
-from eosp.args import Parser, add_config_args, config_from_args, prefixed_config, run_job  # noqa: E402
+from eosp.args import Parser, add_config_args, add_memory_arg, config_from_args, prefixed_config, run_job  # noqa: E402
 from eosp.config import RayConfig, flatten  # noqa: E402
 from eosp.kinds.fleet.config import FleetConfig  # noqa: E402
 
@@ -191,7 +191,8 @@ class RayPassPool:
 
 
 def _load_state(run: Path, fleet, fp: str):
-    """The saved state of a run dir of this fleet: (Resume, best schedule), or None for a new run."""
+    """The saved state of a run dir of this fleet: (Resume, best schedule), or None for a new run; every value
+    checked (a truncated, edited or foreign state file is one line, never a traceback or a wrong resume)."""
     from eosp.errors import InputError
     from eosp.fleet.io import read_schedule
     from eosp.kinds.fleet.solve import Resume
@@ -201,20 +202,51 @@ def _load_state(run: Path, fleet, fp: str):
         return None
     try:
         meta = json.loads(meta_path.read_text())
-    except ValueError:
+    except (ValueError, UnicodeDecodeError):
         raise InputError(meta_path, "not readable JSON: not a fleet run dir eosp wrote") from None
+    if not isinstance(meta, dict):
+        raise InputError(meta_path, "not a JSON object: not a fleet run dir eosp wrote")
     if meta.get("fingerprint") != fp:
         raise InputError(f"--run-dir {run}", f"a run dir of another fleet ({meta.get('case_id', '?')}): use another "
                                              "--run-dir")
     if not (run / STATE).exists() or not (run / BEST).exists():
         return None
-    with np.load(run / STATE, allow_pickle=False) as z:  # never unpickle a file
-        state = {k: z[k] for k in z.files}
-    if len(state["lam"]) != len(fleet.tasks):
-        raise InputError(run / STATE, "prices of another fleet")
+    state = _read_state(run / STATE, len(fleet.tasks))
     best, _ = read_schedule(run / BEST, fleet)
     return Resume(state["lam"], float(state["step"]), float(state["best_bound"]), str(state["bound_source"]),
                   int(state["rounds_done"])), best
+
+
+STATE_KEYS = {"lam": "f", "step": "f", "best_bound": "f", "bound_source": "U", "rounds_done": "i"}
+
+
+def _read_state(path: Path, n_tasks: int) -> dict:
+    """state.npz as :class:`Checkpoint` writes it: the prices (n_tasks finite numbers >= 0), the step (> 0), the best
+    bound (finite), its source (text) and the rounds done (>= 0), each checked."""
+    import zipfile
+
+    from eosp.errors import InputError
+
+    try:
+        with np.load(path, allow_pickle=False) as z:  # never unpickle a file
+            state = {k: z[k] for k in z.files}
+    except (OSError, ValueError, EOFError, zipfile.BadZipFile) as exc:
+        raise InputError(path, f"not a state file eosp wrote (truncated or edited?): {exc}") from None
+    for key, kind in STATE_KEYS.items():
+        if key not in state:
+            raise InputError(path, f"no {key!r}: not a state file eosp wrote (truncated or edited?)")
+        v = state[key]
+        if v.dtype.kind not in (kind, "i" if kind == "f" else kind) or (key != "lam" and v.ndim != 0):
+            raise InputError(path, f"{key!r} is not a {'vector' if key == 'lam' else 'single'} value of the right type")
+    lam = state["lam"]
+    if lam.ndim != 1 or len(lam) != n_tasks:
+        raise InputError(path, f"prices of another fleet ({lam.size} prices, {n_tasks} tasks)")
+    if not np.all(np.isfinite(lam)) or np.any(lam < 0):
+        raise InputError(path, "prices must be finite numbers >= 0")
+    if not (np.isfinite(state["step"]) and state["step"] > 0 and np.isfinite(state["best_bound"])
+            and state["rounds_done"] >= 0):
+        raise InputError(path, "step must be > 0, best_bound finite and rounds_done >= 0")
+    return state
 
 
 class Checkpoint:
@@ -265,10 +297,11 @@ def run(job: SolveFleetJob) -> dict:
     import mlflow
 
     from eosp.atomic import atomic_path
-    from eosp.config import default_mlflow_uri
     from eosp.fleet.io import fingerprint, read_fleet, write_schedule
+    from eosp.fleet.passgraph import require_solvable
     from eosp.jobs.preflight import make_run_dir
     from eosp.jobs.ray_init import init_ray
+    from eosp.jobs.tracking import use_experiment
     from eosp.kinds.fleet.problem import Problem
     from eosp.kinds.fleet.solve import solve
 
@@ -281,6 +314,9 @@ def run(job: SolveFleetJob) -> dict:
     fp = fingerprint(fleet)
     run_dir = Path(job.run_dir)
     saved = _load_state(run_dir, fleet, fp) if run_dir.is_dir() else None
+    local_actors = job.fleet.workers if job.fleet.workers > 1 and not job.ray.address else 0
+    require_solvable(fleet, opps, f"--fleet-dir {job.fleet_dir}", processes=1 + local_actors)
+    use_experiment(job.mlflow_uri, job.experiment)  # before the run dir: a store MLflow refuses leaves nothing behind
     make_run_dir(run_dir, replace=False, kind=RUN_KIND)
     (run_dir / META).write_text(json.dumps({"fingerprint": fp, "case_id": fleet.case_id,
                                             "fleet_dir": str(Path(job.fleet_dir).resolve())}, indent=1))
@@ -291,8 +327,6 @@ def run(job: SolveFleetJob) -> dict:
         init_ray(job.ray.address, max(job.ray.num_cpus, job.fleet.workers))
         pool = RayPassPool(prob, job.fleet)
     t_pool = time.perf_counter() - t0
-    mlflow.set_tracking_uri(default_mlflow_uri(job.mlflow_uri))
-    mlflow.set_experiment(job.experiment)
     with mlflow.start_run(run_name=run_dir.name):
         mlflow.log_params({k: str(v) for k, v in flatten(job).items()})
         mlflow.set_tags({"case": fleet.case_id, "resumed": str(saved is not None)})
@@ -327,7 +361,7 @@ def run(job: SolveFleetJob) -> dict:
                   round(first_t + t_build, 2), "wall_s": round(wall, 2), "faults": 0 if pool is None else pool.faults,
                   "workers": job.fleet.workers, "nodes": 0 if pool is None else len(set(pool.nodes)),
                   "resumed_from_round": 0 if resume is None else resume.rounds_done,
-                  "price_round_s": sol.info["price_round_s"],
+                  "price_round_s": sol.info["price_round_s"], "interrupted": sol.info["interrupted"],
                   "history": [(round(t + t_build, 3), v, b) for t, v, b in sol.history]}
         (run_dir / "result.json").write_text(json.dumps(result, indent=1))
         mlflow.log_metrics({"final/value": sol.value, "final/bound": sol.bound or 0.0, "final/gap": sol.gap or 0.0,
@@ -349,6 +383,7 @@ def _main(argv: list[str] | None) -> int:
 
     p = Parser(prog=errors.PROG, description=__doc__.splitlines()[0])
     add_config_args(p, SolveFleetJob)
+    add_memory_arg(p)
     ns = p.parse_args(argv)
     job = config_from_args(SolveFleetJob, ns)
     for flag, value in (("--fleet-dir", job.fleet_dir), ("--run-dir", job.run_dir)):
@@ -370,11 +405,18 @@ def _main(argv: list[str] | None) -> int:
     check_mlflow(job.mlflow_uri)
     if job.ray.address and job.fleet.workers > 1:
         _require_ray_address(job.ray.address)
-    r = run(job)
+    from eosp.memory import memory_ceiling
+
+    with memory_ceiling(ns.max_memory_gb):
+        r = run(job)
     gap = "" if r["gap"] is None else f", gap {r['gap']:.4%}"
     print(f"[solve_fleet] {job.run_dir}: WCR {r['value']:.6f}, bound {r['bound']:.6f}{gap}; {r['rounds']} rounds, "
           f"{r['pass_solves']} pass solves on {r['workers']} worker(s), {r['faults']} lost to faults "
           f"({r['wall_s']:.1f} s)")
+    if r.get("interrupted"):  # Ctrl-C: the best schedule so far was checked and written with the run's files
+        print(f"{errors.PROG}: interrupted: wrote the best valid schedule so far to "
+              f"{Path(job.run_dir) / 'schedule.parquet'} (WCR {r['value']:.6f})", file=sys.stderr, flush=True)
+        return 130
     return 0
 
 

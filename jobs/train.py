@@ -199,8 +199,9 @@ def _main(argv: list[str] | None) -> int:
         print(f"[train] value scale {cfg.model.value_scale:.3g} (mean return of random episodes)", flush=True)
 
     logging.getLogger("mlflow").setLevel(logging.WARNING)  # its INFO lines (creating tables, experiments) are noise
-    mlflow.set_tracking_uri(mlflow_uri(cfg))
-    mlflow.set_experiment(t.experiment)
+    from eosp.jobs.tracking import use_experiment
+
+    use_experiment(mlflow_uri(cfg), t.experiment)
     active = mlflow.start_run(run_id=run_id, run_name=None if run_id else t.run_name)
     run_id = active.info.run_id
     # what a run list filters on: the objective and the reward variant

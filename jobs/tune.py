@@ -104,8 +104,9 @@ def run(cfg: RunConfig, tc: TuneConfig) -> dict:
     if cfg.train.val_data:
         baseline_values(cfg.train.val_data, objective_mode(cfg.env))
     # the database and the experiment are created here, not by racing trials
-    mlflow.set_tracking_uri(uri)
-    exp = mlflow.set_experiment(cfg.train.experiment)
+    from eosp.jobs.tracking import use_experiment
+
+    exp = use_experiment(uri, cfg.train.experiment)
     sweep_dir.mkdir(parents=True, exist_ok=True)
     from eosp.ownership import kind_of, mark_dir
 

@@ -51,6 +51,7 @@ class KindBase:
     extra_commands: tuple[str, ...] = ()  # commands of this kind alone (a single pass: export, plot, build-shards)
     schedule_suffixes: tuple[str, ...] = (".parquet",)
     schedule_mark = "schedule"  # the ownership mark (eosp.ownership) of the schedule files this kind writes
+    memory_checked: tuple[str, ...] = ()  # commands whose memory estimates --max-memory-gb caps (eosp.memory)
 
     @property
     def commands(self) -> frozenset[str]:
@@ -96,9 +97,11 @@ class KindBase:
     def arguments(self, command: str, p: argparse.ArgumentParser, solver: str | None) -> None:
         """Add `command`'s arguments to its parser `p` (`solver`: the --solver given to a solve), worded by the
         kind's :class:`Words`."""
-        from eosp.args import add_config_args
+        from eosp.args import add_config_args, add_memory_arg
 
         w = self.words
+        if command in self.memory_checked:
+            add_memory_arg(p)
         if command in ("info", "validate", "solve", "export-schedule"):
             p.add_argument("problem", metavar=w.problem)
         if command == "validate":

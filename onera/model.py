@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import math
 import os
 from dataclasses import dataclass
 from pathlib import Path
@@ -40,6 +41,9 @@ VIDEO_FACTOR = 4.0
 PERIODIC_ALPHA = 0.5
 DOWNLOAD_S = 180.0
 TAU_MAX_S = 90.0
+TIME_MAX_S = 10 ** 9  # window times and durations: seconds since 0 h (an instance spans a day; 1e9 s is 31 years)
+SLOT_MAX = 2 ** 31 - 1  # pair ids and time slots are int32
+INT64 = (-(2 ** 63), 2 ** 63 - 1)
 CLASS_BOUNDS = np.array([0.5, 0.6, 0.7, 0.8, 0.9, 1.0])
 CLASS_VALUES = np.array([0.05, 0.1, 0.4, 0.7, 0.95, 1.0])
 
@@ -147,11 +151,14 @@ def is_onera_file(path) -> bool:
     return head[0].isdigit() and len(parts) == 3 and parts[2].strip() in KIND_NAMES
 
 
-def _int(path, ln: int, text: str, what: str) -> int:
+def _int(path, ln: int, text: str, what: str, lo: int = INT64[0], hi: int = INT64[1]) -> int:
     try:
-        return int(text)
+        value = int(text)
     except ValueError:
         raise InputError(path, f"line {ln}: {what}: {text.strip()!r} is not an integer") from None
+    if not lo <= value <= hi:
+        raise InputError(path, f"line {ln}: {what}: {value} is out of range [{lo}, {hi}]")
+    return value
 
 
 def read_pb(path: str | os.PathLike) -> OneraFleet:
@@ -196,7 +203,7 @@ def read_pb(path: str | os.PathLike) -> OneraFleet:
                 raise InputError(path, f"line {i + 1}: observation of a {KIND_NAMES[kind]} request needs {width} "
                                        f"fields, got {len(parts)}")
             if width == 10:
-                obs_slot.append(_int(path, i + 1, parts[0], "pair id" if kind == STEREO else "time slot"))
+                obs_slot.append(_int(path, i + 1, parts[0], "pair id" if kind == STEREO else "time slot", 0, SLOT_MAX))
                 parts = parts[1:]
             else:
                 obs_slot.append(0)
@@ -226,6 +233,10 @@ def read_pb(path: str | os.PathLike) -> OneraFleet:
     for j in range(i, n):
         if lines[j].strip():
             raise InputError(path, f"line {j + 1}: unexpected content after the {n_dl} downloads")
+    if n_req <= 0:
+        raise InputError(path, "line 1: no request (an instance needs one)")
+    if n_dl <= 0:
+        raise InputError(path, f"line {i}: no download (the satellites are those the downloads name)")
 
     ocols = _columns(path, obs_rows, obs_line, (int, int, int, int, int, float, float, float, float),
                      ("observation id", "satellite", "window start", "window end", "duration", "latitude",
@@ -233,6 +244,17 @@ def read_pb(path: str | os.PathLike) -> OneraFleet:
     dcols = _columns(path, dl_rows, dl_line, (int, int, int, int, float, float, float),
                      ("download id", "satellite", "window start", "window end", "latitude", "longitude", "altitude"))
     obs_line_a = np.asarray(obs_line, dtype=np.int64)
+    for what, cols, lines_, ranges in (
+            ("observation", ocols, obs_line, ((2, "window start", 0, TIME_MAX_S), (3, "window end", 0, TIME_MAX_S),
+                                              (4, "duration", 0, TIME_MAX_S), (5, "latitude", -90, 90),
+                                              (6, "longitude", -180, 180))),
+            ("download", dcols, dl_line, ((2, "window start", 0, TIME_MAX_S), (3, "window end", 0, TIME_MAX_S),
+                                          (4, "latitude", -90, 90), (5, "longitude", -180, 180)))):
+        for c, name, lo, hi in ranges:
+            bad = np.flatnonzero((cols[c] < lo) | (cols[c] > hi))
+            if len(bad):
+                k = bad[0]
+                raise InputError(path, f"line {lines_[k]}: {what} {name} {cols[c][k]} is out of range [{lo}, {hi}]")
     sats = np.unique(dcols[1])
     o_sat = np.searchsorted(sats, ocols[1])
     unknown = np.flatnonzero((o_sat >= len(sats)) | (sats[np.minimum(o_sat, max(len(sats) - 1, 0))] != ocols[1])
@@ -290,13 +312,15 @@ def _columns(path, rows, lines, types, names) -> list[np.ndarray]:
         try:
             out.append(np.array(col, dtype=np.float64 if t is float else np.int64) if col
                        else np.zeros(0, np.float64 if t is float else np.int64))
-        except ValueError:
+        except (ValueError, OverflowError):
             for k, v in enumerate(col):
                 try:
-                    t(v)
+                    x = t(v)
                 except ValueError:
                     kind = "a number" if t is float else "an integer"
                     raise InputError(path, f"line {lines[k]}: {name}: {v.strip()!r} is not {kind}") from None
+                if t is int and not INT64[0] <= x <= INT64[1]:
+                    raise InputError(path, f"line {lines[k]}: {name}: {x} does not fit a 64-bit integer") from None
             raise
         if t is float and len(out[-1]) and not np.all(np.isfinite(out[-1])):
             k = int(np.flatnonzero(~np.isfinite(out[-1]))[0])
@@ -343,6 +367,7 @@ OBS_COLUMNS = {"observation_id": "int", "request": "int", "satellite": "int", "s
 DL_COLUMNS = {"download_id": "int", "satellite": "int", "window_start_s": "int", "window_end_s": "int",
               "latitude_deg": "float", "longitude_deg": "float", "altitude": "float"}
 SAT_COLUMNS = {"satellite_id": "int"}
+TABLE_FILES = ("meta.json", "satellites.parquet", "requests.parquet", "observations.parquet", "downloads.parquet")
 
 
 def _tables(f: OneraFleet) -> dict[str, dict[str, np.ndarray]]:
@@ -392,7 +417,7 @@ def write_onera(f: OneraFleet, out, overwrite: bool = False, source: str = "") -
             "fingerprint": fingerprint(f), "satellites": len(f.satellites), "requests": len(f.requests),
             "requests_by_kind": {KIND_SHORT[k]: int((f.requests.kind == k).sum()) for k in range(4)},
             "observations": len(o), "downloads": len(f.downloads)}
-    with atomic_dir(out, overwrite=overwrite, owned=is_onera_dir) as tmp:
+    with atomic_dir(out, overwrite=overwrite, owned=is_onera_dir, names=lambda _: TABLE_FILES) as tmp:
         for name, cols in _tables(f).items():
             pq.write_table(arrow_table(cols), tmp / f"{name}.parquet")
         (tmp / "meta.json").write_text(json.dumps(meta, indent=2) + "\n")
@@ -474,9 +499,8 @@ def read_schedule(path, f: OneraFleet) -> tuple[OneraSchedule, dict]:
     path = Path(path)
     if path.suffix.lower() != ".parquet":
         return read_plan(path), {}
-    columns = ("satellite", "activity", "start")
-    table, info = read_schedule_table(path, SCHEDULE_KIND, fingerprint(f), columns, "an ONERA schedule")
-    cols = {c: table.column(c).to_numpy().astype(np.float64 if c == "start" else np.int64) for c in columns}
+    columns = {"satellite": "int", "activity": "int", "start": "float"}
+    cols, info = read_schedule_table(path, SCHEDULE_KIND, fingerprint(f), columns, "an ONERA schedule")
     return OneraSchedule(cols["satellite"], cols["activity"], cols["start"]), info
 
 
@@ -522,8 +546,11 @@ def read_plan(path) -> OneraSchedule:
         if len(parts) not in (3, 4):
             raise InputError(path, f"line {k}: expected SATELLITE ACTIVITY START END")
         try:
-            rows.append((int(parts[0]), int(parts[1]), float(parts[2])))
+            sat, act, start = int(parts[0]), int(parts[1]), float(parts[2])
         except ValueError:
             raise InputError(path, f"line {k}: satellite and activity must be integers, start a number") from None
-    a = np.array(rows, dtype=np.float64).reshape(-1, 3)
-    return OneraSchedule(a[:, 0].astype(np.int64), a[:, 1].astype(np.int64), a[:, 2].copy())
+        if not (INT64[0] <= sat <= INT64[1] and INT64[0] <= act <= INT64[1] and math.isfinite(start)):
+            raise InputError(path, f"line {k}: satellite and activity must fit 64-bit integers, start be finite")
+        rows.append((sat, act, start))
+    return OneraSchedule(np.array([r[0] for r in rows], dtype=np.int64), np.array([r[1] for r in rows], dtype=np.int64),
+                         np.array([r[2] for r in rows], dtype=np.float64))

@@ -37,7 +37,8 @@ def tiny():
 # pytest-xdist workers, then these one after another with the cores to themselves (two Ray clusters, or a Ray
 # cluster beside a CPU-bound worker, starve each other and make the timing-sensitive ones flaky).
 RAY_MODULES = {"test_platform", "test_platform_multinode", "test_train", "test_tune", "test_jobs_faults",
-               "test_jobs_smoke", "test_overlap", "test_expert", "test_readme", "test_fleet_ray"}
+               "test_jobs_smoke", "test_overlap", "test_expert", "test_readme", "test_fleet_ray",
+               "test_train_prices"}
 RAY_TESTS = {"test_shard_source_splits_shards_between_workers"}
 
 

@@ -68,15 +68,26 @@ def test_evaluate(tmp_path):
 def test_demo_data_built_by_an_older_eosp_is_built_again(tmp_path, monkeypatch, capsys):
     """make demo after an upgrade: the demo's own data sets, in a shard format this eosp refuses, are rebuilt
     (instead of the training failing on them); current ones are kept as they are."""
-    import pyarrow.parquet as pq
-
     from eosp.jobs import train
-    from eosp.shards.io import ShardReader
 
     monkeypatch.chdir(tmp_path)
     monkeypatch.setattr(train, "DEMO_DATA", {"data/demo/train": (2, 1000)})
     monkeypatch.setattr(train, "DEMO_ACQ", 10)
     cfg, _ = train.parse(["--demo", "--ray.num-cpus", "1"])
+    try:
+        rebuild_and_keep(train, cfg, tmp_path, capsys)
+    finally:
+        import ray
+
+        if ray.is_initialized():  # the shard build starts Ray in this process; the next Ray test starts its own
+            ray.shutdown()
+
+
+def rebuild_and_keep(train, cfg, tmp_path, capsys):
+    import pyarrow.parquet as pq
+
+    from eosp.shards.io import ShardReader
+
     train.ensure_demo_data(cfg)
     shard = tmp_path / "data/demo/train/shard-00000.parquet"
     t = pq.read_table(shard)

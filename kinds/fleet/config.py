@@ -32,12 +32,18 @@ class FleetConfig(UtilityConfig):
     rounds: int | None = ranged(None, 1)
     """Price rounds, each followed by a large-neighbourhood move (a deterministic budget: the same schedule for a
     seed on any machine, with --time-limit 0 or one long enough); unset: as many as the time limit allows."""
-    pass_time_limit: float = ranged(5.0, 0)
+    pass_time_limit: float = ranged(5.0, 0, WEEK_S)
     """Seconds the exact solver may spend on one pass (its bound is used when it stops early)."""
     span_s: float = ranged(3600.0, 1)
     """Length of the time span freed by one large-neighbourhood move."""
     workers: int = ranged(1, 1, 256)
     """Processes solving the passes of a price round (forked from this one, the pass graphs shared)."""
+    warm_start: str = choice("none", "none", "heuristic", "learned")
+    """Where the task prices start: none (0), heuristic (weight x (1 - 1/satellites that can serve the task)) or
+    learned (the shipped price network over the task-opportunity graph, eosp.kinds.fleet.warmstart)."""
+    price_model: str = ""
+    """Directory of the price network used by --warm-start learned (prices.pt, prices.json from
+    jobs/train_prices.py); empty: the shipped one."""
 
     NAME = "fleet"
     BUDGET = "rounds"

@@ -238,9 +238,9 @@ class Coordinator:
     def record(self) -> None:
         self.history.append((time.perf_counter() - self.t0, self.best.value, self.best_bound))
 
-    def offer(self, primal: Primal) -> bool:
+    def offer(self, primal: Primal, deadline: float | None = None) -> bool:
         """Keep `primal` (after battery repair) when it serves more than the best."""
-        self.battery_repair(primal)
+        self.battery_repair(primal, deadline)
         if primal.value > self.best.value + 1e-9:
             self.keep(primal)
             return True
@@ -290,20 +290,24 @@ class Coordinator:
         deadline = None if cfg.time_limit is None else self.t0 + cfg.time_limit
         rng = np.random.default_rng(cfg.seed if self.start_round == 0 else [cfg.seed, self.start_round])
         order = np.argsort(prob.pass_time[:, 0], kind="stable")
-        if self.initial is not None:  # start from the given schedule (its paths re-walked unless frozen)
-            first = self.empty()
-            for p in np.flatnonzero(~self.frozen).tolist():
-                path = self.initial.paths[p]
-                free = self._available(first, p)[prob.passes[p].graph.node_acq[path]] if len(path) else path
-                self._assign(first, p, rewalk(prob.passes[p], path[free]) if len(path) else path)
-        else:
-            first = self.construct(order, primal=self.empty())
-        self.descend(first, list(range(len(prob.passes))), deadline)
-        self.offer(first)
-        try:
-            self._rounds(deadline, rng)
-        except KeyboardInterrupt:  # Ctrl-C: the best schedule so far is the answer
+        first = self.empty()
+        try:  # Ctrl-C while the first schedule is built: the passes built so far are the answer
+            if self.initial is not None:  # start from the given schedule (its paths re-walked unless frozen)
+                for p in np.flatnonzero(~self.frozen).tolist():
+                    path = self.initial.paths[p]
+                    free = self._available(first, p)[prob.passes[p].graph.node_acq[path]] if len(path) else path
+                    self._assign(first, p, rewalk(prob.passes[p], path[free]) if len(path) else path)
+            else:
+                self.construct(order, primal=first)
+            self.descend(first, list(range(len(prob.passes))), deadline)
+        except KeyboardInterrupt:
             self.interrupted = True
+        self.offer(first, time.perf_counter() if self.interrupted else None)  # repaired, not improved, after Ctrl-C
+        if not self.interrupted:
+            try:
+                self._rounds(deadline, rng)
+            except KeyboardInterrupt:  # Ctrl-C: the best schedule so far is the answer
+                self.interrupted = True
         return self.best
 
     def _rounds(self, deadline: float | None, rng: np.random.Generator) -> None:

@@ -11,9 +11,10 @@ from __future__ import annotations
 
 import argparse
 import time
+from dataclasses import dataclass
 from datetime import timedelta
 from pathlib import Path
-from typing import Any, NamedTuple
+from typing import Any
 
 from eosp.errors import InputError
 from eosp.kinds.base import KindBase, Words, labelled
@@ -22,11 +23,16 @@ from eosp.problem import Detection, Export, Generator, Result, Solver, Source, V
 HERE = "eosp.kinds.fleet.kind"
 
 
-class FleetData(NamedTuple):
-    """A fleet directory read: the fleet and its opportunities (None when read for checking only)."""
+@dataclass
+class FleetData:
+    """A fleet directory read: the fleet, its opportunities (None when read for checking only), the meta.json that
+    the size checks name, and the Geometry a solve's checks built (:meth:`FleetKind.before_solve`; the solvers and
+    the checker reuse it)."""
 
     fleet: Any
     opps: Any
+    meta: Path
+    geo: Any = None
 
 
 def is_case(path: str) -> Detection:
@@ -44,18 +50,25 @@ def _written(out, fleet, opps, t0: float) -> str:
 
 
 def import_case(paths: list[str], out: str, overwrite: bool = False) -> str:
-    """Read an aeossp case, compute opportunities and passes, write the fleet directory `out`."""
+    """Read an aeossp case, compute opportunities and passes, write the fleet directory `out`; the memory of the scan
+    (the horizon's instants x satellites, the tasks) is estimated and checked after reading, before any propagation,
+    and a fleet without any valid schedule is refused."""
     from eosp.atomic import check_output_dir
     from eosp.fleet.aeossp import read_case
+    from eosp.fleet.check import require_feasible
     from eosp.fleet.geometry import Geometry
-    from eosp.fleet.io import is_fleet_dir, write_fleet
-    from eosp.fleet.opportunities import compute
+    from eosp.fleet.io import is_fleet_dir, write_fleet, written_names
+    from eosp.fleet.opportunities import compute, require_check_memory, require_scan_memory
 
     (case_dir,) = paths
-    check_output_dir(out, overwrite=overwrite, owned=is_fleet_dir, what="fleet directory")
+    check_output_dir(out, overwrite=overwrite, owned=is_fleet_dir, what="fleet directory", names=written_names)
     t0 = time.perf_counter()
     fleet = read_case(case_dir)
-    opps = compute(fleet, Geometry(fleet))
+    require_scan_memory(fleet, Path(case_dir) / "mission.yaml")  # the horizon's length as much as the fleet's size
+    require_check_memory(fleet, Path(case_dir) / "mission.yaml")  # and the feasibility check below
+    geo = Geometry(fleet)
+    opps = compute(fleet, geo)
+    require_feasible(fleet, case_dir, geo)  # a battery that idling alone runs dry: no schedule is valid
     write_fleet(fleet, opps, out, overwrite=overwrite)
     return _written(out, fleet, opps, t0)
 
@@ -66,22 +79,24 @@ def generate(cfg, out: str, overwrite: bool = False) -> str:
     The memory it needs is estimated from the request and checked against what the machine has before any
     work (one line, exit 2, instead of the kernel's out-of-memory killer hours later)."""
     from eosp.atomic import check_output_dir
-    from eosp.fleet.generate import estimate_bytes
+    from eosp.fleet.generate import check, estimate_bytes
     from eosp.fleet.generate import generate as draw
     from eosp.fleet.geometry import Geometry
-    from eosp.fleet.io import is_fleet_dir, write_fleet
+    from eosp.fleet.io import is_fleet_dir, write_fleet, written_names
     from eosp.fleet.opportunities import compute
     from eosp.memory import require_memory
 
-    check_output_dir(out, overwrite=overwrite, owned=is_fleet_dir, what="fleet directory")
-    require_memory("--satellites/--tasks", estimate_bytes(cfg), f"a fleet of {cfg.satellites} satellites and "
-                                                                f"{cfg.tasks} tasks over {cfg.hours:g} h")
-    t0 = time.perf_counter()
+    check_output_dir(out, overwrite=overwrite, owned=is_fleet_dir, what="fleet directory", names=written_names)
     try:
-        fleet = draw(cfg)
+        check(cfg)
     except ValueError as exc:  # "FleetGenConfig.planes: reason" -> "--planes: reason"
         name, _, reason = str(exc).partition(": ")
         raise InputError("--" + name.rpartition(".")[2].replace("_", "-"), reason) from None
+    require_memory("--satellites/--tasks/--hours", estimate_bytes(cfg),
+                   f"a fleet of {cfg.satellites} satellites and {cfg.tasks} tasks over {cfg.hours:g} h "
+                   f"({cfg.hours * 720:,.0f} instants of the 5 s grid)")
+    t0 = time.perf_counter()
+    fleet = draw(cfg)
     opps = compute(fleet, Geometry(fleet))
     write_fleet(fleet, opps, out, overwrite=overwrite)
     return _written(out, fleet, opps, t0)
@@ -114,7 +129,9 @@ def export_globe(fmt: str):
 
     def write(data: FleetData, schedule, out: str, overwrite: bool = False) -> str:
         from eosp.fleet.export import write_export
+        from eosp.fleet.opportunities import require_check_memory
 
+        require_check_memory(data.fleet, data.meta)  # tracks over the whole horizon
         path = write_export(data.fleet, schedule, fmt, out, overwrite=overwrite)
         return f"{Path(path)}: {len(schedule)} observations"
 
@@ -151,6 +168,7 @@ class FleetKind(KindBase):
                   overwrite_written="replace a fleet directory eosp wrote",
                   generate_flag="generate a fleet (not a single pass)")
     schedule_mark = "fleet-schedule"
+    memory_checked = ("import", "generate", "solve", "validate", "report", "export-schedule")
     solvers = {"greedy": Solver("greedy", "eosp.kinds.fleet.config:GreedyConfig", "eosp.kinds.fleet.solve:solve_greedy",
                                 "each task once, by weight"),
                "fleet": Solver("fleet", "eosp.kinds.fleet.config:FleetConfig", "eosp.kinds.fleet.solve:solve_fleet",
@@ -173,7 +191,7 @@ class FleetKind(KindBase):
     def read(self, path: str, solving: bool = True) -> FleetData:
         from eosp.fleet.io import read_fleet
 
-        return FleetData(*read_fleet(path, with_opportunities=solving))
+        return FleetData(*read_fleet(path, with_opportunities=solving), Path(path) / "meta.json")
 
     def read_schedule(self, path: str, problem: FleetData) -> Any:
         from eosp.fleet.io import read_schedule
@@ -187,14 +205,18 @@ class FleetKind(KindBase):
         return write_schedule(schedule, problem.fleet, path, overwrite=overwrite, info=info)
 
     def check(self, problem: FleetData, schedule: Any) -> Verdict:
+        """The checker's verdict, its memory over the horizon estimated before any geometry."""
         from eosp.fleet.check import validate
+        from eosp.fleet.opportunities import require_check_memory
 
-        return validate(problem.fleet, schedule).verdict()
+        if problem.geo is None:
+            require_check_memory(problem.fleet, problem.meta)
+        return validate(problem.fleet, schedule, problem.geo).verdict()
 
     def describe(self, problem: FleetData, path: str) -> str:
         import numpy as np
 
-        fleet, opps = problem
+        fleet, opps = problem.fleet, problem.opps
         tk = fleet.tasks
         per_task = opps.per_task(len(tk))
         served = per_task > 0
@@ -218,10 +240,12 @@ class FleetKind(KindBase):
         """The planner's page of the fleet's day for one or more schedules; a schedule of another fleet is refused
         (fingerprint) before anything is written."""
         from eosp.evaluation.fleet_report import check_report_out
+        from eosp.fleet.opportunities import require_check_memory
 
         check_report_out(out, ns.overwrite)
         t0 = time.perf_counter()
         data = self.read(path)
+        require_check_memory(data.fleet, data.meta)  # the page checks and draws the whole horizon
         scheds = labelled(schedules, lambda s: self.read_schedule(s, data))
         return report_page(data.fleet, data.opps, scheds, out, ns, t0)
 
@@ -235,6 +259,13 @@ class FleetKind(KindBase):
         if getattr(cfg, "pass_solver", "") == "policy":
             raise InputError("--pass-solver", "policy: no model trained on fleet passes is shipped yet; use exact, "
                                               "ramp or greedy")
+
+    def before_solve(self, problem: FleetData, path: str) -> None:
+        """The pass graphs' memory over the horizon estimated, then the fleet feasible (a battery that idling alone
+        runs dry has no valid schedule), before any solver runs; the Geometry built for it is kept for the solve."""
+        from eosp.fleet.passgraph import require_solvable
+
+        problem.geo = require_solvable(problem.fleet, problem.opps, problem.meta)
 
     def solve_inputs(self, ns: argparse.Namespace, problem: FleetData) -> dict:
         """--init (a schedule of this fleet to start from) and --freeze-until (the passes that start before it keep
@@ -250,7 +281,7 @@ class FleetKind(KindBase):
         initial, freeze_s = None, None
         if ns.init:
             initial = self.read_schedule(ns.init, problem)  # a schedule of another fleet is refused (fingerprint)
-            res = validate(fleet, initial)
+            res = validate(fleet, initial, problem.geo)
             if not res.valid:
                 raise InputError(ns.init, f"not a valid schedule of this fleet: {res.first}")
         if ns.freeze_until:
@@ -278,11 +309,10 @@ class FleetKind(KindBase):
         info = {"value": res.value, "solver": "fleet", "pass_solver": cfg.pass_solver, "seconds": round(seconds, 3),
                 "bound": res.bound, "gap": res.gap, "bound_source": res.bound_kind}
         why = res.info["no_lagrangian_bound_because"]
-        source = res.bound_kind + ("" if why is None else f": {why}")
-        stop = " (interrupted: the best schedule so far)" if res.status == "interrupted" else ""
-        return info, (f"{out}: {n} observations, WCR {res.value:.6f}, bound {res.bound:.6f} ({source}), "
-                      f"gap {res.gap:.4%}; {res.info['rounds']} rounds, {res.info['pass_solves']} pass solves "
-                      f"({seconds:.1f} s){stop}")
+        source = f"{res.bound_kind}{'' if why is None else f': {why}'}"
+        bound = "" if res.bound is None else f", bound {res.bound:.6f} ({source}), gap {res.gap:.4%}"
+        return info, (f"{out}: {n} observations, WCR {res.value:.6f}{bound}; {res.info['rounds']} rounds, "
+                      f"{res.info['pass_solves']} pass solves ({seconds:.1f} s)")
 
     def solve_arguments(self, p: argparse.ArgumentParser) -> None:
         p.add_argument("--init", default="", help="a schedule of this fleet to start from")

@@ -55,6 +55,14 @@ class InProcessPool:
 _FORKED: tuple[Problem, FleetConfig] | None = None  # the problem and config a forked worker inherits
 
 
+def _ignore_sigint() -> None:
+    """A pool worker leaves Ctrl-C to its parent (a terminal sends SIGINT to the whole process group): the parent
+    keeps the best schedule and terminates the pool, instead of every worker printing a traceback."""
+    import signal
+
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
 def _solve_chunk(args: tuple[list[int], np.ndarray]) -> list[PassResult]:
     passes, prices = args
     prob, cfg = _FORKED
@@ -71,7 +79,7 @@ class ForkPool:
         global _FORKED
         _FORKED = (prob, cfg)
         self.workers = cfg.workers
-        self.pool = multiprocessing.get_context("fork").Pool(cfg.workers)
+        self.pool = multiprocessing.get_context("fork").Pool(cfg.workers, initializer=_ignore_sigint)
 
     def solve_priced(self, passes: list[int], prices: np.ndarray,
                      deadline: float | None) -> dict[int, PassResult] | None:

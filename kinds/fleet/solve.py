@@ -76,6 +76,10 @@ def solve(fleet: Fleet, opps: Opportunities, cfg: FleetConfig | None = None, pro
     own_pool = pool is None and cfg.workers > 1
     pool = ForkPool(prob, cfg) if own_pool else pool
     coord = Coordinator(prob, cfg, t0=t0, pool=pool, initial=start, frozen=frozen, on_round=on_round)
+    if resume is None and cfg.warm_start != "none":
+        from eosp.kinds.fleet.warmstart import start_prices
+
+        coord.prices = Prices(start_prices(prob, cfg.warm_start, cfg.price_model or None))
     if resume is not None:
         if len(resume.lam) != len(fleet.tasks):
             raise ValueError("resume: prices of another fleet")
@@ -124,7 +128,9 @@ def solve_fleet(data, cfg: FleetConfig, initial: Schedule | None = None,
                 freeze_until_s: float | None = None) -> Result:
     """The contract's entry of ``--solver fleet`` (:mod:`eosp.kinds.fleet.kind`): `data` a fleet directory read."""
     t0 = time.perf_counter()
-    sol = solve(data.fleet, data.opps, cfg, initial=initial, freeze_until_s=freeze_until_s, t0=t0)
+    cfg.validate()  # before the pass graphs are built
+    prob = Problem.build(data.fleet, data.opps, data.geo)  # the Geometry the kind's checks built, when they did
+    sol = solve(data.fleet, data.opps, cfg, problem=prob, initial=initial, freeze_until_s=freeze_until_s, t0=t0)
     status = "interrupted" if sol.info["interrupted"] else "optimal" if sol.gap == 0 else \
         "budget" if cfg.rounds is not None and sol.info["rounds"] >= cfg.rounds else "time_limit"
     return Result(sol.schedule, sol.value, sol.bound, sol.info["bound_source"], status,
@@ -138,7 +144,7 @@ def solve_greedy(data, cfg: GreedyConfig) -> Result:
     from eosp.fleet.greedy import solve as greedy
 
     t0 = time.perf_counter()
-    geo = Geometry(data.fleet)
+    geo = data.geo or Geometry(data.fleet)
     sched = greedy(data.fleet, data.opps, geo)
     verdict = validate(data.fleet, sched, geo).verdict()
     return Result(sched, float(verdict.metrics["WCR"]), None, None, "done", {"solve": time.perf_counter() - t0},

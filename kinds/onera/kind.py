@@ -30,10 +30,11 @@ def is_pb(path: str) -> Detection:
 def import_pb(paths: list[str], out: str, overwrite: bool = False) -> str:
     """Read an ONERA ``.pb`` instance and write its fleet directory."""
     from eosp.atomic import check_output_dir
-    from eosp.onera.model import KIND_SHORT, is_onera_dir, read_pb, write_onera
+    from eosp.onera.model import KIND_SHORT, TABLE_FILES, is_onera_dir, read_pb, write_onera
 
     (pb_file,) = paths
-    check_output_dir(out, overwrite=overwrite, owned=is_onera_dir, what="ONERA fleet directory")
+    check_output_dir(out, overwrite=overwrite, owned=is_onera_dir, what="ONERA fleet directory",
+                     names=lambda _: TABLE_FILES)
     t0 = time.perf_counter()
     f = read_pb(pb_file)
     write_onera(f, out, overwrite=overwrite, source=Path(pb_file).name)

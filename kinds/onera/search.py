@@ -50,8 +50,9 @@ class BoundConfig(UtilityConfig):
     """Upper bound: lp (the time-capacity relaxation, solved by HiGHS, certified from its duals),
     conflict-free (each request at its best), none."""
     bound_time_limit: float = ranged(30.0, 0, WEEK_S)
-    """Seconds of cutting-plane rounds of the lp bound, after the plan (the last solve's certified bound is
-    kept)."""
+    """Seconds of cutting-plane rounds of the lp bound: under a time limit, at most this and half of the limit are
+    kept from the search for it (the bound gets the time left); without one, this many after the plan (the last
+    finished solve's certified bound is kept; none finished: the conflict-free bound)."""
 
 
 @dataclass
@@ -299,6 +300,7 @@ class Search:
     def __init__(self, f: OneraFleet, seed: int = 0):
         self.f = f
         self.plan = Plan(f)
+        self.moves = 0  # moves tried so far (also when Ctrl-C stops the search)
         o, r = f.observations, f.requests
         self.rng = random.Random(seed)
         first = r.first.tolist()
@@ -406,13 +408,25 @@ class Search:
     def lns(self, stop: Stop, span_s: float, trace: list, t0: float) -> int:
         """Destroy-and-repair moves until `stop` (deadline, move budget or the value of an upper bound); the number
         of moves."""
+        pl = self.plan
+        pl.journal = []
+        try:
+            return self._moves(stop, span_s, trace, t0)
+        except KeyboardInterrupt:  # Ctrl-C: the move in flight undone, the plan as it was before it
+            if pl.journal:
+                pl.undo(0)
+            raise
+        finally:
+            pl.journal = None
+
+    def _moves(self, stop: Stop, span_s: float, trace: list, t0: float) -> int:
         pl, rng, f = self.plan, self.rng, self.f
         n_sat = len(f.satellites)
         obj = self.objective
         moves = 0
-        pl.journal = []
         while not stop.reached(moves, obj):
             moves += 1
+            self.moves += 1
             s = rng.randrange(n_sat)
             rows = self.sat_rows[s]
             if not len(rows):
@@ -460,7 +474,6 @@ class Search:
             else:
                 pl.undo(mark)
                 pl.journal.clear()
-        pl.journal = None
         return moves
 
 
@@ -479,39 +492,53 @@ class Stop:
 
 
 def solve(f: OneraFleet, cfg: BoundConfig | None = None) -> Solution:
-    """The greedy plan, then (an :class:`OneraConfig`) large-neighbourhood search until the time limit (counted
-    from the call) or the move budget; the bound."""
+    """The greedy plan, then (an :class:`OneraConfig`) large-neighbourhood search until the time limit or the move
+    budget, then the bound, all within the time limit (counted from the call: the search stops early by the lp
+    bound's share, ``bound_time_limit``).  Ctrl-C keeps the plan as it was before the move in flight (status
+    "interrupted", the conflict-free bound)."""
     cfg = cfg or OneraConfig()
     cfg.validate()  # fields set one by one (eosp.config.apply_overrides) are checked together here
     t0 = time.perf_counter()
     search = Search(f, seed=cfg.seed)
-    search.greedy()
-    trace = [(time.perf_counter() - t0, search.objective)]
-    greedy_value = search.objective
-    moves, status = 0, "done"
-    if isinstance(cfg, OneraConfig):
-        stop = Stop(None if cfg.time_limit is None else t0 + cfg.time_limit, cfg.moves, float(search.best.sum()))
-        moves = search.lns(stop, cfg.span_s, trace, t0)
-        status = "optimal" if search.objective >= stop.target - 1e-9 else "budget" if moves == cfg.moves \
-            else "time_limit"
+    limit = cfg.time_limit  # None for the greedy (one pass) and for a search bounded by its moves alone
+    reserve = min(cfg.bound_time_limit, limit / 2) if cfg.bound == "lp" and limit is not None else 0.0
+    trace: list = []
+    status = "done"
+    try:
+        search.greedy()
+        trace.append((time.perf_counter() - t0, search.objective))
+        if isinstance(cfg, OneraConfig):
+            stop = Stop(None if limit is None else t0 + limit - reserve, cfg.moves, float(search.best.sum()))
+            moves = search.lns(stop, cfg.span_s, trace, t0)
+            status = "optimal" if search.objective >= stop.target - 1e-9 else "budget" if moves == cfg.moves \
+                else "time_limit"
+    except KeyboardInterrupt:
+        status = "interrupted"
+    if not trace:
+        trace.append((time.perf_counter() - t0, search.objective))
+    greedy_value = trace[0][1]
     value = search.objective
     t_search = time.perf_counter() - t0
     schedule = search.plan.schedule()
+    free = float(search.best.sum())  # the conflict-free bound
     bound, source = None, cfg.bound
-    if cfg.bound == "conflict-free":
-        bound = float(search.best.sum())
-    elif cfg.bound == "lp" and value >= float(search.best.sum()) - 1e-9:  # the plan meets the conflict-free bound
-        bound, source = float(search.best.sum()), "conflict-free"
+    if cfg.bound == "conflict-free" or (cfg.bound == "lp" and (status == "interrupted" or value >= free - 1e-9)):
+        bound, source = free, "conflict-free"  # the plan meets it, or Ctrl-C: no LP after it
     elif cfg.bound == "lp":
         from eosp.kinds.onera.bound import lp_bound
 
         lp_info: dict = {}
-        bound = min(lp_bound(f, time_limit=cfg.bound_time_limit, info=lp_info), float(search.best.sum()))
-        source = f"lp ({lp_info.get('rounds', 0)} rounds, {lp_info.get('cuts', 0)} cuts)"
+        budget = cfg.bound_time_limit if limit is None else \
+            min(cfg.bound_time_limit, max(0.0, t0 + limit - time.perf_counter()))
+        try:
+            bound = min(lp_bound(f, time_limit=budget, info=lp_info), free)
+            source = f"lp ({lp_info.get('rounds', 0)} rounds, {lp_info.get('cuts', 0)} cuts)"
+        except KeyboardInterrupt:
+            status, bound, source = "interrupted", free, "conflict-free"
     gap = None if bound is None else (0.0 if bound <= 0 else max(0.0, (bound - value) / bound))
-    t99 = next(t for t, v in trace if v >= 0.99 * value - 1e-12)
+    t99 = next((t for t, v in trace if v >= 0.99 * value - 1e-12), trace[-1][0])
     return Solution(schedule, value, bound, gap,
-                    {"greedy_value": greedy_value, "moves": moves, "seconds_search": t_search,
+                    {"greedy_value": greedy_value, "moves": search.moves, "seconds_search": t_search,
                      "seconds": time.perf_counter() - t0, "time_to_99": t99, "bound_source": source,
                      "trace": trace, "status": status})
 
