@@ -310,6 +310,12 @@ def test_the_command_line(tmp_path, capsys):
     assert "TP" in line and "bound" in line
     assert main(["validate", path, str(out)]) == 0
     assert capsys.readouterr().out.startswith("valid: TP")
+    # the code reading's schedule is judged under the code reading (the documented one may refuse it)
+    code = tmp_path / "code.json"
+    assert main(["solve", path, "--solver", "eosbench", "--transition", "code", "--rounds", "2", "--time-limit", "0",
+                 "--out", str(code)]) == 0
+    assert check(read_scenario(path), read_schedule(str(code), read_scenario(path)), Rules("code")).valid
+    capsys.readouterr()
     data = json.loads(out.read_text())
     assert data["eosp"] == "eosbench-schedule" and set(data["metrics"]) == {"TP", "TCR", "BD", "TM", "RT", "RV"}
     data["assignments"].append(dict(data["assignments"][0]))
