@@ -205,28 +205,31 @@ def train(graphs: list, targets: list, cfg: PriceTrainConfig, log) -> object:
 
 
 class DualRound:
-    """A Ray actor holding one fleet's Problem: L(lam)/W and the tasks' serve counts of one price round."""
+    """A Ray actor holding some fleets' Problems: for each, L(lam)/W and the tasks' serve counts of one price
+    round (a fleet per CPU would leave actors waiting for CPUs the others hold: the fleets are dealt out)."""
 
-    def __init__(self, path: str):
+    def __init__(self, paths: list[str]):
         import torch
 
         torch.set_num_threads(1)
-        self.prob = read_problem(path)
+        self.probs = [read_problem(p) for p in paths]
 
-    def round(self, lam):
+    def rounds(self, lams: list) -> list:
         import numpy as np
 
         from eosp.kinds.fleet.config import FleetConfig
         from eosp.kinds.fleet.problem import path_tasks, priced, solve_round_pass
 
-        prob, cfg = self.prob, FleetConfig()
-        count = np.zeros(len(prob.weight))
-        total = float(lam.sum())
-        for pg in prob.passes:
-            res = solve_round_pass(pg, priced(prob.weight, lam, pg.tasks), cfg)
-            total += res.bound if res.bound is not None else res.value
-            count[path_tasks(prob, pg.pass_id, res.nodes)] += 1
-        return total / prob.total_weight, count
+        cfg, out = FleetConfig(), []
+        for prob, lam in zip(self.probs, lams):
+            count = np.zeros(len(prob.weight))
+            total = float(lam.sum())
+            for pg in prob.passes:
+                res = solve_round_pass(pg, priced(prob.weight, lam, pg.tasks), cfg)
+                total += res.bound if res.bound is not None else res.value
+                count[path_tasks(prob, pg.pass_id, res.nodes)] += 1
+            out.append((total / prob.total_weight, count))
+        return out
 
 
 def dual_descent(model, graphs: list, actors: list, cfg: PriceTrainConfig, log) -> object:
@@ -247,7 +250,8 @@ def dual_descent(model, graphs: list, actors: list, cfg: PriceTrainConfig, log) 
         sig = [torch.sigmoid(model(x)).double() * torch.from_numpy(g.contested.astype(np.float64))
                for x, g in zip(xs, graphs)]
         lams = [(s.detach().numpy() * g.weight) for s, g in zip(sig, graphs)]
-        got = ray.get([a.round.remote(lam) for a, lam in zip(actors, lams)])
+        dealt = ray.get([a.rounds.remote(lams[k::len(actors)]) for k, a in enumerate(actors)])
+        got = [dealt[i % len(actors)][i // len(actors)] for i in range(len(lams))]
         mean_L = float(np.mean([v for v, _ in got]))
         log(cfg.epochs + epoch, {"train_L_over_W": mean_L})
         if mean_L < best:
@@ -266,6 +270,9 @@ def dual_descent(model, graphs: list, actors: list, cfg: PriceTrainConfig, log) 
 
 def run(cfg: PriceTrainConfig) -> dict:
     import ray
+    import torch
+
+    torch.set_num_threads(1)  # one thread per process (a second one made the fit 10x slower on a loaded machine)
 
     from eosp.errors import InputError
     from eosp.jobs.ray_init import init_ray
@@ -316,7 +323,9 @@ def run(cfg: PriceTrainConfig) -> dict:
         if cfg.dual_epochs:
             n_train = len(pairs) - cfg.val if len(pairs) > cfg.val else len(pairs)
             actor = ray.remote(num_cpus=1)(DualRound)
-            actors = [actor.remote(str(Path(f).resolve())) for f in cfg.fleets[:n_train]]
+            paths = [str(Path(f).resolve()) for f in cfg.fleets[:n_train]]
+            k = max(1, min(n_train, int(ray.available_resources().get("CPU", 1))))
+            actors = [actor.remote(paths[i::k]) for i in range(k)]
             model = dual_descent(model, [g for g, _ in pairs[:n_train]], actors, cfg,
                                  lambda step, m: mlflow.log_metrics(m, step=step))
             for a in actors:

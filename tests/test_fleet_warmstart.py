@@ -152,3 +152,9 @@ def test_the_cli_refuses_a_model_that_does_not_fit_in_one_line(tmp_path, model_d
     assert r.returncode == 2, r.stderr
     assert r.stderr.strip().count("\n") == 0 and "task features differ" in r.stderr
     assert not (tmp_path / "s.parquet").exists()
+
+
+def test_the_shipped_model_prices_a_fleet(prob):
+    lam = start_prices(prob, "learned")  # no directory: the shipped model
+    assert np.isfinite(lam).all() and (lam >= 0).all() and (lam <= prob.weight + 1e-12).all()
+    assert (lam > 0).sum() > 0
