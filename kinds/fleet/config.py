@@ -41,9 +41,9 @@ class FleetConfig(UtilityConfig):
     default: on test_hard (120 s) the bound with them stayed at the conflict-free one while the bound without
     them reached a 3.5% gap (docs/results.md)."""
     energy_price: float = ranged(1.0, 0)
-    """With --energy-bound, the share of the bound's energy prices (what a Wh is worth in each pass, from the battery's energy windows)
-    that the schedules' pass problems pay (construction, coordinate descent, moves): 0 leaves energy to the
-    battery repair alone."""
+    """With --energy-bound, the share of the bound's energy prices (what a Wh is worth in each pass, from the
+    battery's energy windows) that the schedules' pass problems pay (construction, coordinate descent, moves):
+    0 leaves energy to the battery repair alone."""
     workers: int = ranged(1, 1, 256)
     """Processes solving the passes of a price round (forked from this one, the pass graphs shared)."""
     warm_start: str = choice("none", "none", "heuristic", "learned")

@@ -196,7 +196,7 @@ class Coordinator:
                                     f"({self.best.value:.6f})")
             else:
                 self.best_bound, self.bound_source = total, "lagrangian"
-        self.prices.step_towards(count, pass_wh, total, self.best.value)
+        self.prices.step_towards(count, total, self.best.value, pass_wh)
         self.spend = self.cfg.energy_price * self.prices.pass_price()
         return total
 
@@ -415,7 +415,8 @@ class Coordinator:
         """The best proven bound: the Lagrangian one when every pass term of a price round was proven (exact pass
         solver; each pass's term its priced optimum where its graph serves the bound, else its bound problem, see
         :func:`eosp.fleet.passgraph.bound_problem`), else the conflict-free bound (every task that has an
-        opportunity, served once).  Energy enters the Lagrangian bound through the battery's energy windows
-        (:mod:`eosp.fleet.energy`, their multipliers in :mod:`eosp.kinds.fleet.prices`).  With frozen passes the Lagrangian bound holds for the
-        schedules that keep them as given."""
+        opportunity, served once).  With ``energy_bound`` energy enters the Lagrangian bound through the
+        battery's energy windows (:mod:`eosp.fleet.energy`, their multipliers in :mod:`eosp.kinds.fleet.prices`);
+        else it is relaxed.  With frozen passes the Lagrangian bound holds for the schedules that keep them as
+        given."""
         return self.best_bound

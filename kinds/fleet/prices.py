@@ -45,17 +45,19 @@ class Prices:
     improved."""
 
     lam: np.ndarray
-    windows: EnergyWindows
+    windows: EnergyWindows | None = None  # None: no energy window (task prices only)
     mu: np.ndarray = field(default=None)  # per window, in typical observations of its satellite (scale_wh)
     factor: float = 1.0
     stall: int = 0
 
     def __post_init__(self) -> None:
+        if self.windows is None:
+            self.windows = EnergyWindows.none(0)
         if self.mu is None:
             self.mu = np.zeros(len(self.windows))
 
     @classmethod
-    def zero(cls, n_tasks: int, windows: EnergyWindows) -> Prices:
+    def zero(cls, n_tasks: int, windows: EnergyWindows | None = None) -> Prices:
         return cls(np.zeros(n_tasks), windows)
 
     def pass_price(self) -> np.ndarray:
@@ -70,18 +72,18 @@ class Prices:
             total += t
         return total
 
-    def step_towards(self, served: np.ndarray, pass_wh: np.ndarray, dual: float, best: float) -> None:
+    def step_towards(self, served: np.ndarray, dual: float, best: float, pass_wh: np.ndarray | None = None) -> None:
         """Move the prices by a subgradient step: `served[i]` is how many passes of the round serve task i, and
-        `pass_wh[p]` the energy (sum of e_o) of pass p's path of the round; the step Polyak's towards the best
-        value known `best` from the dual value `dual`, taken by the task prices and the multipliers each with
-        its own norm (the multipliers :data:`ENERGY_SHARE` of theirs): one norm over both let thousands of
+        `pass_wh[p]` the energy (sum of e_o) of pass p's path of the round (None: no window); the step Polyak's
+        towards the best value known `best` from the dual value `dual`, taken by the task prices and the
+        multipliers each with its own norm (the multipliers :data:`ENERGY_SHARE` of theirs): one norm over both let thousands of
         windows shrink the task prices' steps until the bound stalled above the conflict-free one (test_hard);
         any nonnegative prices give a valid bound, so the step rule is a matter of speed only; a price or
         multiplier at 0 cannot go lower."""
         g = 1.0 - served
         g[(self.lam <= 0) & (g > 0)] = 0.0
         win = self.windows
-        h = (win.rhs_wh - win.used(pass_wh)) / win.scale_wh
+        h = (win.rhs_wh - win.used(pass_wh)) / win.scale_wh if pass_wh is not None else np.zeros(len(win))
         h[(self.mu <= 0) & (h > 0)] = 0.0
         target = self.factor * max(dual - best, 1e-6 * dual)
         if float(g @ g) > 0:
