@@ -76,10 +76,10 @@ class Prices:
         """Move the prices by a subgradient step: `served[i]` is how many passes of the round serve task i, and
         `pass_wh[p]` the energy (sum of e_o) of pass p's path of the round (None: no window); the step Polyak's
         towards the best value known `best` from the dual value `dual`, taken by the task prices and the
-        multipliers each with its own norm (the multipliers :data:`ENERGY_SHARE` of theirs): one norm over both let thousands of
-        windows shrink the task prices' steps until the bound stalled above the conflict-free one (test_hard);
-        any nonnegative prices give a valid bound, so the step rule is a matter of speed only; a price or
-        multiplier at 0 cannot go lower."""
+        multipliers each with its own norm (the multipliers :data:`ENERGY_SHARE` of theirs): one norm over both
+        let thousands of windows shrink the task prices' steps until the bound stalled above the conflict-free
+        one (test_hard); any nonnegative prices give a valid bound, so the step rule is a matter of speed only;
+        a price or multiplier at 0 cannot go lower."""
         g = 1.0 - served
         g[(self.lam <= 0) & (g > 0)] = 0.0
         win = self.windows
