@@ -1,11 +1,14 @@
 """The fleet solver on the astro-reason aeossp_standard cases, end to end, scored by the benchmark's own verifier.
 
 For each case: read the case, compute opportunities and passes, build the pass graphs, solve with the fleet
-solver (``--time-limit`` seconds after the build), write solution.json, then run the astro-reason verifier on
+solver (``--time-limit`` seconds after the fleet and its opportunities are read: pass graphs, rounds, repair and
+final check all count), write solution.json, then run the astro-reason verifier on
 it in a subprocess (``python -m benchmarks.aeossp_standard.verifier.run CASE SOLUTION`` in a checkout of
 astro-reason at commit ffd1e89; make one from the fetched mirror with ``git -C MIRROR archive HEAD benchmarks
 | tar x -C DIR``).  Prints one line per case and writes a CSV, a Markdown table and a plot of value and bound
-against time per case.  Wall time is end to end, verifier excluded.
+against time per case; the anytime curve (seconds after reading, value, bound: WCR fractions) is kept in
+history.json and sampled at ``--at`` seconds in the table (WCR and gap of the best schedule and bound then).
+Wall time is end to end, verifier excluded.
 
     python benchmarks/bench_fleet.py --astro /path/to/astro-reason --splits test --time-limit 120 --out runs/bench-fleet
 """
@@ -40,11 +43,13 @@ def run_case(case: Path, split: str, args: argparse.Namespace) -> dict:
     t0 = time.perf_counter()
     fleet = read_case(case)
     opps = compute(fleet)
-    t_opp = time.perf_counter() - t0
+    t_read = time.perf_counter()
+    t_opp = t_read - t0
     prob = Problem.build(fleet, opps)
     t_build = time.perf_counter() - t0
     cfg = FleetConfig(pass_solver=args.pass_solver, time_limit=args.time_limit, seed=args.seed)
-    sol = solve(fleet, opps, cfg, problem=prob)
+    sol = solve(fleet, opps, cfg, problem=prob, t0=t_read)
+    solve_s = time.perf_counter() - t_read
     wall = time.perf_counter() - t0
     name = f"{split}/{case.name}"
     out = Path(args.out) / split / case.name
@@ -60,13 +65,27 @@ def run_case(case: Path, split: str, args: argparse.Namespace) -> dict:
            "opportunities": len(opps), "valid": verdict.get("valid"), "WCR": verdict["metrics"].get("WCR"),
            "CR": verdict["metrics"].get("CR"), "our_WCR": sol.value, "bound": sol.bound, "gap": sol.gap,
            "opportunities_s": round(t_opp, 1), "build_s": round(t_build, 1), "wall_s": round(wall, 1),
+           "solve_s": round(solve_s, 2), "first_schedule_s": sol.info["first_schedule_s"],
+           "check_reserve_s": sol.info["check_reserve_s"], "final_check_s": sol.info["final_check_s"],
            "rounds": sol.info["rounds"], "battery_barred": sol.info["battery_barred"],
+           "repair_removed": sol.info["repair_removed"], "repair_first": sol.info["repair_first"],
+           "energy_windows": sol.info["energy_windows"],
            "bound_source": sol.info["bound_source"], "bound_graphs": sol.info["bound_graphs"],
            "bound_refused": len(sol.info["bound_refused"]),
            "ref_greedy_lns": ref.get("greedy_lns", (None,))[0], "ref_mwis": ref.get("mwis_conflict_graph", (None,))[0]}
+    for t in args.at:
+        v, b = at_time(sol.history, t)
+        row[f"WCR@{t:g}"], row[f"gap@{t:g}"] = v, None if v is None or not b else (b - v) / b
     (out / "history.json").write_text(json.dumps(sol.history))
     plot_history(sol.history, out / "value_bound.png", name)
     return row
+
+
+def at_time(history: list, t: float) -> tuple[float | None, float | None]:
+    """The best value and bound of an anytime curve at `t` seconds: its last point at or before t (a run that
+    ended earlier keeps its last point); None before its first schedule."""
+    before = [(v, b) for ti, v, b in history if ti <= t]
+    return before[-1] if before else (None, None)
 
 
 def plot_history(history: list, path: Path, title: str) -> None:
@@ -83,7 +102,7 @@ def plot_history(history: list, path: Path, title: str) -> None:
     finite = [(ti, bi) for ti, bi in zip(t, b) if bi < 1e9]
     if finite:
         ax.step(*zip(*finite), where="post", label="bound")
-    ax.set_xlabel("seconds after the pass graphs are built")
+    ax.set_xlabel("seconds after the fleet is read")
     ax.set_ylabel("weighted completion")
     ax.set_title(title)
     ax.legend()
@@ -100,6 +119,8 @@ def main() -> None:
     p.add_argument("--pass-solver", default="exact")
     p.add_argument("--time-limit", type=float, default=120.0)
     p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--at", type=float, nargs="*", default=[5.0, 10.0, 30.0, 120.0],
+                   help="seconds after reading at which the anytime curve is sampled")
     p.add_argument("--out", default="runs/bench-fleet")
     a = p.parse_args()
     rows = []
@@ -116,12 +137,19 @@ def main() -> None:
                 w = csv.DictWriter(fh, fieldnames=list(rows[0]))
                 w.writeheader()
                 w.writerows(rows)
-    lines = ["| case | sat / tasks | valid | WCR (verifier) | CR | bound | gap | wall s | greedy_lns | mwis |",
-             "|---|---|---|---|---|---|---|---|---|---|"]
+    at = [t for t in a.at if t <= a.time_limit]
+    lines = ["| case | sat / tasks | valid | WCR (verifier) | CR | bound | gap | "
+             + "".join(f"WCR / gap @{t:g} s | " for t in at)
+             + "repair removed | first s | solve s | wall s | greedy_lns | mwis |",
+             "|---|---|---|---|---|---|---|" + "---|" * len(at) + "---|---|---|---|---|---|"]
     for r in rows:
         f = (lambda x: "-" if x is None else f"{x:.4f}")
+        g = (lambda x: "-" if x is None else f"{x:.2%}")
         lines.append(f"| {r['case']} | {r['satellites']} / {r['tasks']} | {r['valid']} | {f(r['WCR'])} | {f(r['CR'])} | "
-                     f"{f(r['bound'])} | {f(r['gap'])} | {r['wall_s']} | {f(r['ref_greedy_lns'])} | {f(r['ref_mwis'])} |")
+                     f"{f(r['bound'])} | {g(r['gap'])} | "
+                     + "".join(f"{f(r[f'WCR@{t:g}'])} / {g(r[f'gap@{t:g}'])} | " for t in at)
+                     + f"{r['repair_removed']} | {r['first_schedule_s']} | {r['solve_s']} | {r['wall_s']} | "
+                     f"{f(r['ref_greedy_lns'])} | {f(r['ref_mwis'])} |")
     refused = sum(r["bound_refused"] > 0 for r in rows)
     lines.append(f"\nLagrangian bound refused (below a schedule found) on {refused} of {len(rows)} cases; passes whose "
                  f"bound term needed their bound problem (bridges, repeats, loose arcs): "

@@ -56,7 +56,7 @@ class Result:
     `value` is the objective the kind reports (a pass's utility sum, a fleet's WCR, an ONERA plan's value);
     `bound` an upper bound of the best value or None, `bound_kind` what proves it ("lagrangian",
     "conflict-free", "lp", "exact", ...); `status` how the solve ended ("optimal", "time_limit", "budget",
-    "done", "interrupted"); `timings` seconds by phase; `info` the solver's own figures; `verdict` the
+    "done", "interrupted", "first_schedule": the first schedule of an anytime search, found after the limit); `timings` seconds by phase; `info` the solver's own figures; `verdict` the
     checker's verdict when the solver ran the checker itself (the command line then does not run it again)."""
 
     schedule: Any

@@ -29,6 +29,7 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
+from eosp.fleet.energy import observation_wh
 from eosp.fleet.geometry import NUMERICAL_EPS
 from eosp.fleet.model import Fleet
 from eosp.fleet.opportunities import Opportunities
@@ -87,6 +88,7 @@ class PassGraph:
     rows: np.ndarray  # int64 [N - 1]
     duration: np.ndarray  # float64 [k]
     graph: DiscreteGraph
+    energy_wh: np.ndarray  # float64 [k]: the least energy above idle an observation of each task takes (energy.py)
     bound_graph: DiscreteGraph | None = None  # see bound_problem(); None: `graph` serves the bound as it is
     bound_provable: bool = True  # False: the bound graph is not FIFO, no pass bound can be proven on it
 
@@ -177,7 +179,8 @@ def build_pass(fleet: Fleet, opps: Opportunities, los: LineOfSight, p: int, offs
     fifo = fifo_violations(loose) == 0
     if fifo and _same_arcs(_without_repeats(loose), graph) and bridge_triples(loose) == 0:
         loose = None  # the pass graph serves the bound (bound_problem)
-    return PassGraph(p, sat, tasks.astype(np.int32), rows.astype(np.int64), duration, graph, loose, fifo)
+    return PassGraph(p, sat, tasks.astype(np.int32), rows.astype(np.int64), duration, graph,
+                     observation_wh(fleet, sat, tasks), loose, fifo)
 
 
 @numba.njit(cache=True)

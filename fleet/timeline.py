@@ -11,6 +11,7 @@ while it runs dry, drops the least valuable observation started before the failu
 
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass, field
 from typing import NamedTuple
 
@@ -127,8 +128,10 @@ def intervals(los: LineOfSight, tl: Timeline, sat: int) -> tuple[Intervals, Inte
     return Intervals(st, en), Intervals(np.asarray(w0, dtype=np.int64), st.copy())
 
 
-def repair_battery(fleet: Fleet, los: LineOfSight, tls: list[Timeline], sats=None, sun: SunCache | None = None) -> int:
-    """Drop the least valuable observations until every battery stays above zero; returns drops.
+def repair_battery(fleet: Fleet, los: LineOfSight, tls: list[Timeline], sats=None, sun: SunCache | None = None,
+                   deadline: float | None = None) -> int | None:
+    """Drop the least valuable observations until every battery stays above zero; returns drops, or None when
+    `deadline` (a ``time.perf_counter()`` instant) came first (the timelines are then half repaired).
 
     `sats`: only these satellites' timelines (default: all); `sun`: a cache of sunlight kept between calls."""
     sun = sun or SunCache(los.geo)
@@ -137,6 +140,8 @@ def repair_battery(fleet: Fleet, los: LineOfSight, tls: list[Timeline], sats=Non
     for sat in range(len(tls)) if sats is None else sats:
         tl = tls[sat]
         while True:
+            if deadline is not None and time.perf_counter() > deadline:
+                return None
             run = simulate(fleet, sun, sat, *intervals(los, tl, sat))
             if run.ok or not tl.start:
                 break

@@ -87,19 +87,23 @@ class PassWorker:
 
         return ray.get_runtime_context().get_node_id()
 
-    def solve_priced(self, passes: np.ndarray, lam: np.ndarray) -> tuple:
-        """Every pass of `passes` under task prices `lam` (utility weight - price), packed in a few arrays
-        (a round of thousands of passes costs thousands of small objects otherwise): pass ids, values, bounds
-        (NaN: none), CSR offsets and nodes of the paths, seconds per pass."""
+    def solve_priced(self, passes: np.ndarray, lam: np.ndarray, pass_prices: np.ndarray, left_s: float | None) -> tuple:
+        """Every pass of `passes` under task prices `lam` and the passes' energy prices `pass_prices` (utility
+        weight - price - pass price * energy), each solve stopped `left_s` seconds from now (this machine's
+        clock: the driver's deadline as a duration), packed in a few arrays (a round of thousands of passes costs
+        thousands of small objects otherwise): pass ids, values, bounds (NaN: none), CSR offsets and nodes of the
+        paths, seconds per pass."""
         from eosp.kinds.fleet.problem import priced, solve_round_pass
 
+        deadline = None if left_s is None else time.perf_counter() + left_s
         n = len(passes)
         value, bound, secs = np.zeros(n), np.full(n, np.nan), np.zeros(n)
         paths = []
         for i, p in enumerate(passes.tolist()):
             pg = self.graphs[p]
             t = time.perf_counter()
-            res = solve_round_pass(pg, priced(self.weight, lam, pg.tasks), self.cfg)
+            util = priced(self.weight, lam, pg.tasks, pg.energy_wh, pass_prices[p])
+            res = solve_round_pass(pg, util, self.cfg, deadline)
             secs[i] = time.perf_counter() - t
             value[i] = res.value
             if res.bound is not None:
@@ -142,23 +146,28 @@ class RayPassPool:
         self.times: list[tuple[int, float, int]] = []  # (pass, seconds, worker) of every pass an actor solved
         self.kill_round = int(os.environ.get("EOSP_FAULT_KILL_ACTOR_ROUND", "0") or 0)
 
-    def solve_priced(self, passes: list[int], lam: np.ndarray, deadline: float | None) -> dict | None:
-        """Every pass of `passes` under task prices `lam`: the prices go to the object store once, each actor
-        solves its own passes and sends them back packed (:meth:`PassWorker.solve_priced`)."""
+    def solve_priced(self, passes: list[int], lam: np.ndarray, pass_prices: np.ndarray,
+                     deadline: float | None) -> dict | None:
+        """Every pass of `passes` under task prices `lam` and energy prices `pass_prices`: the prices go to the
+        object store once, each actor solves its own passes and sends them back packed
+        (:meth:`PassWorker.solve_priced`)."""
         import ray
         from ray.exceptions import RayActorError
 
-        from eosp.kinds.fleet.problem import PassResult, priced, solve_round_pass
+        from eosp.kinds.fleet.pool import solve_priced_pass
+        from eosp.kinds.fleet.problem import PassResult
 
         self.calls += 1
         ids = np.asarray(passes, dtype=np.int64)
         owner = self.owner[ids]
         lam_ref = ray.put(np.asarray(lam, dtype=np.float64))
+        pi_ref = ray.put(np.asarray(pass_prices, dtype=np.float64))
+        left = None if deadline is None else max(0.0, deadline - time.perf_counter())
         refs, parts = [], []
         for k in range(len(self.actors)):
             mine = ids[owner == k]
             if len(mine):
-                refs.append(self.actors[k].solve_priced.remote(mine, lam_ref))
+                refs.append(self.actors[k].solve_priced.remote(mine, lam_ref, pi_ref, left))
                 parts.append((k, mine))
         if self.calls == self.kill_round and self.actors:
             ray.kill(self.actors[0], no_restart=False)  # a worker lost mid-round (tests)
@@ -167,15 +176,13 @@ class RayPassPool:
         if len(ready) < len(refs):
             return None  # the deadline came first
         out = {}
-        w = self.prob.weight
         for ref, (k, mine) in zip(refs, parts):
             try:
                 got, value, bound, offsets, nodes, secs = ray.get(ref)
             except RayActorError:
                 self.faults += 1
                 for p in mine.tolist():
-                    pg = self.prob.passes[p]
-                    out[p] = solve_round_pass(pg, priced(w, lam, pg.tasks), self.cfg)
+                    out[p] = solve_priced_pass(self.prob, p, lam, pass_prices, self.cfg, deadline)
                 continue
             for i, p in enumerate(got.tolist()):
                 b = float(bound[i])
@@ -214,7 +221,7 @@ def _load_state(run: Path, fleet, fp: str):
     state = _read_state(run / STATE, len(fleet.tasks))
     best, _ = read_schedule(run / BEST, fleet)
     return Resume(state["lam"], float(state["step"]), float(state["best_bound"]), str(state["bound_source"]),
-                  int(state["rounds_done"])), best
+                  int(state["rounds_done"]), state.get("mu")), best
 
 
 STATE_KEYS = {"lam": "f", "step": "f", "best_bound": "f", "bound_source": "U", "rounds_done": "i"}
@@ -263,7 +270,7 @@ class Checkpoint:
 
         with atomic_path(self.run / STATE) as tmp:
             with open(tmp, "wb") as fh:
-                np.savez(fh, lam=coord.prices.lam, step=np.float64(coord.prices.factor),
+                np.savez(fh, lam=coord.prices.lam, mu=coord.prices.mu, step=np.float64(coord.prices.factor),
                          best_bound=np.float64(coord.best_bound),
                          bound_source=np.str_(coord.bound_source), rounds_done=np.int64(coord.rounds_done))
         if coord.best.value != self.last_value:

@@ -16,6 +16,7 @@ REGISTRY: dict[str, Any] = {  # name -> "module:attribute" of the kind (loaded w
     "single-pass": "eosp.kinds.single.kind:KIND",
     "fleet": "eosp.kinds.fleet.kind:KIND",
     "onera": "eosp.kinds.onera.kind:KIND",
+    "eosbench": "eosp.kinds.eosbench.kind:KIND",
 }
 
 

@@ -22,6 +22,7 @@ LAYERS = [
     {"eosp.shards"},
     {"eosp.fleet"},
     {"eosp.onera"},
+    {"eosp.eosbench"},
     {"eosp.envs"},
     {"eosp.models"},
     {"eosp.search"},

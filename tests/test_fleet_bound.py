@@ -246,8 +246,8 @@ def test_a_bound_below_a_schedule_is_refused(monkeypatch):
     from eosp.kinds.fleet.solve import solve
     from tests.test_fleet import synthetic_fleet
 
-    def wrong(pg, value, cfg):
-        res = solve_round_pass(pg, value, cfg)
+    def wrong(pg, value, cfg, deadline=None):
+        res = solve_round_pass(pg, value, cfg, deadline)
         return PassResult(res.nodes, res.value, 0.0)
 
     monkeypatch.setattr(pool, "solve_round_pass", wrong)

@@ -38,6 +38,14 @@ class FleetConfig(UtilityConfig):
     """Seconds the exact solver may spend on one pass (its bound is used when it stops early)."""
     span_s: float = ranged(3600.0, 1)
     """Length of the time span freed by one large-neighbourhood move."""
+    energy_bound: bool = False
+    """Price the battery's energy windows in the Lagrangian bound (eosp.fleet.energy; valid either way).  Off by
+    default: on test_hard (120 s) the bound with them stayed at the conflict-free one while the bound without
+    them reached a 3.5% gap (docs/results.md)."""
+    energy_price: float = ranged(1.0, 0)
+    """With --energy-bound, the share of the bound's energy prices (what a Wh is worth in each pass, from the
+    battery's energy windows) that the schedules' pass problems pay (construction, coordinate descent, moves):
+    0 leaves energy to the battery repair alone."""
     workers: int = ranged(1, 1, 256)
     """Processes solving the passes of a price round (forked from this one, the pass graphs shared)."""
     warm_start: str = choice("none", "none", "heuristic", "learned")

@@ -1,11 +1,11 @@
 """The fleet solver's coordinator: a constellation's passes solved by the project's single-pass solvers, held
 together by task prices (:mod:`eosp.kinds.fleet.prices`), with an upper bound.
 
-A constellation-day is hundreds of passes (:mod:`eosp.fleet.passgraph`) coupled by one constraint: a task is
-served at most once (and each satellite's battery runs from one pass to the next).  Relaxing "at most once"
-with prices separates the passes; a price round solves every pass under the prices on a pass pool
-(:mod:`eosp.kinds.fleet.pool`), proves the Lagrangian bound when every pass term is an optimum or a bound the
-exact solver proved, and moves the prices.
+A constellation-day is hundreds of passes (:mod:`eosp.fleet.passgraph`) coupled by two constraints: a task is
+served at most once, and each satellite's battery runs from one pass to the next (its consequences as energy
+windows over runs of passes, :mod:`eosp.fleet.energy`).  Relaxing both with prices separates the passes; a
+price round solves every pass under the prices on a pass pool (:mod:`eosp.kinds.fleet.pool`), proves the
+Lagrangian bound when every pass term is an optimum or a bound the exact solver proved, and moves the prices.
 
 Schedules come from the same pass solver with true weights:
 
@@ -30,13 +30,18 @@ from typing import Callable
 
 import numpy as np
 
-from eosp.fleet.battery import SunCache
+from eosp.fleet.check import validate
+from eosp.fleet.energy import EnergyWindows
 from eosp.fleet.timeline import Timeline, repair_battery, timelines, to_schedule
 from eosp.fleet.model import Schedule
 from eosp.kinds.fleet.config import FleetConfig
 from eosp.kinds.fleet.pool import InProcessPool, PassPool
 from eosp.kinds.fleet.prices import Prices
-from eosp.kinds.fleet.problem import PassResult, Primal, Problem, path_tasks, priced, rewalk, solve_pass
+from eosp.kinds.fleet.problem import (PassResult, Primal, Problem, path_tasks, path_wh, priced, rewalk,
+                                      solve_pass)
+
+CHECK_MARGIN = 1.5  # the final check's estimate times this (a better schedule has more actions, a loaded machine)
+CHECK_SLACK_S = 0.2  # seconds added to it (the time the first steps after the deadline take)
 
 
 @dataclass
@@ -52,7 +57,11 @@ class Coordinator:
     history: list[tuple[float, float, float]] = field(default_factory=list)  # (seconds, value, bound)
     t0: float = field(default_factory=time.perf_counter)  # when the problem was read: the time limit counts from it
     pass_solves: int = 0
+    repair_drops: int = 0  # observations the battery repair took out, over the whole run
+    first_repair_drops: int | None = None  # those it took out of the first schedule
     rounds_done: int = 0
+    first_s: float | None = None  # seconds from t0 to the first schedule (repaired)
+    check_s: float = 0.0  # seconds kept before the deadline for the final check (check_estimate)
     interrupted: bool = False
     bound_source: str = "conflict-free"  # until a proven Lagrangian bound is lower
     refused: list[str] = field(default_factory=list)  # Lagrangian bounds refused, and why (see price_round)
@@ -66,21 +75,40 @@ class Coordinator:
 
     def __post_init__(self) -> None:
         n = len(self.prob.fleet.tasks)
-        self.prices = Prices.zero(n)
+        self.windows = self.prob.windows if self.cfg.energy_bound else EnergyWindows.none(len(self.prob.passes))
+        self.prices = Prices.zero(n, self.windows)
+        self.spend = np.zeros(len(self.prob.passes))  # price of a Wh in each pass for the schedules (energy_price)
         self.pool = self.pool or InProcessPool(self.prob, self.cfg)
         self.round_paths = [np.zeros(0, np.int64)] * len(self.prob.passes)
         self.best = Primal.empty(len(self.prob.passes), n)
         self.barred = np.zeros((len(self.prob.fleet.satellites), n), dtype=bool)
         if self.frozen is None:
             self.frozen = np.zeros(len(self.prob.passes), dtype=bool)
-        self.sun = SunCache(self.prob.geo)  # sunlight, computed once for every battery simulation
+        self.sun = self.prob.sun  # sunlight, computed once for every battery simulation
         self.battery_ok: dict[int, tuple] = {}  # satellite -> the timeline last found to hold its battery
         self.best_bound = self.conflict_free()
 
     # ------------------------------------------------------------------ pass solves
-    def _solve(self, p: int, util: np.ndarray) -> PassResult:
+    def _solve(self, p: int, util: np.ndarray, deadline: float | None) -> PassResult:
         self.pass_solves += 1
-        return solve_pass(self.prob, p, util, self.cfg)
+        return solve_pass(self.prob, p, util, self.cfg, deadline)
+
+    def _utility(self, primal: Primal, p: int, shift: np.ndarray | None = None) -> np.ndarray:
+        """The utilities of pass p's tasks for a schedule: weight, less `shift` (kept below the weight), less the
+        pass's price of the energy they take (:attr:`spend`); 0 (left out) for a task another pass serves or the
+        battery repair barred from this satellite."""
+        pg = self.prob.passes[p]
+        w = self.prob.weight
+        shift = np.zeros_like(w) if shift is None else np.minimum(shift, 0.999 * w)
+        util = priced(w, shift, pg.tasks, pg.energy_wh, self.spend[p])
+        return np.where(self._available(primal, p), util, 0.0)
+
+    def _path_utility(self, p: int, path: np.ndarray) -> float:
+        """The utility :meth:`_utility` gives pass p's `path` (its tasks are its own)."""
+        pg = self.prob.passes[p]
+        acq = pg.graph.node_acq[path]
+        return float(priced(self.prob.weight, np.zeros_like(self.prob.weight), pg.tasks[acq], pg.energy_wh[acq],
+                            self.spend[p]).sum())
 
     def _available(self, primal: Primal, p: int) -> np.ndarray:
         tasks = self.prob.passes[p].tasks
@@ -99,8 +127,8 @@ class Coordinator:
         return freed.tolist()
 
     def descend(self, primal: Primal, queue: list[int], deadline: float | None) -> None:
-        """Coordinate descent: solve the queued passes again with every task no other pass serves."""
-        w = self.prob.weight
+        """Coordinate descent: solve the queued passes again with every task no other pass serves (utilities
+        :meth:`_utility`; a pass takes its new path when it is worth more under them)."""
         queued = np.zeros(len(self.prob.passes), dtype=bool)
         queued[queue] = True
         while queue:
@@ -110,9 +138,8 @@ class Coordinator:
             queued[p] = False
             if self.frozen[p]:
                 continue
-            tasks = self.prob.passes[p].tasks
-            res = self._solve(p, np.where(self._available(primal, p), w[tasks], 0.0))
-            if res.value > float(w[path_tasks(self.prob, p, primal.paths[p])].sum()) + 1e-9:
+            res = self._solve(p, self._utility(primal, p), deadline)
+            if res.value > self._path_utility(p, primal.paths[p]) + 1e-9:
                 for t in self._assign(primal, p, res.nodes):
                     for q in self.prob.task_passes[t].tolist():
                         if q != p and not queued[q]:
@@ -120,43 +147,47 @@ class Coordinator:
                             queue.append(q)
 
     def construct(self, order: np.ndarray, util_shift: np.ndarray | None = None,
-                  primal: Primal | None = None, deadline: float | None = None) -> Primal:
-        """Passes in `order`, each solved with the tasks still free (utility ``w - util_shift``, kept positive)."""
-        w = self.prob.weight
-        primal = primal or Primal.empty(len(self.prob.passes), len(w))
+                  primal: Primal | None = None, deadline: float | None = None, whole: bool = False) -> Primal:
+        """Passes in `order`, each solved with the tasks still free (utilities :meth:`_utility`, `util_shift`
+        taken off the weights); stops at `deadline` unless `whole` (the first schedule: every pass, each solve
+        then cut short past the deadline)."""
+        primal = primal or Primal.empty(len(self.prob.passes), len(self.prob.weight))
         for p in order.tolist():
-            if deadline is not None and time.perf_counter() > deadline:
+            if not whole and deadline is not None and time.perf_counter() > deadline:
                 break
             if self.frozen[p]:
                 continue
-            tasks = self.prob.passes[p].tasks
-            u = w[tasks] if util_shift is None else np.maximum(w[tasks] - util_shift[tasks], 1e-3 * w[tasks])
-            res = self._solve(p, np.where(self._available(primal, p), u, 0.0))
+            res = self._solve(p, self._utility(primal, p, util_shift), deadline)
             self._assign(primal, p, res.nodes)
         return primal
 
     # ------------------------------------------------------------------ prices and bound
     def price_round(self, deadline: float | None) -> float | None:
-        """Every pass under the current prices (on the pool); returns L(lam) (None when cut by the deadline),
+        """Every pass under the current prices (on the pool); returns L(lam, mu) (None when cut by the deadline),
         keeps the bound when it is proven and lower, and moves the prices."""
         w, lam = self.prob.weight, self.prices.lam
+        pi = self.prices.pass_price()
         todo = np.flatnonzero(~self.frozen).tolist()
-        solved = self.pool.solve_priced(todo, lam, deadline)
+        solved = self.pool.solve_priced(todo, lam, pi, deadline)
         if solved is None:
             return None  # cut by the deadline
         self.pass_solves += len(todo)
         count = np.zeros(len(w))
+        pass_wh = np.zeros(len(self.prob.passes))
         terms, proven = [], True
-        for p in range(len(self.prob.passes)):
+        for p, pg in enumerate(self.prob.passes):
             if self.frozen[p]:  # a fixed term: its schedule under the prices
-                value = float(priced(w, lam, path_tasks(self.prob, p, self.initial.paths[p])).sum())
-                res = PassResult(self.initial.paths[p], value, value)
+                path = self.initial.paths[p]
+                acq = pg.graph.node_acq[path]
+                value = float(priced(w, lam, pg.tasks[acq], pg.energy_wh[acq], pi[p]).sum())
+                res = PassResult(path, value, value)
             else:
                 res = solved[p]
             self.round_paths[p] = res.nodes
             proven &= res.bound is not None
             terms.append(res.value if res.bound is None else res.bound)
             count[path_tasks(self.prob, p, res.nodes)] += 1
+            pass_wh[p] = path_wh(pg, res.nodes)
         total = self.prices.dual(terms)
         if proven and total < self.best_bound:
             if total < self.best.value - 1e-9 * max(1.0, self.best.value):
@@ -165,7 +196,8 @@ class Coordinator:
                                     f"({self.best.value:.6f})")
             else:
                 self.best_bound, self.bound_source = total, "lagrangian"
-        self.prices.step_towards(count, total, self.best.value)
+        self.prices.step_towards(count, total, self.best.value, pass_wh)
+        self.spend = self.cfg.energy_price * self.prices.pass_price()
         return total
 
     def empty(self) -> Primal:
@@ -192,21 +224,28 @@ class Coordinator:
         return primal
 
     # ------------------------------------------------------------------ battery
-    def battery_repair(self, primal: Primal, deadline: float | None = None) -> int:
+    def battery_repair(self, primal: Primal, deadline: float | None = None, whole: bool = False) -> int | None:
         """Drop observations until every battery holds (checker's model); a dropped task is barred from that
         satellite, and the passes of other satellites that could serve it are solved again once (then the
-        batteries are checked and repaired again).  Returns the number dropped."""
+        batteries are checked and repaired again).  Returns the number dropped (also counted in
+        :attr:`repair_drops`), or None when `deadline` came first: `primal` is then not repaired and must not be
+        kept.  `whole` (the first schedule): the repair runs to its end whatever the deadline (the re-solves
+        still stop at it)."""
         total = 0
         for attempt in range(2):  # the last attempt only repairs: what it returns holds
             tls = self.timelines(primal)
             keys = [tuple(zip(tl.task, tl.start)) for tl in tls]
             todo = [k for k, key in enumerate(keys) if self.battery_ok.get(k) != key]  # satellites not seen as is
-            dropped = repair_battery(self.prob.fleet, self.prob.los, tls, sats=todo, sun=self.sun)
+            dropped = repair_battery(self.prob.fleet, self.prob.los, tls, sats=todo, sun=self.sun,
+                                     deadline=None if whole else deadline)
+            if dropped is None:
+                return None
             for k in todo:
                 self.battery_ok[k] = tuple(zip(tls[k].task, tls[k].start))
             if not dropped:
                 break
             total += dropped
+            self.repair_drops += dropped
             keep = {(k, t) for k, tl in enumerate(tls) for t in tl.task}
             freed = []
             for p, pg in enumerate(self.prob.passes):
@@ -239,8 +278,10 @@ class Coordinator:
         self.history.append((time.perf_counter() - self.t0, self.best.value, self.best_bound))
 
     def offer(self, primal: Primal, deadline: float | None = None) -> bool:
-        """Keep `primal` (after battery repair) when it serves more than the best."""
-        self.battery_repair(primal, deadline)
+        """Keep `primal` (after battery repair) when it serves more than the best (not when the deadline cut its
+        repair)."""
+        if self.battery_repair(primal, deadline) is None:
+            return False
         if primal.value > self.best.value + 1e-9:
             self.keep(primal)
             return True
@@ -278,7 +319,8 @@ class Coordinator:
                           for q in prob.task_passes[t].tolist()})
         self.descend(trial, touched, deadline)
         if trial.value >= self.best.value - 1e-9:
-            self.battery_repair(trial)
+            if self.battery_repair(trial, deadline) is None:
+                return
             if trial.value >= self.best.value - 1e-9:
                 if trial.value > self.best.value + 1e-9:
                     self.keep(trial)
@@ -297,18 +339,50 @@ class Coordinator:
                     path = self.initial.paths[p]
                     free = self._available(first, p)[prob.passes[p].graph.node_acq[path]] if len(path) else path
                     self._assign(first, p, rewalk(prob.passes[p], path[free]) if len(path) else path)
-            else:
-                self.construct(order, primal=first)
+            else:  # every pass, each solve cut short past the deadline
+                self.construct(order, primal=first, deadline=deadline, whole=True)
             self.descend(first, list(range(len(prob.passes))), deadline)
         except KeyboardInterrupt:
             self.interrupted = True
-        self.offer(first, time.perf_counter() if self.interrupted else None)  # repaired, not improved, after Ctrl-C
+        # the first schedule is repaired whole (its re-solves stop at the deadline; none after Ctrl-C)
+        self.first_repair_drops = self.battery_repair(first, time.perf_counter() if self.interrupted else deadline,
+                                                      whole=True)
+        if first.value > self.best.value + 1e-9:
+            self.keep(first)
+        self.first_s = time.perf_counter() - self.t0
         if not self.interrupted:
+            if deadline is not None:  # what is left after the rounds: the final check of a schedule like this one
+                self.check_s = self.check_estimate(first)
+                deadline -= self.check_s
             try:
                 self._rounds(deadline, rng)
             except KeyboardInterrupt:  # Ctrl-C: the best schedule so far is the answer
                 self.interrupted = True
         return self.best
+
+    def check_estimate(self, primal: Primal) -> float:
+        """Seconds the final steps will take on a schedule like `primal` (its timelines and the checker on it,
+        :func:`eosp.fleet.check.validate`), with a margin: the checker's fixed cost (timed on no action) plus its
+        cost per action, timed on the actions of the first satellites (a tenth of the actions, at least 40),
+        scaled to all (the checker's work is per satellite and per action)."""
+        t = time.perf_counter()
+        sched = self.schedule(primal)
+        n = len(sched)
+        t_fixed = time.perf_counter()
+        validate(self.prob.fleet, Schedule(*(np.zeros(0, a.dtype) for a in
+                                             (sched.satellite, sched.task, sched.start_us, sched.end_us))),
+                 self.prob.geo)
+        t_sub = time.perf_counter()
+        fixed = t_sub - t_fixed
+        per_action = 0.0
+        if n:
+            sats, counts = np.unique(sched.satellite, return_counts=True)
+            upto = int(np.searchsorted(np.cumsum(counts), max(0.1 * n, min(n, 40)))) + 1
+            keep = np.isin(sched.satellite, sats[:upto])
+            validate(self.prob.fleet, Schedule(sched.satellite[keep], sched.task[keep], sched.start_us[keep],
+                                               sched.end_us[keep]), self.prob.geo)
+            per_action = max(0.0, time.perf_counter() - t_sub - fixed) / int(keep.sum())
+        return CHECK_MARGIN * ((t_fixed - t) + fixed + per_action * n) + CHECK_SLACK_S
 
     def _rounds(self, deadline: float | None, rng: np.random.Generator) -> None:
         cfg = self.cfg
@@ -318,7 +392,7 @@ class Coordinator:
             if deadline is not None and time.perf_counter() > deadline:
                 break
             if self.best_bound <= self.best.value + 1e-9:
-                break  # proven optimal (energy relaxed in the bound, kept in the schedule)
+                break  # proven optimal
             if cfg.pass_solver == "exact" or rounds == 0:
                 before = self.best_bound
                 t_round = time.perf_counter()
@@ -327,7 +401,7 @@ class Coordinator:
                 self.round_s.append(time.perf_counter() - t_round)
                 self.prices.stalled(self.best_bound < before - 1e-9)
                 self.record()
-                if not self.offer(self.recover(rng, deadline)):
+                if not self.offer(self.recover(rng, deadline), deadline):
                     self.neighbourhood(rng, deadline)
             else:
                 self.neighbourhood(rng, deadline)
@@ -341,6 +415,8 @@ class Coordinator:
         """The best proven bound: the Lagrangian one when every pass term of a price round was proven (exact pass
         solver; each pass's term its priced optimum where its graph serves the bound, else its bound problem, see
         :func:`eosp.fleet.passgraph.bound_problem`), else the conflict-free bound (every task that has an
-        opportunity, served once).  Energy is relaxed.  With frozen passes the Lagrangian bound holds for the
-        schedules that keep them as given."""
+        opportunity, served once).  With ``energy_bound`` energy enters the Lagrangian bound through the
+        battery's energy windows (:mod:`eosp.fleet.energy`, their multipliers in :mod:`eosp.kinds.fleet.prices`);
+        else it is relaxed.  With frozen passes the Lagrangian bound holds for the schedules that keep them as
+        given."""
         return self.best_bound

@@ -332,8 +332,10 @@ class FleetKind(KindBase):
         why = res.info["no_lagrangian_bound_because"]
         source = f"{res.bound_kind}{'' if why is None else f': {why}'}"
         bound = "" if res.bound is None else f", bound {res.bound:.6f} ({source}), gap {res.gap:.4%}"
+        stop = (f" (the first schedule, found after the time limit at {res.info['first_schedule_s']:.1f} s)"
+                if res.status == "first_schedule" else "")
         return info, (f"{out}: {n} observations, WCR {res.value:.6f}{bound}; {res.info['rounds']} rounds, "
-                      f"{res.info['pass_solves']} pass solves ({seconds:.1f} s)")
+                      f"{res.info['pass_solves']} pass solves ({seconds:.1f} s){stop}")
 
     def solve_arguments(self, p: argparse.ArgumentParser) -> None:
         p.add_argument("--init", default="", help="a schedule of this fleet to start from")

@@ -1,8 +1,9 @@
 """What solves the passes of a price round: :class:`PassPool`, and its in-process and forked implementations
 (the Ray actors' is :class:`jobs.solve_fleet.RayPassPool`).
 
-A pool takes pass ids and the task prices, never utilities: whoever holds a pass's graph prices its tasks
-(:func:`eosp.kinds.fleet.problem.priced`), so a round sends one vector of prices and gets paths back.  The pass
+A pool takes pass ids, the task prices and the passes' energy prices (one vector each, :mod:`eosp.kinds.fleet.
+prices`), never utilities: whoever holds a pass's graph prices its tasks (:func:`eosp.kinds.fleet.problem.priced`),
+so a round sends two vectors of prices and gets paths back.  The pass
 graphs stay where they were built: in this process, in forked children that share them, or on Ray actors that
 own whole satellites.  The same split is where the rest of the loop (coordinate descent, battery repair, the
 moves) can move to the owners of the satellites later: the protocol names passes, never graphs.
@@ -20,13 +21,13 @@ from eosp.kinds.fleet.problem import PassResult, Problem, priced, solve_round_pa
 
 
 class PassPool(Protocol):
-    """Solves passes under task prices."""
+    """Solves passes under task prices and energy prices."""
 
-    def solve_priced(self, passes: list[int], prices: np.ndarray,
+    def solve_priced(self, passes: list[int], prices: np.ndarray, pass_prices: np.ndarray,
                      deadline: float | None) -> dict[int, PassResult] | None:
-        """Every pass of `passes` with utilities weight - price of its tasks
+        """Every pass p of `passes` with utilities weight - price - pass_prices[p] * energy of its tasks
         (:func:`eosp.kinds.fleet.problem.solve_round_pass`: its path and its term of the bound); None when the
-        deadline (a ``time.perf_counter()`` instant) came first."""
+        deadline (a ``time.perf_counter()`` instant) came first (no pass solve runs much past it)."""
         ...
 
     def close(self) -> None: ...
@@ -38,18 +39,24 @@ class InProcessPool:
     def __init__(self, prob: Problem, cfg: FleetConfig):
         self.prob, self.cfg = prob, cfg
 
-    def solve_priced(self, passes: list[int], prices: np.ndarray,
+    def solve_priced(self, passes: list[int], prices: np.ndarray, pass_prices: np.ndarray,
                      deadline: float | None) -> dict[int, PassResult] | None:
         out = {}
         for p in passes:
             if deadline is not None and time.perf_counter() > deadline:
                 return None
-            pg = self.prob.passes[p]
-            out[p] = solve_round_pass(pg, priced(self.prob.weight, prices, pg.tasks), self.cfg)
+            out[p] = solve_priced_pass(self.prob, p, prices, pass_prices, self.cfg, deadline)
         return out
 
     def close(self) -> None:
         pass
+
+
+def solve_priced_pass(prob: Problem, p: int, prices: np.ndarray, pass_prices: np.ndarray, cfg: FleetConfig,
+                      deadline: float | None) -> PassResult:
+    """Pass `p` of a price round (:func:`eosp.kinds.fleet.problem.solve_round_pass`) under the prices."""
+    pg = prob.passes[p]
+    return solve_round_pass(pg, priced(prob.weight, prices, pg.tasks, pg.energy_wh, pass_prices[p]), cfg, deadline)
 
 
 _FORKED: tuple[Problem, FleetConfig] | None = None  # the problem and config a forked worker inherits
@@ -63,10 +70,10 @@ def _ignore_sigint() -> None:
     signal.signal(signal.SIGINT, signal.SIG_IGN)
 
 
-def _solve_chunk(args: tuple[list[int], np.ndarray]) -> list[PassResult]:
-    passes, prices = args
+def _solve_chunk(args: tuple[list[int], np.ndarray, np.ndarray, float | None]) -> list[PassResult]:
+    passes, prices, pass_prices, deadline = args
     prob, cfg = _FORKED
-    return [solve_round_pass(prob.passes[p], priced(prob.weight, prices, prob.passes[p].tasks), cfg) for p in passes]
+    return [solve_priced_pass(prob, p, prices, pass_prices, cfg, deadline) for p in passes]
 
 
 class ForkPool:
@@ -81,13 +88,13 @@ class ForkPool:
         self.workers = cfg.workers
         self.pool = multiprocessing.get_context("fork").Pool(cfg.workers, initializer=_ignore_sigint)
 
-    def solve_priced(self, passes: list[int], prices: np.ndarray,
+    def solve_priced(self, passes: list[int], prices: np.ndarray, pass_prices: np.ndarray,
                      deadline: float | None) -> dict[int, PassResult] | None:
-        """Every pass of `passes` (in chunks, about four per worker)."""
+        """Every pass of `passes` (in chunks, about four per worker; the children share this machine's clock)."""
         import multiprocessing
 
         n = max(1, len(passes) // (4 * self.workers))
-        chunks = [(passes[i:i + n], prices) for i in range(0, len(passes), n)]
+        chunks = [(passes[i:i + n], prices, pass_prices, deadline) for i in range(0, len(passes), n)]
         job = self.pool.map_async(_solve_chunk, chunks)
         timeout = None if deadline is None else max(0.0, deadline - time.perf_counter())
         try:

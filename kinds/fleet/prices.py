@@ -1,53 +1,95 @@
-"""The task prices of the fleet solver and their update: the Lagrangian dual of "a task is served at most once".
+"""The prices of the fleet solver and their update: the Lagrangian dual of "a task is served at most once" and of
+the battery's energy windows (:mod:`eosp.fleet.energy`).
 
-With a price ``lam[i] >= 0`` per task, each pass is solved on its own with utilities ``w[i] - lam[i]``, and
+With a price ``lam[i] >= 0`` per task and a multiplier ``mu[w] >= 0`` per energy window w (its inequality
+``sum of e_o over the observations of its passes <= R_w``), each pass p is solved on its own with utilities
+``w[i] - lam[i] - pi[p] * e[i]``, ``pi[p]`` the sum of the multipliers of the windows holding p (per Wh), and
 
-    L(lam) = sum over passes of (the pass optimum under lam) + sum of lam
+    L(lam, mu) = sum over passes of (the pass optimum under these utilities) + sum of lam + sum of mu[w] R_w
 
-bounds the weight any schedule can serve (energy relaxed).  A price round gives the pass terms (:meth:`Prices.
-dual`); the prices then take a projected subgradient step by Polyak's rule towards the best schedule known
-(:meth:`Prices.step_towards`), whose factor is halved when the bound stalls for three rounds (:meth:`Prices.
-stalled`).
+bounds the weight any valid schedule can serve.  Why, for a valid schedule x observing the tasks c_p(x) in pass
+p (repeats allowed, each credited once; E_p(x) the sum of e_o over all its observations in p):
+
+* a pass's term is at least ``sum over c_p(x) of (w - lam)^+ - pi[p] E_p(x)``: the pass's bound problem credits
+  each task observed once at ``(w - lam - pi e)^+`` (:func:`eosp.fleet.passgraph.bound_problem`; where the pass
+  graph serves the bound, its priced optimum is that), and ``(w - lam)^+ - pi e <= (w - lam - pi e)^+`` for the
+  observation credited, ``-pi e <= 0`` for any other (a bridge, a repeat);
+* summed over passes, ``- sum_p pi[p] E_p(x) = - sum_w mu[w] * (the energy of x in w)``, and with
+  ``mu[w] R_w`` added this is ``sum_w mu[w] (R_w - energy of x in w) >= 0``: x is valid, so its battery keeps
+  every window's inequality;
+* what is left, ``sum lam + sum_p sum over c_p(x) of (w - lam)^+``, is at least the weight x serves (a served
+  task's ``lam + (w - lam)^+ >= w``; an unserved one's ``lam >= 0``).
+
+A price round gives the pass terms (:meth:`Prices.dual`); the prices then take one projected subgradient step
+by Polyak's rule towards the best schedule known (:meth:`Prices.step_towards`): a task's component is 1 - (the
+passes serving it), a window's ``(R_w - energy of the round's paths in w) / scale_w`` (each window's inequality
+measured in typical observations of its satellite), each part with its own Polyak norm; the
+step factor is halved when the bound stalls for three rounds (:meth:`Prices.stalled`).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
+from eosp.fleet.energy import EnergyWindows
+
 STALL_ROUNDS = 3  # rounds without a better bound before the step factor is halved
+ENERGY_SHARE = 0.5  # the multipliers' Polyak step, as a share of the one that alone would close the gap
 
 
 @dataclass
 class Prices:
-    """The prices, the step factor and the rounds since the bound last improved."""
+    """The task prices, the energy windows' multipliers, the step factor and the rounds since the bound last
+    improved."""
 
     lam: np.ndarray
+    windows: EnergyWindows | None = None  # None: no energy window (task prices only)
+    mu: np.ndarray = field(default=None)  # per window, in typical observations of its satellite (scale_wh)
     factor: float = 1.0
     stall: int = 0
 
+    def __post_init__(self) -> None:
+        if self.windows is None:
+            self.windows = EnergyWindows.none(0)
+        if self.mu is None:
+            self.mu = np.zeros(len(self.windows))
+
     @classmethod
-    def zero(cls, n_tasks: int) -> Prices:
-        return cls(np.zeros(n_tasks))
+    def zero(cls, n_tasks: int, windows: EnergyWindows | None = None) -> Prices:
+        return cls(np.zeros(n_tasks), windows)
+
+    def pass_price(self) -> np.ndarray:
+        """Each pass's price of a Wh (the sum of the multipliers of the windows holding it)."""
+        return self.windows.pass_price(self.mu)
 
     def dual(self, terms: list[float]) -> float:
-        """L(lam): the pass terms (each pass's optimum or a bound of it under the prices) plus the prices."""
-        total = float(self.lam.sum())
+        """L(lam, mu): the pass terms (each pass's optimum or a bound of it under the prices) plus the prices and
+        the multipliers times their windows' right-hand sides."""
+        total = float(self.lam.sum()) + float(self.mu @ (self.windows.rhs_wh / self.windows.scale_wh))
         for t in terms:
             total += t
         return total
 
-    def step_towards(self, served: np.ndarray, dual: float, best: float) -> None:
-        """Move the prices by a subgradient step: `served[i]` is how many passes of the round serve task i (the
-        subgradient is 1 - served), the step Polyak's towards the best value known `best` from the dual value
-        `dual`; a free task at price 0 cannot go lower."""
+    def step_towards(self, served: np.ndarray, dual: float, best: float, pass_wh: np.ndarray | None = None) -> None:
+        """Move the prices by a subgradient step: `served[i]` is how many passes of the round serve task i, and
+        `pass_wh[p]` the energy (sum of e_o) of pass p's path of the round (None: no window); the step Polyak's
+        towards the best value known `best` from the dual value `dual`, taken by the task prices and the
+        multipliers each with its own norm (the multipliers :data:`ENERGY_SHARE` of theirs): one norm over both
+        let thousands of windows shrink the task prices' steps until the bound stalled above the conflict-free
+        one (test_hard); any nonnegative prices give a valid bound, so the step rule is a matter of speed only;
+        a price or multiplier at 0 cannot go lower."""
         g = 1.0 - served
         g[(self.lam <= 0) & (g > 0)] = 0.0
-        norm2 = float(g @ g)
-        if norm2 > 0:
-            step = self.factor * max(dual - best, 1e-6 * dual) / norm2
-            self.lam = np.maximum(0.0, self.lam - step * g)
+        win = self.windows
+        h = (win.rhs_wh - win.used(pass_wh)) / win.scale_wh if pass_wh is not None else np.zeros(len(win))
+        h[(self.mu <= 0) & (h > 0)] = 0.0
+        target = self.factor * max(dual - best, 1e-6 * dual)
+        if float(g @ g) > 0:
+            self.lam = np.maximum(0.0, self.lam - target / float(g @ g) * g)
+        if float(h @ h) > 0:
+            self.mu = np.maximum(0.0, self.mu - ENERGY_SHARE * target / float(h @ h) * h)
 
     def stalled(self, improved: bool) -> None:
         """Count the rounds without a better bound; halve the step factor after :data:`STALL_ROUNDS` of them."""

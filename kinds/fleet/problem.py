@@ -1,5 +1,5 @@
-"""A fleet as the fleet solver sees it: its pass graphs built once, a pass solved by a single-pass solver, and a
-schedule as one path per pass (:class:`Primal`)."""
+"""A fleet as the fleet solver sees it: its pass graphs and the battery's energy windows built once, a pass solved
+by a single-pass solver, and a schedule as one path per pass (:class:`Primal`)."""
 
 from __future__ import annotations
 
@@ -9,6 +9,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from eosp.fleet.battery import SunCache
+from eosp.fleet.energy import EnergyWindows, energy_windows
 from eosp.fleet.geometry import Geometry
 from eosp.fleet.model import Fleet, Schedule
 from eosp.fleet.opportunities import Opportunities
@@ -37,6 +39,8 @@ class Problem:
     weight: np.ndarray  # float64 [tasks]
     task_passes: list[np.ndarray]  # passes holding each task
     pass_time: np.ndarray  # (first start, last end) of each pass, seconds
+    windows: EnergyWindows | None = None  # what the battery allows in runs of passes (eosp.fleet.energy)
+    sun: SunCache | None = None  # sunlight of the satellites, computed once (the windows, the battery repair)
     fifo_violations: int = 0  # see eosp.graphs.prune.fifo_violations: 0 makes the pass optima the passes'
     build_s: float = 0.0
 
@@ -65,33 +69,63 @@ class Problem:
                           (pg.graph.node_time[1:] + pg.duration[pg.graph.node_acq[1:]]).max()] for pg in passes])
         span = span.reshape(-1, 2)
         fifo = sum(fifo_violations(pg.graph) for pg in passes)
+        sun = SunCache(geo)
+        windows = energy_windows(fleet, sun, np.array([pg.satellite for pg in passes], dtype=np.int64), span,
+                                 np.array([most_wh(fleet, pg) for pg in passes]))
         return cls(fleet, opps, geo, los, passes, fleet.tasks.weight.astype(np.float64),
-                   [np.asarray(h, dtype=np.int64) for h in holders], span, fifo, time.perf_counter() - t0)
+                   [np.asarray(h, dtype=np.int64) for h in holders], span, windows, sun, fifo,
+                   time.perf_counter() - t0)
 
     @property
     def total_weight(self) -> float:
         return float(self.weight.sum())
 
 
-def priced(weight: np.ndarray, prices: np.ndarray, tasks: np.ndarray) -> np.ndarray:
-    """The utilities of `tasks` under task prices: weight - price (the one place they are computed, on the driver
-    and on the workers alike)."""
-    return weight[tasks] - prices[tasks]
+def most_wh(fleet: Fleet, pg: PassGraph) -> float:
+    """An upper bound of the energy (sum of e_o) a path of pass `pg` can spend: every task once, and no more
+    than imaging and slewing throughout the pass (which of the energy windows can bind)."""
+    b = fleet.satellites.battery
+    t = pg.graph.node_time[1:]
+    span = float((t + pg.duration[pg.graph.node_acq[1:]]).max() - t.min()) if len(t) else 0.0
+    busy = (float(b.imaging_w[pg.satellite]) + float(b.slew_w[pg.satellite])) * span / 3600.0
+    return min(float(pg.energy_wh.sum()), busy + float(pg.energy_wh.max(initial=0.0)))
 
 
-def solve_pass(prob: Problem, p: int, value: np.ndarray, cfg: FleetConfig) -> PassResult:
+def priced(weight: np.ndarray, prices: np.ndarray, tasks: np.ndarray, energy_wh: np.ndarray | None = None,
+           pass_price: float = 0.0) -> np.ndarray:
+    """The utilities of `tasks` under task prices and the pass's price of a Wh: weight - price - pass_price *
+    energy (`energy_wh` the tasks' least energy on the pass's satellite, :attr:`PassGraph.energy_wh`; none: task
+    prices only); the one place utilities are computed, on the driver and on the workers alike."""
+    util = weight[tasks] - prices[tasks]
+    return util if energy_wh is None or pass_price == 0 else util - pass_price * energy_wh
+
+
+def pass_limit(cfg: FleetConfig, deadline: float | None) -> float:
+    """Seconds one pass solve may take: the pass time limit, or what is left before `deadline` (a
+    ``time.perf_counter()`` instant) when that is less (rounded up to 10 ms, so that the solver's config, checked
+    once per distinct value, is not checked again for every pass near the deadline)."""
+    if deadline is None:
+        return cfg.pass_time_limit
+    left = deadline - time.perf_counter()
+    return cfg.pass_time_limit if left >= cfg.pass_time_limit else max(0.01, math.ceil(left * 100) / 100)
+
+
+def solve_pass(prob: Problem, p: int, value: np.ndarray, cfg: FleetConfig,
+               deadline: float | None = None) -> PassResult:
     """Pass `p` with utility `value[a]` per local task (non-positive ones left out)."""
-    return solve_pass_graph(prob.passes[p], value, cfg)
+    return solve_pass_graph(prob.passes[p], value, cfg, deadline)
 
 
-def solve_pass_graph(pg: PassGraph, value: np.ndarray, cfg: FleetConfig) -> PassResult:
-    """One pass graph with utility `value[a]` per local task: what a worker holding the graph runs."""
+def solve_pass_graph(pg: PassGraph, value: np.ndarray, cfg: FleetConfig,
+                     deadline: float | None = None) -> PassResult:
+    """One pass graph with utility `value[a]` per local task: what a worker holding the graph runs; the solver
+    stops by `deadline` (:func:`pass_limit`)."""
     from eosp.solvers.base import run_solver
 
     pp = priced_instance(pg, value)
     if pp is None:
         return PassResult(np.zeros(0, np.int64), 0.0, 0.0)
-    opts = {"time_limit": cfg.pass_time_limit} if cfg.pass_solver in ("exact", "ramp") else {}
+    opts = {"time_limit": pass_limit(cfg, deadline)} if cfg.pass_solver in ("exact", "ramp") else {}
     sol = run_solver(cfg.pass_solver, pp.instance, mode="utility", **opts)
     bound = None
     if cfg.pass_solver == "exact":
@@ -99,17 +133,23 @@ def solve_pass_graph(pg: PassGraph, value: np.ndarray, cfg: FleetConfig) -> Pass
     return PassResult(pp.nodes[np.asarray(sol.nodes, dtype=np.int64)], float(sol.value), bound)
 
 
-def solve_round_pass(pg: PassGraph, value: np.ndarray, cfg: FleetConfig) -> PassResult:
+def solve_round_pass(pg: PassGraph, value: np.ndarray, cfg: FleetConfig,
+                     deadline: float | None = None) -> PassResult:
     """A pass of a price round: its priced problem solved (the path moves the prices and seeds the recovery), with
     its term of the Lagrangian bound as `bound`: the priced optimum where the pass graph serves the bound, else
     the pass's bound problem (:func:`eosp.fleet.passgraph.bound_problem`: bridges and repeats kept, the verifier's
     tolerance); None when no bound is proven (a pass solver that proves none, a bound graph that is not FIFO, a
-    bound problem cut by the pass time limit)."""
-    res = solve_pass_graph(pg, value, cfg)
+    bound problem cut by the pass time limit or the deadline)."""
+    res = solve_pass_graph(pg, value, cfg, deadline)
     if pg.bound_graph is None or res.bound is None:
         return res
-    b = bound_problem(pg, value, cfg.pass_time_limit)
+    b = bound_problem(pg, value, pass_limit(cfg, deadline))
     return PassResult(res.nodes, res.value, max(b, res.bound) if math.isfinite(b) else None)
+
+
+def path_wh(pg: PassGraph, path: np.ndarray) -> float:
+    """The energy (sum of e_o, :attr:`PassGraph.energy_wh`) of a path of pass `pg`."""
+    return float(pg.energy_wh[pg.graph.node_acq[path]].sum())
 
 
 def rewalk(pg: PassGraph, path: np.ndarray) -> np.ndarray:

@@ -10,6 +10,7 @@ from typing import Callable
 import numpy as np
 
 from eosp.fleet.check import CheckResult
+from eosp.fleet.energy import EnergyWindows
 from eosp.fleet.model import Fleet, Schedule
 from eosp.fleet.opportunities import Opportunities
 from eosp.kinds.fleet.config import FleetConfig, GreedyConfig
@@ -46,6 +47,13 @@ class Resume:
     best_bound: float
     bound_source: str
     rounds_done: int
+    mu: np.ndarray | None = None  # the energy windows' multipliers (None: a run dir from before they existed)
+
+
+def resume_mu(resume: Resume, windows: EnergyWindows) -> np.ndarray | None:
+    """The saved multipliers of the energy windows, when they are this problem's (else they start at 0)."""
+    mu = resume.mu
+    return None if mu is None or len(mu) != len(windows) else np.asarray(mu, dtype=np.float64)
 
 
 def solve(fleet: Fleet, opps: Opportunities, cfg: FleetConfig | None = None, problem: Problem | None = None,
@@ -61,7 +69,10 @@ def solve(fleet: Fleet, opps: Opportunities, cfg: FleetConfig | None = None, pro
     `pool`: what solves the passes of a price round (:class:`eosp.kinds.fleet.pool.PassPool`, e.g. Ray actors;
     default: forked processes when ``cfg.workers > 1``, else this process); `on_round`: called after every round;
     `resume`: prices and bound of a stopped run (its best schedule as `initial`); `t0`: when the fleet was read
-    (``time.perf_counter()``; default: now): ``cfg.time_limit`` counts from it."""
+    (``time.perf_counter()``; default: now): ``cfg.time_limit`` counts from it and bounds everything after it
+    (the pass graphs when `problem` is not given, the rounds, the battery repairs, the final check: the rounds
+    stop early by the final check's estimate, :meth:`Coordinator.check_estimate`); when the first schedule comes
+    after the limit, it is returned as soon as it is repaired and checked (``info["first_after_limit"]``)."""
     from eosp.fleet.check import validate
 
     t0 = time.perf_counter() if t0 is None else t0
@@ -79,11 +90,13 @@ def solve(fleet: Fleet, opps: Opportunities, cfg: FleetConfig | None = None, pro
     if resume is None and cfg.warm_start != "none":
         from eosp.kinds.fleet.warmstart import start_prices
 
-        coord.prices = Prices(start_prices(prob, cfg.warm_start, cfg.price_model or None))
+        coord.prices = Prices(start_prices(prob, cfg.warm_start, cfg.price_model or None), coord.windows)
     if resume is not None:
         if len(resume.lam) != len(fleet.tasks):
             raise ValueError("resume: prices of another fleet")
-        coord.prices, coord.start_round = Prices(resume.lam.astype(np.float64), resume.step), resume.rounds_done
+        coord.prices = Prices(resume.lam.astype(np.float64), coord.windows, resume_mu(resume, coord.windows),
+                              resume.step)
+        coord.start_round = resume.rounds_done
         if resume.best_bound < coord.best_bound:
             coord.best_bound, coord.bound_source = resume.best_bound, resume.bound_source
     try:
@@ -91,6 +104,7 @@ def solve(fleet: Fleet, opps: Opportunities, cfg: FleetConfig | None = None, pro
     finally:
         if own_pool:
             pool.close()
+    t_final = time.perf_counter()
     sched = coord.schedule(best)
     res = validate(fleet, sched, prob.geo)
     dropped = 0
@@ -110,7 +124,13 @@ def solve(fleet: Fleet, opps: Opportunities, cfg: FleetConfig | None = None, pro
         source = "lagrangian, frozen passes as given"  # what it bounds: the schedules that keep them
     info = {"pass_solver": cfg.pass_solver, "rounds": coord.rounds_done, "pass_solves": coord.pass_solves,
             "passes": len(prob.passes), "build_s": round(prob.build_s, 3), "checker_drops": dropped,
-            "battery_barred": int(coord.barred.sum()), "metrics": res.metrics, "interrupted": coord.interrupted,
+            "battery_barred": int(coord.barred.sum()), "repair_removed": coord.repair_drops,
+            "repair_first": coord.first_repair_drops, "energy_windows": len(coord.windows),
+            "first_schedule_s": None if coord.first_s is None else round(coord.first_s, 3),
+            "first_after_limit": cfg.time_limit is not None and coord.first_s is not None
+            and coord.first_s > cfg.time_limit, "check_reserve_s": round(coord.check_s, 3),
+            "final_check_s": round(time.perf_counter() - t_final, 3),
+            "metrics": res.metrics, "interrupted": coord.interrupted,
             "bound_source": source, "price_round_s": [round(x, 4) for x in coord.round_s],
             "bound_graphs": prob.bound_graphs, "bound_refused": list(coord.refused),
             "no_lagrangian_bound_because": None if coord.bound_source == "lagrangian" else (
@@ -132,6 +152,7 @@ def solve_fleet(data, cfg: FleetConfig, initial: Schedule | None = None,
     prob = Problem.build(data.fleet, data.opps, data.geo)  # the Geometry the kind's checks built, when they did
     sol = solve(data.fleet, data.opps, cfg, problem=prob, initial=initial, freeze_until_s=freeze_until_s, t0=t0)
     status = "interrupted" if sol.info["interrupted"] else "optimal" if sol.gap == 0 else \
+        "first_schedule" if sol.info["first_after_limit"] else \
         "budget" if cfg.rounds is not None and sol.info["rounds"] >= cfg.rounds else "time_limit"
     return Result(sol.schedule, sol.value, sol.bound, sol.info["bound_source"], status,
                   {"solve": time.perf_counter() - t0, "build": sol.info["build_s"]}, sol.info, sol.check.verdict())

@@ -1,0 +1,1 @@
+"""The EOS-Bench kind (kind.py): its pass problems, price coordination and bound (solve.py)."""

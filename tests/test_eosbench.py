@@ -1,0 +1,379 @@
+"""The EOS-Bench kind on small scenarios the tests write in their format: the streaming reader, both transition
+readings, the checker against an independent replay of their rules, the solver (valid, bound above a brute-force
+optimum), the command line and its one-line refusals."""
+
+from __future__ import annotations
+
+import itertools
+import json
+import math
+from datetime import datetime, timedelta
+from pathlib import Path
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from eosp.cli import main
+from eosp.eosbench.check import check, metrics
+from eosp.eosbench.model import Schedule
+from eosp.eosbench.read import read_scenario
+from eosp.eosbench.schedules import read_schedule, schedule_json
+from eosp.eosbench.transition import C_SMALL, Rules, documented_s, to_us
+from eosp.kinds.eosbench.solve import EosBenchConfig, solve
+
+T0 = datetime(2025, 11, 18, 12, 0, 0)
+
+
+def iso(s: float) -> str:
+    return (T0 + timedelta(seconds=s)).isoformat()
+
+
+def scenario_json(windows: list[dict], n_sat: int = 2, n_task: int = 4, prio=None, dur=None, power: float = 50.0,
+                  max_power: float = 500.0, agile: bool = True, duration: float = 21600.0) -> dict:
+    """A scenario as their generator writes it.  `windows`: dicts (task, sat, start, length, orbit, pitch0, roll)
+    with a pitch that turns 0.5 deg/s from pitch0."""
+    prio = prio or [float(i % 10 + 1) for i in range(n_task)]
+    dur = dur or [5.0 + (i % 3) * 5 for i in range(n_task)]
+    sats = [{"id": f"SAT{s}", "orbital_type": "LEO", "satellite_specs": {
+        "max_data_storage_GB": 1000.0, "max_operation_time_s": 4500.0, "max_power_W": max_power},
+        "observation_capability": {"sensors": [{"sensor_id": f"SAT{s}_sensor", "data_rate_Mbps": 0.1,
+                                                "power_consumption_W": power}]},
+        "maneuverability_capability": {"maneuverability_type": "agile" if agile else "non_agile"}}
+        for s in range(n_sat)]
+    missions = [{"id": f"M{i:03d}", "priority": prio[i], "observation_requirement": {"duration_s": dur[i]}}
+                for i in range(n_task)]
+    obs = []
+    for w in windows:
+        n = int(w["length"])
+        pitch = [w.get("pitch0", 0.0) + 0.5 * j for j in range(n)]
+        tw = {"start_time": iso(w["start"]), "end_time": iso(w["start"] + n), "orbit_number": w.get("orbit", 1),
+              "agile_data": {"pitch_angles": pitch, "yaw_angles": [0.1 * j for j in range(n)],
+                             "roll_angles": [w.get("roll", 0.0)] * n},
+              "non_agile_data": {"pitch_angle": pitch[n // 2], "yaw_angle": 0.0, "roll_angle": w.get("roll", 0.0)}}
+        obs.append({"satellite_id": f"SAT{w['sat']}", "sensor_id": f"SAT{w['sat']}_sensor",
+                    "mission_id": f"M{w['task']:03d}", "time_windows": [tw]})
+    return {"scenario_id": "Scenario_T", "scenario_type": "basic",
+            "metadata": {"name": "Scenario_T", "creation_time": T0.isoformat(), "duration": duration, "time_step": 1.0},
+            "satellites": sats, "missions": missions, "observation_windows": obs}
+
+
+def write(tmp_path: Path, data: dict, name: str = "scen.json") -> str:
+    p = tmp_path / name
+    p.write_text(json.dumps(data))
+    return str(p)
+
+
+# ---------------------------------------------------------------------------------------------- an independent replay
+
+
+def replay(scen_data: dict, sched_data: dict, reading: str) -> tuple[int, dict]:
+    """Their rules as plain Python over the JSON (datetimes, every pair, sums in order): the first assignment
+    refused (-1 none) and TP, TCR, TM, BD."""
+    dur = {m["id"]: m["observation_requirement"]["duration_s"] for m in scen_data["missions"]}
+    prio = {m["id"]: m["priority"] for m in scen_data["missions"]}
+    caps = {s["id"]: s["satellite_specs"] for s in scen_data["satellites"]}
+    t = datetime.fromisoformat
+    kept: list[dict] = []
+    first = -1
+    for i, a in enumerate(sched_data["assignments"]):
+        s, e = t(a["sat_start_time"]), t(a["sat_end_time"])
+        ok = all(b["task_id"] != a["task_id"] for b in kept) and (e - s).total_seconds() + 1e-6 >= dur[a["task_id"]]
+        for b in (b for b in kept if b["satellite_id"] == a["satellite_id"]) if ok else ():
+            bs, be = t(b["sat_start_time"]), t(b["sat_end_time"])
+            prev, nxt = (b, a) if s >= bs else (a, b)
+            if reading == "code":
+                need = 11.66
+            else:
+                la = {k: prev["sat_angles"][k + "_angles"][-1] for k in ("pitch", "yaw", "roll")}
+                fa = {k: nxt["sat_angles"][k + "_angles"][0] for k in ("pitch", "yaw", "roll")}
+                dg = abs(fa["roll"] - la["roll"]) + abs(fa["pitch"] - la["pitch"]) + abs(fa["yaw"] - la["yaw"])
+                v = (1.5, 2.0, 2.5, 3.0)
+                need = 11.66 if dg <= 10 else 5 + dg / v[0] if dg <= 30 else 10 + dg / v[1] if dg <= 60 else \
+                    16 + dg / v[2] if dg <= 90 else 22 + dg / v[3]
+            if t(prev["sat_end_time"]) + timedelta(seconds=need) > t(nxt["sat_start_time"]) or not (e <= bs or s >= be):
+                ok = False
+                break
+        if ok:
+            cap = caps[a["satellite_id"]]
+            same = [b for b in kept if b["satellite_id"] == a["satellite_id"] and b["orbit_number"] == a["orbit_number"]]
+            pw = 0.0
+            for b in same:
+                pw += b["power_cost_W"]
+            pw += a["power_cost_W"]
+            ok = pw - cap["max_power_W"] <= 1e-9
+        if not ok and first < 0:
+            first = i
+        kept.append(a)
+    tasks = [m["id"] for m in scen_data["missions"]]
+    assigned = {a["task_id"] for a in sched_data["assignments"]}
+    horizon = scen_data["metadata"]["duration"]
+    last = {a["task_id"]: a for a in sched_data["assignments"]}
+    num = 0.0
+    for tid in tasks:
+        num += max(0.0, (t(last[tid]["sat_start_time"]) - T0).total_seconds()) if tid in last else horizon
+    loads = {s["id"]: 0.0 for s in scen_data["satellites"]}
+    for a in sched_data["assignments"]:
+        loads[a["satellite_id"]] += (t(a["sat_end_time"]) - t(a["sat_start_time"])).total_seconds()
+    mu = sum(loads.values()) / len(loads)
+    bd = 1.0 - sum(abs(x - mu) for x in loads.values()) / (2.0 * sum(dur.values()))
+    tp = 0.0
+    for tid in tasks:
+        tp += prio[tid] if tid in assigned else 0.0
+    return first, {"TP": tp, "TCR": len(assigned) / len(tasks), "TM": num / (horizon * len(tasks)),
+                   "BD": min(1.0, max(0.0, bd))}
+
+
+def dense(n_task: int = 6, n_sat: int = 2, seed: int = 0, orbits: int = 2) -> dict:
+    rng = np.random.default_rng(seed)
+    wins = []
+    for task in range(n_task):
+        for sat in range(n_sat):
+            for _ in range(int(rng.integers(1, 3))):
+                wins.append({"task": task, "sat": sat, "start": float(rng.integers(0, 400)),
+                             "length": int(rng.integers(20, 60)), "orbit": int(rng.integers(1, orbits + 1)),
+                             "pitch0": float(rng.uniform(-30, 10)), "roll": float(rng.uniform(-20, 20))})
+    return scenario_json(wins, n_sat=n_sat, n_task=n_task)
+
+
+def candidates(scen) -> list[tuple[int, int]]:
+    w = scen.windows
+    out = []
+    for r in range(len(w)):
+        total = (w.end_us[r] - w.start_us[r]) / 1e6 - scen.tasks.duration_s[w.task[r]]
+        out += [(r, k) for k in range(0, int(total) + 1, 3)]
+    return out
+
+
+@settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(seed=st.integers(0, 10_000), picks=st.lists(st.integers(0, 10_000), min_size=1, max_size=14),
+       reading=st.sampled_from(["code", "documented"]))
+def test_the_checker_agrees_with_a_replay_of_their_rules(tmp_path, seed, picks, reading):
+    data = dense(seed=seed)
+    scen = read_scenario(write(tmp_path, data))
+    cand = candidates(scen)
+    sched = Schedule.build(scen, [cand[p % len(cand)] for p in picks])
+    sdata = json.loads(json.dumps(schedule_json(sched, scen)))
+    first, want = replay(data, sdata, reading)
+    rep = check(scen, read_schedule(write(tmp_path, sdata, "s.json"), scen), Rules(reading))
+    assert rep.their_first == first
+    for k, v in want.items():
+        assert rep.metrics[k] == pytest.approx(v, abs=1e-12), k
+    assert rep.first == first  # the schedule comes from their candidates: the generator's rules all hold
+
+
+def test_the_readings_differ_only_one_way(tmp_path):
+    # two tasks 15 s apart on one satellite: 11.66 s is enough, a 40 deg attitude change is not (10 + 40/2 = 30 s)
+    data = scenario_json([{"task": 0, "sat": 0, "start": 0, "length": 20, "pitch0": -20.0},
+                          {"task": 1, "sat": 0, "start": 20, "length": 30, "pitch0": 35.0}], n_sat=1, n_task=2,
+                         dur=[5.0, 5.0])
+    scen = read_scenario(write(tmp_path, data))
+    sched = Schedule.build(scen, [(0, 0), (1, 0)])  # 0-5 s, then 20-25 s: a 15 s gap
+    code, doc = check(scen, sched, Rules("code")), check(scen, sched, Rules("documented"))
+    assert code.valid and not doc.valid
+    assert "needs" in doc.reason and "has 15 s" in doc.reason
+    assert documented_s(np.array([10.0, 10.5, 30.0, 45.0, 90.0, 200.0])).tolist() == pytest.approx(
+        [C_SMALL, 5 + 10.5 / 1.5, 5 + 20.0, 10 + 45 / 2, 16 + 90 / 2.5, 22 + 200 / 3])
+    assert (documented_s(np.linspace(0, 270, 500)) >= C_SMALL).all()  # the code reading is the minimum
+
+
+@given(st.floats(0, 200, allow_nan=False))
+def test_transitions_round_as_their_datetime_arithmetic(x):
+    assert to_us(np.array([x]))[0] == timedelta(seconds=x) // timedelta(microseconds=1)
+
+
+def test_the_generator_rules_their_checker_trusts(tmp_path):
+    data = scenario_json([{"task": 0, "sat": 0, "start": 0, "length": 40, "orbit": 2},
+                          {"task": 1, "sat": 1, "start": 0, "length": 40}], n_task=2, dur=[5.0, 5.0])
+    scen = read_scenario(write(tmp_path, data))
+    good = schedule_json(Schedule.build(scen, [(0, 3), (1, 0)]), scen)
+    assert check(scen, read_schedule(write(tmp_path, good, "g.json"), scen)).valid
+    bad = {"orbit_number": (0, 1, "orbit number 1, its window's is 2"),
+           "power_cost_W": (0, 10.0, "power cost 10 W, its sensor's is 50 W"),
+           "sat_start_time": (0, iso(3.5), "off its window's 1 s grid")}
+    for key, (i, value, why) in bad.items():
+        data2 = json.loads(json.dumps(good))
+        data2["assignments"][i][key] = value
+        if key == "sat_start_time":
+            data2["assignments"][i]["sat_end_time"] = iso(8.5)
+        rep = check(scen, read_schedule(write(tmp_path, data2, f"{key}.json"), scen))
+        assert rep.their_first < 0 and rep.first == i and why in rep.reason
+    data2 = json.loads(json.dumps(good))
+    data2["assignments"][1]["sat_angles"]["pitch_angles"][0] += 1.0
+    assert "attitude" in check(scen, read_schedule(write(tmp_path, data2, "a.json"), scen)).reason
+    data2["assignments"][1].update(sat_start_time=iso(100), sat_end_time=iso(105))
+    assert "not inside an observation window" in check(scen, read_schedule(write(tmp_path, data2, "w.json"),
+                                                                           scen)).reason
+
+
+def test_the_orbit_power_cap_counts_in_file_order(tmp_path):
+    wins = [{"task": i, "sat": 0, "start": 20 * i, "length": 18, "orbit": 1} for i in range(12)]
+    data = scenario_json(wins, n_sat=1, n_task=12, dur=[5.0] * 12)
+    scen = read_scenario(write(tmp_path, data))
+    sched = Schedule.build(scen, [(i, 0) for i in range(12)])
+    rep = check(scen, sched, Rules("code"))
+    assert rep.their_first == 10 and "power of orbit 1 would be 550 W, over 500 W" in rep.reason
+    res = solve(scen, EosBenchConfig(time_limit=None, rounds=3, transition="code"))
+    assert len(res.schedule) == 10 and check(scen, res.schedule, Rules("code")).valid
+    top10 = np.sort(scen.tasks.priority)[::-1][:10].sum()
+    assert res.value == top10 and res.bound == pytest.approx(top10)  # the cap's term is exact here
+
+
+def brute_force(scen, rules: Rules) -> float:
+    """The best profit over every set of candidate observations (all grid starts), by exhaustive search."""
+    w = scen.windows
+    cands = []
+    for r in range(len(w)):
+        total = (w.end_us[r] - w.start_us[r]) / 1e6 - scen.tasks.duration_s[w.task[r]]
+        cands += [(r, k) for k in range(int(math.floor(total + 1e-9)) + 1)]
+    best = 0.0
+
+    def extend(chosen: list, start: int, tasks: set, value: float) -> None:
+        nonlocal best
+        best = max(best, value)
+        for c in range(start, len(cands)):
+            t = int(w.task[cands[c][0]])
+            if t in tasks:
+                continue
+            trial = chosen + [cands[c]]
+            if check(scen, Schedule.build(scen, trial), rules).their_first >= 0:
+                continue
+            extend(trial, c + 1, tasks | {t}, value + float(scen.tasks.priority[t]))
+
+    extend([], 0, set(), 0.0)
+    return best
+
+
+@pytest.mark.parametrize("reading", ["code", "documented"])
+def test_the_solver_is_valid_and_its_bound_holds_against_brute_force(tmp_path, reading):
+    wins = [{"task": 0, "sat": 0, "start": 0, "length": 12, "pitch0": -30.0},
+            {"task": 1, "sat": 0, "start": 10, "length": 12, "pitch0": 20.0},
+            {"task": 2, "sat": 0, "start": 14, "length": 14, "pitch0": -10.0},
+            {"task": 3, "sat": 0, "start": 30, "length": 10, "pitch0": 10.0},
+            {"task": 1, "sat": 1, "start": 0, "length": 10},
+            {"task": 3, "sat": 1, "start": 5, "length": 10}]
+    data = scenario_json(wins, n_sat=2, n_task=4, prio=[3.0, 5.0, 4.0, 2.0], dur=[5.0, 5.0, 5.0, 5.0])
+    scen = read_scenario(write(tmp_path, data))
+    rules = Rules(reading)
+    opt = brute_force(scen, rules)
+    res = solve(scen, EosBenchConfig(time_limit=None, rounds=5, transition=reading))
+    assert check(scen, res.schedule, rules).valid
+    if reading == "documented":
+        assert check(scen, res.schedule, Rules("code")).valid  # documented-valid is valid for both
+    assert res.value <= opt + 1e-9 <= res.bound + 1e-9
+    assert res.value == opt  # two satellites, four tasks: the passes are solved exactly
+    again = solve(scen, EosBenchConfig(time_limit=None, rounds=5, transition=reading))
+    assert schedule_json(again.schedule, scen) == schedule_json(res.schedule, scen)
+
+
+def tiny(seed: int) -> dict:
+    """Four 5 s tasks, each seen by each of two satellites through one 6-8 s window in the first 40 s (2-4 starts)
+    on one of two orbits, one observation an orbit (50 W cap, 50 W each): few enough candidates for the
+    exhaustive search, crowded enough for transitions and the cap to bind."""
+    rng = np.random.default_rng(seed)
+    wins = [{"task": task, "sat": sat, "start": float(rng.integers(0, 40)), "length": int(rng.integers(6, 9)),
+             "orbit": int(rng.integers(1, 3)), "pitch0": float(rng.uniform(-30, 10)), "roll": float(rng.uniform(-20, 20))}
+            for task in range(4) for sat in range(2)]
+    return scenario_json(wins, n_sat=2, n_task=4, dur=[5.0] * 4, max_power=50.0)
+
+
+@pytest.mark.parametrize("seed", [1, 2, 4, 7])
+@pytest.mark.parametrize("reading", ["code", "documented"])
+def test_the_bound_holds_on_random_scenarios(tmp_path, seed, reading):
+    scen = read_scenario(write(tmp_path, tiny(seed)))
+    res = solve(scen, EosBenchConfig(time_limit=None, rounds=4, transition=reading))
+    assert check(scen, res.schedule, Rules(reading)).valid
+    assert res.bound + 1e-9 >= brute_force(scen, Rules(reading)) >= res.value - 1e-9
+
+
+def test_non_agile_satellites(tmp_path):
+    wins = [{"task": 0, "sat": 0, "start": 0, "length": 21}, {"task": 1, "sat": 0, "start": 10, "length": 31}]
+    data = scenario_json(wins, n_sat=1, n_task=2, dur=[5.0, 5.0], agile=False)
+    path = write(tmp_path, data)
+    scen = read_scenario(path)
+    res = solve(scen, EosBenchConfig(time_limit=None, rounds=2))
+    assert len(res.schedule) == 2 and check(scen, res.schedule).valid  # centred starts 8 and 23: 10 s apart
+    rep = check(scen, res.schedule, Rules("code"))
+    assert not rep.valid and "non-agile" in rep.reason
+    assert main(["solve", path, "--solver", "eosbench", "--transition", "code", "--rounds", "1", "--out",
+                 str(tmp_path / "o.json")]) == 2
+
+
+def test_the_command_line(tmp_path, capsys):
+    path = write(tmp_path, dense(seed=5))
+    assert main(["info", path]) == 0
+    assert "EOS-Bench scenario" in capsys.readouterr().out
+    out = tmp_path / "s.json"
+    assert main(["solve", path, "--solver", "eosbench", "--rounds", "2", "--time-limit", "0", "--out", str(out)]) == 0
+    line = capsys.readouterr().out
+    assert "TP" in line and "bound" in line
+    assert main(["validate", path, str(out)]) == 0
+    assert capsys.readouterr().out.startswith("valid: TP")
+    # the code reading's schedule is judged under the code reading (the documented one may refuse it)
+    code = tmp_path / "code.json"
+    assert main(["solve", path, "--solver", "eosbench", "--transition", "code", "--rounds", "2", "--time-limit", "0",
+                 "--out", str(code)]) == 0
+    assert check(read_scenario(path), read_schedule(str(code), read_scenario(path)), Rules("code")).valid
+    capsys.readouterr()
+    data = json.loads(out.read_text())
+    assert data["eosp"] == "eosbench-schedule" and set(data["metrics"]) == {"TP", "TCR", "BD", "TM", "RT", "RV"}
+    data["assignments"].append(dict(data["assignments"][0]))
+    bad = tmp_path / "dup.json"
+    bad.write_text(json.dumps(data))
+    assert main(["validate", path, str(bad)]) == 1
+    assert "task already assigned" in capsys.readouterr().out
+    assert main(["solve", path, "--solver", "eosbench", "--rounds", "1", "--out", str(out)]) == 2
+    assert "already exists" in capsys.readouterr().err
+    # the registry routes the path to this kind: its solvers and options, no other kind's
+    for argv, words in ((["--solver", "greedy"], "invalid choice: 'greedy' (choose from 'eosbench')"),
+                        (["--solver", "eosbench", "--moves", "3"], "no option --moves")):
+        try:
+            code = main(["solve", path, *argv, "--out", str(tmp_path / "g.json")])
+        except SystemExit as exit_:  # the solver's own options are parsed once the solver is known
+            code = exit_.code
+        assert code == 2 and words in capsys.readouterr().err and not (tmp_path / "g.json").exists()
+
+
+@pytest.mark.parametrize("mutate, words", [
+    (lambda d: d["observation_windows"][0].update(mission_id="NOPE"), "observation_windows[0]: mission 'NOPE'"),
+    (lambda d: d["observation_windows"][1]["time_windows"][0].update(end_time=iso(0)),
+     "observation_windows[1].time_windows[0]: end_time"),
+    (lambda d: d["missions"][2]["observation_requirement"].update(required_mode="sar"),
+     "missions[2].observation_requirement.required_mode = 'sar': unsupported constraint"),
+    (lambda d: d["satellites"][0]["satellite_specs"].update(max_power_W="lots"),
+     "satellites[0].satellite_specs.max_power_W: expected a number"),
+    (lambda d: d.update(constraints={"x": 1}), "unsupported top-level field 'constraints'"),
+    (lambda d: d["observation_windows"][0]["time_windows"][0]["agile_data"].update(pitch_angles=[1.0]),
+     "observation_windows[0].time_windows[0].agile_data: needs"),
+    (lambda d: d["metadata"].pop("duration"), "metadata.duration missing"),
+])
+def test_a_malformed_scenario_is_one_line(tmp_path, capsys, mutate, words):
+    data = dense(seed=7)
+    mutate(data)
+    path = write(tmp_path, data)
+    assert main(["info", path]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and path in err and words in err, err
+
+
+def test_a_truncated_scenario_is_one_line(tmp_path, capsys):
+    path = tmp_path / "cut.json"
+    path.write_text(json.dumps(dense(seed=8))[:3000])
+    assert main(["info", str(path)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "not valid JSON" in err
+
+
+def test_a_scenario_with_defaults_reads_as_their_loader(tmp_path):
+    data = dense(seed=9)
+    del data["missions"][0]["priority"]
+    tw = data["observation_windows"][0]["time_windows"][0]
+    del tw["orbit_number"]
+    data["observation_windows"][0]["orbit_number"] = 4
+    scen = read_scenario(write(tmp_path, data))
+    assert scen.tasks.priority[0] == 1.0 and scen.windows.orbit[0] == 4
+    assert scen.windows.att_ptr[-1] == sum(len(w["time_windows"][0]["agile_data"]["pitch_angles"])
+                                           for w in data["observation_windows"])
+    assert metrics(scen, Schedule.build(scen, []))["TM"] == 1.0
+    assert list(itertools.islice(scen.ignored, 1)) == ["satellite_specs.max_operation_time_s"]
