@@ -547,12 +547,67 @@ class RunConfig:
 
 
 @dataclass
+class FleetTrainConfig(TrainConfig):
+    """PPO fine-tuning of the fleet policy (jobs/train_fleet.py): the constellation environment on multi-agent env
+    runners, every satellite acting with one shared module.  train_data: fleet directories (or directories of them)
+    that the env runners share out; val_data: a demo set of held-out fleets (jobs/build_fleet_demos.py)."""
+
+    train_data: str = "data/demos/train"
+    """A demo set (jobs/build_fleet_demos.py): its fleets are the training fleets, which the env runners share out
+    by index (never the evaluation splits)."""
+    val_data: str = "data/demos/val"
+    """A demo set of held-out fleets (greedy decoding against the fleet solver, the fleet greedy and the
+    features-only decoder); empty to skip."""
+    overlap_sampling: bool = False
+    """Not for fleets (multi-agent episodes): RLlib's PPO (sample, then learn)."""
+    experiment: str = "eosp-fleet"
+
+
+@dataclass
+class FleetRunConfig:
+    """Everything a fleet PPO run uses; recorded with every run (jobs/train_fleet.py)."""
+
+    env: FleetEnvConfig = field(default_factory=FleetEnvConfig)
+    model: ModelConfig = field(default_factory=ModelConfig)
+    train: FleetTrainConfig = field(default_factory=FleetTrainConfig)
+    ray: RayConfig = field(default_factory=RayConfig)
+
+
+@dataclass
 class PretrainConfig:
     """Everything an imitation run uses; recorded with every run (jobs/pretrain.py)."""
 
     env: EnvConfig = field(default_factory=EnvConfig)
     model: ModelConfig = field(default_factory=ModelConfig)
     imitation: ImitationConfig = field(default_factory=ImitationConfig)
+    ray: RayConfig = field(default_factory=RayConfig)
+
+
+@dataclass
+class FleetImitationConfig(ImitationConfig):
+    """Imitation of the fleet solver by the fleet policy (jobs/pretrain_fleet.py).  The demonstrations carry one
+    action per decision (the fleet solver's schedule replayed), no action values: regret_coeff, set_tolerance and
+    dagger_beam do not apply (left at their defaults)."""
+
+    train_data: tuple[str, ...] = ("data/demos/train",)
+    """Demo sets of training fleets (jobs/build_fleet_demos.py)."""
+    val_data: str = "data/demos/val"
+    """A demo set of held-out fleets: greedy decoding against the fleet solver's schedules, the fleet greedy and the
+    features-only decoder; empty: none."""
+    dagger_instances: int = ranged(4, 1)
+    """Training fleets on which the policy plays a partial day per DAgger round (the fleet solver completes it)."""
+    dagger_time_limit: float = ranged(20.0, 0, WEEK_S, lo_open=True)
+    """Seconds of fleet-solver search completing each DAgger day from the policy's partial schedule."""
+    experiment: str = "eosp-fleet-imitation"
+
+
+@dataclass
+class FleetPretrainConfig:
+    """Everything a fleet imitation run uses; recorded with every run (jobs/pretrain_fleet.py)."""
+
+    env: FleetEnvConfig = field(default_factory=FleetEnvConfig)
+    model: ModelConfig = field(default_factory=ModelConfig)
+    imitation: FleetImitationConfig = field(default_factory=FleetImitationConfig)
     ray: RayConfig = field(default_factory=RayConfig)
 
 

@@ -74,7 +74,7 @@ from __future__ import annotations
 from collections import OrderedDict
 from dataclasses import fields
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 import gymnasium as gym
 import numpy as np
@@ -88,27 +88,42 @@ from eosp.errors import InputError
 from eosp.fleet.model import Schedule, strings
 
 
+class Snapshot(NamedTuple):
+    """A copy of an episode's state (:meth:`ConstellationEnv.snapshot`)."""
+
+    prepared: PreparedFleet
+    arrays: tuple  # the Episode's arrays (its actions cut to those taken)
+    agents: tuple  # per satellite: carried own reward, team total seen, acted
+    scalars: tuple  # team total, return so far, acting satellite
+    mask: np.ndarray
+
+
 def agent_id(k: int) -> str:
     return f"sat_{k}"
 
 
-def load_fleet(path: str | Path) -> PreparedFleet:
-    """A fleet directory (``eosp generate --fleet``, opportunities included) or an aeossp case directory
-    (opportunities computed), prepared; InputError for anything else."""
+def read_fleet_dir(path: str | Path, with_opportunities: bool = True):
+    """(fleet, opportunities) of a fleet directory (``eosp generate --fleet``, ``eosp import``; opportunities read)
+    or of an aeossp case directory (opportunities computed); opportunities None when not asked for; InputError
+    for anything else."""
     from eosp.fleet.aeossp import is_case_dir, read_case
     from eosp.fleet.io import is_fleet_dir, read_fleet
 
     root = Path(path)
     if is_fleet_dir(root):
-        fleet, opps = read_fleet(root)
-    elif is_case_dir(root):
+        return read_fleet(root, with_opportunities=with_opportunities)
+    if is_case_dir(root):
         from eosp.fleet.opportunities import compute
 
         fleet = read_case(root)
-        opps = compute(fleet)
-    else:
-        raise InputError(root, "not a fleet directory (eosp generate --fleet) nor an aeossp case directory")
-    return prepare_fleet(fleet, opps, name=str(root))
+        return fleet, compute(fleet) if with_opportunities else None
+    raise InputError(root, "not a fleet directory (eosp generate --fleet) nor an aeossp case directory")
+
+
+def load_fleet(path: str | Path) -> PreparedFleet:
+    """A fleet directory or an aeossp case directory (:func:`read_fleet_dir`), prepared."""
+    fleet, opps = read_fleet_dir(path)
+    return prepare_fleet(fleet, opps, name=str(Path(path)))
 
 
 def expand_fleets(paths: tuple[str, ...] | list[str]) -> list[Path]:
@@ -165,11 +180,7 @@ class FleetDirs:
     def sizes(self) -> dict[str, int]:
         """Satellites of each fleet (read once, without opportunities)."""
         if self._sizes is None:
-            from eosp.fleet.aeossp import is_case_dir, read_case
-            from eosp.fleet.io import read_fleet
-
-            self._sizes = {str(p): len((read_case(p) if is_case_dir(p) else read_fleet(p, with_opportunities=False)[0])
-                                       .satellites) for p in self.paths}
+            self._sizes = {str(p): len(read_fleet_dir(p, with_opportunities=False)[0].satellites) for p in self.paths}
         return self._sizes
 
     def max_satellites(self) -> int:
@@ -404,6 +415,31 @@ class ConstellationEnv:
 
     def action_mask(self) -> np.ndarray:
         return self._mask.copy()
+
+    def snapshot(self) -> Snapshot:
+        """A copy of the episode's state (arrays of a few entries per task and satellite, the observations taken
+        so far), for searches that branch (:mod:`eosp.search.rollouts`, :mod:`eosp.search.mcts`) through
+        :class:`eosp.envs.constellation_team.TeamEnv`."""
+        ep = self.ep
+        n = int(ep.counts[core.N_ACTIONS])
+        arrays = tuple(a[:n].copy() if f == "actions" else a.copy() for f, a in zip(ep._fields, ep))
+        return Snapshot(self.prepared, arrays, (self._own.copy(), self._team_seen.copy(), self._acted.copy()),
+                        (self._team_total, self.value, self.actor), self._mask.copy())
+
+    def restore(self, snap: Snapshot) -> None:
+        """Back to the state of `snap` (taken on this environment, on the fleet it plays now)."""
+        if snap.prepared is not self.prepared:
+            raise ValueError("a snapshot of another fleet: reset(options={'fleet': ...}) to it first")
+        for f, dst, src in zip(self.ep._fields, self.ep, snap.arrays):
+            if f == "actions":
+                dst[:len(src)] = src
+            else:
+                dst[...] = src
+        self._own[:], self._team_seen[:], self._acted[:] = snap.agents
+        self._team_total, self.value, self.actor = snap.scalars
+        self._mask = snap.mask.copy()
+        if self.actor >= 0:
+            self.action_spaces[agent_id(self.actor)].current_mask = self._mask
 
     @property
     def acting_agent(self) -> str | None:

@@ -10,6 +10,9 @@ The battery is not planned ahead: each satellite's timeline is then repaired
 (:func:`eosp.fleet.timeline.repair_battery`: while it runs dry, the least valuable observation
 started before the failure is dropped, and the timeline re-checked for slews).  A final run of the checker
 guards the result: an action it rejects is dropped and the schedule checked again.
+
+:func:`fill` is the same insertion started from a given schedule (the tasks it serves kept where they are): the
+post-processing of the learned fleet solvers, named ``fill`` in their options.
 """
 
 from __future__ import annotations
@@ -29,16 +32,20 @@ def task_order(fleet: Fleet) -> np.ndarray:
     return np.lexsort((tk.due_s, -(tk.weight / tk.duration_s), -tk.weight))
 
 
-def insert_greedily(fleet: Fleet, opps: Opportunities, los: LineOfSight) -> list[Timeline]:
-    """Timelines built by inserting tasks in :func:`task_order` at their earliest-ending fit."""
+def insert_greedily(fleet: Fleet, opps: Opportunities, los: LineOfSight,
+                    tls: list[Timeline] | None = None) -> list[Timeline]:
+    """Timelines built by inserting tasks in :func:`task_order` at their earliest-ending fit; `tls`: the timelines to
+    insert into (the tasks they hold are not inserted again), empty ones when None."""
     step = fleet.horizon.action_step_s
     dur = fleet.tasks.duration_s
-    tls = [Timeline() for _ in range(len(fleet.satellites))]
+    tls = tls if tls is not None else [Timeline() for _ in range(len(fleet.satellites))]
+    held = np.zeros(len(fleet.tasks), dtype=bool)
+    held[[t for tl in tls for t in tl.task]] = True
     by_task = np.argsort(opps.task, kind="stable")
     bounds = np.searchsorted(opps.task[by_task], np.arange(len(fleet.tasks) + 1))
     for t in task_order(fleet).tolist():
         rows = by_task[bounds[t]:bounds[t + 1]]
-        if len(rows) == 0:
+        if len(rows) == 0 or held[t]:
             continue
         best = None
         for sat in np.unique(opps.satellite[rows]).tolist():
@@ -64,7 +71,27 @@ def solve(fleet: Fleet, opps: Opportunities, geo: Geometry | None = None) -> Sch
     """A schedule the checker accepts (see the module docstring)."""
     geo = geo or Geometry(fleet)
     los = LineOfSight(fleet, geo)
-    tls = insert_greedily(fleet, opps, los)
+    return finish(fleet, geo, los, insert_greedily(fleet, opps, los))
+
+
+def fill(fleet: Fleet, opps: Opportunities, schedule: Schedule, geo: Geometry | None = None) -> Schedule:
+    """`schedule` with the tasks it does not serve inserted where they still fit (:func:`insert_greedily` from its
+    timelines), then the battery repaired and the checker's guard (:func:`finish`): the repair may drop
+    observations of `schedule` itself, so the caller compares the two."""
+    from eosp.fleet.timeline import timelines
+
+    geo = geo or Geometry(fleet)
+    los = LineOfSight(fleet, geo)
+    si, ti = fleet.satellite_index(), fleet.task_index()
+    sat = np.array([si[s] for s in schedule.satellite.tolist()], dtype=np.int64)
+    task = np.array([ti[t] for t in schedule.task.tolist()], dtype=np.int64)
+    tls = timelines(fleet, los, sat, task, schedule.start_us / 1e6, schedule.end_us / 1e6)
+    return finish(fleet, geo, los, insert_greedily(fleet, opps, los, tls))
+
+
+def finish(fleet: Fleet, geo: Geometry, los: LineOfSight, tls: list[Timeline]) -> Schedule:
+    """The timelines with their batteries repaired, as a schedule the checker accepts (an action it rejects is
+    dropped, and the schedule checked again)."""
     repair_battery(fleet, los, tls)
     sched = to_schedule(fleet, tls)
     for _ in range(len(sched) + 1):

@@ -51,18 +51,14 @@ def run(cfg: PretrainConfig) -> dict:
     import numpy as np
     import torch
 
-    from eosp.atomic import atomic_path
     from eosp.jobs.ray_init import init_ray
     from eosp.models.agent import EOSPAgent
-    from eosp.models.checkpoint import save_agent
-    from eosp.training.imitation import DemoData, WeightAverage, cosine_lr, train_epoch
-    from eosp.training.plots import imitation_curve
-    from eosp.training.validation import Validator, selection_score
+    from eosp.training.imitation import DemoData, fit
+    from eosp.training.validation import Validator
 
     torch.set_num_threads(1)
     im = cfg.imitation
     torch.manual_seed(im.seed)
-    rng = np.random.default_rng(im.seed)
     init_ray(cfg.ray.address, cfg.ray.num_cpus)
     t_load = time.perf_counter()
     agent = None
@@ -80,14 +76,12 @@ def run(cfg: PretrainConfig) -> dict:
     if im.val_data:
         validator = Validator(im.val_data, cfg.env, im.max_val_instances, baselines=("greedy", "ramp", "exact"))
     run_dir = Path(im.run_dir) / im.run_name
-    ckpt = run_dir / "checkpoints"
     from eosp.jobs.preflight import make_run_dir
 
     make_run_dir(run_dir, im.overwrite)
 
     if agent is None:
         agent = EOSPAgent(cfg.model)
-    opt = torch.optim.Adam(agent.parameters(), lr=im.lr, weight_decay=im.weight_decay)
     from eosp.jobs.tracking import use_experiment
 
     use_experiment(im.mlflow_uri, im.experiment)
@@ -96,54 +90,10 @@ def run(cfg: PretrainConfig) -> dict:
     mlflow.log_dict(to_dict(cfg), "config.json")
     mlflow.log_metrics({"data/instances": len(data.instances), "data/expert_states": len(data.samples)}, step=0)
 
-    history, best = [], float("-inf")
-    average = WeightAverage(agent, im.ema) if im.ema > 0 else None
-    t0 = time.perf_counter()
-    deadline = t0 + im.time_budget if im.time_budget > 0 else None
-    for epoch in range(1, im.epochs + 1):
-        lr_at = None
-        if im.lr_schedule == "cosine":
-            def lr_at(done: float, epoch: int = epoch) -> float:
-                by_epochs = (epoch - 1 + done) / im.epochs
-                by_time = (time.perf_counter() - t0) / im.time_budget if deadline is not None else 0.0
-                return cosine_lr(im.lr, max(by_epochs, by_time))
-        metrics = train_epoch(agent, opt, data.samples, im, rng, deadline, average, lr_at)
-        metrics["train/lr"] = opt.param_groups[0]["lr"]
-        policy = average.model if average is not None else agent  # what is validated, saved and rolled out
-        out_of_time = deadline is not None and time.perf_counter() > deadline
-        last = epoch == im.epochs or out_of_time
-        if validator is not None and (epoch % im.validate_every == 0 or last):
-            metrics.update(validator.run(policy).metrics)
-            if selection_score(metrics) > best:
-                best = selection_score(metrics)
-                save_agent(policy, ckpt / "best", cfg.env, {"epoch": epoch, "val": metrics, "source": "imitation"})
-        if im.dagger_every and epoch % im.dagger_every == 0 and not last:
-            metrics.update(data.add_policy_states(policy, im.dagger_instances, im.dagger_beam, rng))
-        metrics["wall_s"] = time.perf_counter() - t0
-        history.append({"epoch": epoch, **metrics})
-        mlflow.log_metrics(metrics, step=epoch)
-        print(f"[pretrain] epoch {epoch}: loss {metrics['train/policy_loss']:.4f} accuracy "
-              f"{metrics['train/accuracy']:.4f} value {metrics['train/value_loss']:.4f}"
-              + (f"  val /optimum {metrics['val/ratio_to_exact']:.4f} /ramp {metrics['val/ratio_to_ramp']:.4f} "
-                 f"/greedy {metrics['val/ratio_to_greedy']:.4f} (per instance /optimum "
-                 f"{metrics['val/mean_ratio_to_exact']:.4f})" if "val/ratio_to_exact" in metrics else "")
-              + (f"  dagger +{metrics['dagger/states_added']:.0f} states" if "dagger/states_added" in metrics else "")
-              + f"  ({metrics['wall_s']:.0f} s)", flush=True)
-        if out_of_time:
-            print(f"[pretrain] time budget of {im.time_budget:.0f} s reached", flush=True)
-            break
-    policy = average.model if average is not None else agent
-    save_agent(policy, ckpt / "last", cfg.env, {"epoch": history[-1]["epoch"], "source": "imitation"})
-    if validator is None:
-        save_agent(policy, ckpt / "best", cfg.env, {"epoch": history[-1]["epoch"], "source": "imitation"})
-    png = imitation_curve(history, run_dir / "learning_curve")
-    mlflow.log_artifact(str(png))
-    mlflow.log_artifact(str(png.with_suffix(".svg")))
-    with atomic_path(run_dir / "history.json") as tmp:
-        tmp.write_text(json.dumps({"config": to_dict(cfg), "history": history}, indent=1))
-    mlflow.log_metric("perf/train_wall_s", time.perf_counter() - t0)
+    dagger = (lambda policy, rng: data.add_policy_states(policy, im.dagger_instances, im.dagger_beam, rng))
+    history = fit(agent, data, validator, im, cfg.env, run_dir, to_dict(cfg), dagger)
     mlflow.end_run()
-    return {"history": history, "checkpoint": str(ckpt / "best"), "run_dir": str(run_dir)}
+    return {"history": history, "checkpoint": str(run_dir / "checkpoints" / "best"), "run_dir": str(run_dir)}
 
 
 def main(argv: list[str] | None = None) -> int:

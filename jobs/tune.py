@@ -75,12 +75,61 @@ def trial(config: dict) -> None:
     trainer.stop()
 
 
-def run(cfg: RunConfig, tc: TuneConfig) -> dict:
+def sweep(trainable, space: dict, tc: TuneConfig, sweep_dir: Path, experiment: str, uri: str, max_t: int,
+          resources: dict, state: dict):
+    """Run a Ray Tune grid `space` of `trainable` (trials report ``iteration`` and ``tc.metric`` with "/" as "_"),
+    ASHA stopping the poor trials after ``tc.grace_period`` iterations, tracked in MLflow (`uri`, `experiment`):
+    one parent run named ``tc.name`` (created here, not by racing trials; its id kept in ``sweep.json`` beside
+    `state`), one child run per trial.  A sweep directory with a Tuner state resumes.  Returns (results, the best
+    trial's result, its best checkpoint, the parent run id, the MLflow client).  Shared by jobs/tune.py (PPO
+    trials) and jobs/tune_fleet.py (fleet imitation trials)."""
     import mlflow
-    import ray
     from ray import tune
     from ray.air.integrations.mlflow import MLflowLoggerCallback
     from ray.tune.schedulers import ASHAScheduler
+
+    from eosp.ownership import kind_of, mark_dir
+
+    from eosp.jobs.tracking import use_experiment
+
+    exp = use_experiment(uri, experiment)  # the database and the experiment created here, not by racing trials
+    sweep_dir.mkdir(parents=True, exist_ok=True)
+    if kind_of(sweep_dir) != SWEEP_KIND:
+        mark_dir(sweep_dir, SWEEP_KIND)
+    state_file = sweep_dir / "sweep.json"
+    client = mlflow.tracking.MlflowClient(uri)
+    if state_file.exists():
+        parent_id = json.loads(state_file.read_text())["mlflow_parent_run_id"]
+    else:
+        parent_id = client.create_run(exp.experiment_id, run_name=tc.name, tags={"eosp.kind": "tune-sweep"}).info.run_id
+        client.log_param(parent_id, "search_space", json.dumps(to_dict(tc)))
+        state_file.write_text(json.dumps({"mlflow_parent_run_id": parent_id, "tune": to_dict(tc), **state}))
+    metric = tc.metric.replace("/", "_")
+    trainable = tune.with_resources(trainable, resources)
+    callbacks = [MLflowLoggerCallback(tracking_uri=uri, experiment_name=experiment,
+                                      tags={"mlflow.parentRunId": parent_id, "eosp.sweep": tc.name})]
+    if tune.Tuner.can_restore(str(sweep_dir)) and (sweep_dir / "tuner.pkl").exists():
+        print(f"[tune] resuming sweep {tc.name} from {sweep_dir}", flush=True)
+        tuner = tune.Tuner.restore(str(sweep_dir), trainable, resume_errored=True, param_space=space)
+    else:
+        tuner = tune.Tuner(
+            trainable, param_space=space,
+            tune_config=tune.TuneConfig(metric=metric, mode="max", num_samples=tc.num_samples,
+                                        scheduler=ASHAScheduler(time_attr="iteration", grace_period=tc.grace_period,
+                                                                max_t=max(max_t, tc.grace_period))),
+            run_config=tune.RunConfig(name=tc.name, storage_path=str(sweep_dir.parent), callbacks=callbacks,
+                                      failure_config=tune.FailureConfig(max_failures=1),
+                                      checkpoint_config=tune.CheckpointConfig(num_to_keep=1)),
+        )
+    results = tuner.fit()
+    best = results.get_best_result(metric=metric, mode="max", scope="all")
+    ck = best.get_best_checkpoint(metric=metric, mode="max") or best.checkpoint
+    return results, best, ck, parent_id, client
+
+
+def run(cfg: RunConfig, tc: TuneConfig) -> dict:
+    import ray
+    from ray import tune
 
     from eosp.jobs.ray_init import init_ray
     from eosp.training.validation import baseline_values
@@ -98,50 +147,17 @@ def run(cfg: RunConfig, tc: TuneConfig) -> dict:
         cfg.train.val_data = str(Path(cfg.train.val_data).resolve())
 
     uri = default_mlflow_uri(cfg.train.mlflow_uri)
-    storage = (Path(cfg.train.run_dir) / "tune").resolve()
-    sweep_dir = storage / tc.name
+    sweep_dir = (Path(cfg.train.run_dir) / "tune").resolve() / tc.name
     # baselines once, in the driver, before the trials hold the CPUs
     if cfg.train.val_data:
         baseline_values(cfg.train.val_data, objective_mode(cfg.env))
-    # the database and the experiment are created here, not by racing trials
-    from eosp.jobs.tracking import use_experiment
-
-    exp = use_experiment(uri, cfg.train.experiment)
-    sweep_dir.mkdir(parents=True, exist_ok=True)
-    from eosp.ownership import kind_of, mark_dir
-
-    if kind_of(sweep_dir) != SWEEP_KIND:
-        mark_dir(sweep_dir, SWEEP_KIND)
-    state_file = sweep_dir / "sweep.json"
-    client = mlflow.tracking.MlflowClient(uri)
-    if state_file.exists():
-        parent_id = json.loads(state_file.read_text())["mlflow_parent_run_id"]
-    else:
-        parent_id = client.create_run(exp.experiment_id, run_name=tc.name, tags={"eosp.kind": "tune-sweep"}).info.run_id
-        client.log_param(parent_id, "search_space", json.dumps(to_dict(tc)))
-        state_file.write_text(json.dumps({"mlflow_parent_run_id": parent_id, "tune": to_dict(tc), "run": to_dict(cfg)}))
-    metric = tc.metric.replace("/", "_")
     space = {"run": to_dict(cfg), "hidden_dim": tune.grid_search(list(tc.hidden_dims)),
              "n_layers": tune.grid_search(list(tc.n_layers)), "lr": tune.grid_search(list(tc.lrs))}
     gpus = cfg.train.num_gpus_per_learner  # a trial's learner runs in the trial's actor: Ray gives it the GPU
-    trainable = tune.with_resources(trial, {"cpu": tc.cpus_per_trial, **({"gpu": gpus} if gpus else {})})
-    callbacks = [MLflowLoggerCallback(tracking_uri=uri, experiment_name=cfg.train.experiment,
-                                      tags={"mlflow.parentRunId": parent_id, "eosp.sweep": tc.name})]
-    if tune.Tuner.can_restore(str(sweep_dir)) and (sweep_dir / "tuner.pkl").exists():
-        print(f"[tune] resuming sweep {tc.name} from {sweep_dir}", flush=True)
-        tuner = tune.Tuner.restore(str(sweep_dir), trainable, resume_errored=True, param_space=space)
-    else:
-        tuner = tune.Tuner(
-            trainable, param_space=space,
-            tune_config=tune.TuneConfig(metric=metric, mode="max", num_samples=tc.num_samples,
-                                        scheduler=ASHAScheduler(time_attr="iteration", grace_period=tc.grace_period,
-                                                                max_t=max(cfg.train.iterations, tc.grace_period))),
-            run_config=tune.RunConfig(name=tc.name, storage_path=str(storage), callbacks=callbacks,
-                                      failure_config=tune.FailureConfig(max_failures=1),
-                                      checkpoint_config=tune.CheckpointConfig(num_to_keep=1)),
-        )
-    results = tuner.fit()
-    best = results.get_best_result(metric=metric, mode="max", scope="all")
+    results, best, ck, parent_id, client = sweep(
+        trial, space, tc, sweep_dir, cfg.train.experiment, uri, cfg.train.iterations,
+        {"cpu": tc.cpus_per_trial, **({"gpu": gpus} if gpus else {})}, {"run": to_dict(cfg)})
+    metric = tc.metric.replace("/", "_")
     best_cfg = from_dict(RunConfig, best.config["run"])
     best_cfg.model.hidden_dim = int(best.config["hidden_dim"])
     best_cfg.model.n_layers = int(best.config["n_layers"])
@@ -150,7 +166,6 @@ def run(cfg: RunConfig, tc: TuneConfig) -> dict:
     out_best = sweep_dir / "best"
     if out_best.exists():
         shutil.rmtree(out_best)
-    ck = best.get_best_checkpoint(metric=metric, mode="max") or best.checkpoint
     with ck.as_directory() as d:
         shutil.copytree(d, out_best)
         best_cfg.model.value_scale = json.loads((Path(d) / "trial.json").read_text())["value_scale"]

@@ -15,6 +15,9 @@ whose greedy episode fits their time share.  Any shipped model is one flag away:
 was a variant, kept so that commands written then still work).  The unitary model reads
 the label sweep's values instead (``--env.plan label``: one backward sweep a step, 45 ms at
 1000 acquisitions on a conflict instance), so it serves searches of every size.
+
+The fleet policy (``fleet``: the constellation environment's agent, one module for every satellite) serves
+``eosp solve FLEET_DIR --solver fleet-policy|fleet-sample`` without ``--checkpoint`` (:func:`load_fleet_pretrained`).
 """
 
 from __future__ import annotations
@@ -26,6 +29,7 @@ from eosp.errors import InputError
 ROOT = Path(__file__).resolve().parent / "pretrained-agents"
 MODES = ("unitary", "utility")
 VARIANTS = ("utility-fast",)
+FLEET = "fleet"  # the shipped fleet policy (a constellation checkpoint: eosp.models.checkpoint.load_fleet_agent)
 ALIASES = {"utility-plan": "utility"}
 FAST = {"utility": "utility-fast"}
 FAST_ABOVE = 500
@@ -43,8 +47,8 @@ def default_name(mode: str, n_acquisitions: int = 0, time_limited: bool = False)
 def pretrained_dir(mode: str) -> Path:
     """The shipped checkpoint directory of an objective mode ('unitary' or 'utility') or of a variant."""
     mode = ALIASES.get(mode, mode)
-    if mode not in MODES + VARIANTS:
-        names = ", ".join(MODES + VARIANTS + tuple(ALIASES))
+    if mode not in MODES + VARIANTS + (FLEET,):
+        names = ", ".join(MODES + VARIANTS + tuple(ALIASES) + (FLEET,))
         raise InputError(f"--checkpoint {PREFIX}{mode}", f"no pretrained model {mode!r}; shipped: {names}")
     d = ROOT / mode
     if not (d / "agent.pt").is_file() or not (d / "agent.json").is_file():
@@ -59,3 +63,16 @@ def load_pretrained(mode: str):
     from eosp.models.checkpoint import load_agent
 
     return load_agent(pretrained_dir(mode))
+
+
+def load_fleet_pretrained(checkpoint: str = ""):
+    """(agent, FleetEnvConfig, metadata) of a fleet policy: the shipped one (`checkpoint` empty or
+    ``pretrained:fleet``), or a checkpoint directory; refused in one line when it is another layout or objective."""
+    from eosp.models.checkpoint import load_fleet_agent
+
+    if not checkpoint or checkpoint.startswith(PREFIX):
+        name = checkpoint[len(PREFIX):] if checkpoint else FLEET
+        if name != FLEET:
+            raise InputError(f"--checkpoint {checkpoint}", f"{name!r} is no fleet policy; shipped: {FLEET}")
+        return load_fleet_agent(pretrained_dir(FLEET))
+    return load_fleet_agent(checkpoint)

@@ -68,7 +68,8 @@ class _State:
     done: bool
 
 
-def _choose(logits: np.ndarray, mask: np.ndarray, rng: np.random.Generator | None, temperature: float) -> int:
+def choose(logits: np.ndarray, mask: np.ndarray, rng: np.random.Generator | None, temperature: float) -> int:
+    """The allowed action of largest logit (`rng` None), or one drawn from the softmax of logits / temperature."""
     allowed = np.flatnonzero(mask)
     if rng is None:
         return int(allowed[np.argmax(logits[allowed])])
@@ -94,7 +95,7 @@ def rollout_many(env, starts: list[_State], evaluate: EvaluateMany, best: Best, 
         best.evaluations += 1
         for j, i in enumerate(todo):
             s = live[i]
-            a = _choose(logits[j], s.obs["action_mask"], rng, temperature)
+            a = choose(logits[j], s.obs["action_mask"], rng, temperature)
             env.restore(s.snap)
             obs, r, done, _, _ = env.step(a)
             s.obs, s.ret, s.done = obs, s.ret + r, done or not obs["action_mask"].any()

@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass, replace
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -32,20 +32,7 @@ import torch
 from eosp.config import EnvConfig, ImitationConfig
 from eosp.models.agent import EOSPAgent, batch_from_padded
 from eosp.reward import objective_mode, reward
-
-
-@dataclass
-class Sample:
-    """One labelled state, its observation trimmed to the instance (padding added per batch)."""
-
-    x: np.ndarray  # float32 [n, F]
-    edge_index: np.ndarray  # int32 [2, m]
-    edge_attr: np.ndarray  # float32 [m, 2]
-    mask: np.ndarray  # int8 [n]
-    optimal: np.ndarray  # int32: optimal actions
-    value: np.ndarray  # float32 [n_values]: remaining return (NaN: unknown)
-    allowed: np.ndarray | None = None  # int32: actions with a known value (None: unknown)
-    regret: np.ndarray | None = None  # float32: their regret, (Q* - Q(a)) / the instance's optimum
+from eosp.training.samples import Sample
 
 
 def samples_along(env, prepared, actions: np.ndarray, optimal: list[np.ndarray], values: np.ndarray,
@@ -282,3 +269,75 @@ def train_epoch(agent: EOSPAgent, opt: torch.optim.Optimizer, samples: list[Samp
             break
     agent.eval()
     return {f"train/{k}": v / max(batches, 1) for k, v in tot.items()} | {"train/batches": batches}
+
+
+def fit(agent: EOSPAgent, data, validator, im: ImitationConfig, env_cfg, run_dir: Path, record: dict,
+        dagger=None, job: str = "pretrain") -> list[dict]:
+    """The imitation loop every imitation job shares (jobs/pretrain.py: the single pass; jobs/pretrain_fleet.py:
+    fleets), inside an active MLflow run: epochs over ``data.samples`` (:func:`train_epoch`; cosine learning rate
+    and weight averaging as `im` says), validation every ``im.validate_every`` epochs (``validator.run(policy)``,
+    the checkpoint of the best :func:`eosp.training.validation.selection_score` saved as ``checkpoints/best``),
+    ``dagger(policy, rng) -> metrics`` every ``im.dagger_every`` epochs (states added to ``data.samples``), until
+    ``im.epochs`` or the time budget; then ``checkpoints/last``, the learning curve and ``history.json``.
+    `env_cfg`: the environment configuration saved with the checkpoints; `record`: the run's whole configuration
+    (a dict), kept in history.json with the history.  Returns the history."""
+    import json
+
+    import mlflow
+
+    from eosp.atomic import atomic_path
+    from eosp.models.checkpoint import save_agent
+    from eosp.training.plots import imitation_curve
+    from eosp.training.validation import primary_metric, selection_score
+
+    rng = np.random.default_rng(im.seed)
+    ckpt = run_dir / "checkpoints"
+    opt = torch.optim.Adam(agent.parameters(), lr=im.lr, weight_decay=im.weight_decay)
+    history, best = [], float("-inf")
+    average = WeightAverage(agent, im.ema) if im.ema > 0 else None
+    t0 = time.perf_counter()
+    deadline = t0 + im.time_budget if im.time_budget > 0 else None
+    for epoch in range(1, im.epochs + 1):
+        lr_at = None
+        if im.lr_schedule == "cosine":
+            def lr_at(done: float, epoch: int = epoch) -> float:
+                by_epochs = (epoch - 1 + done) / im.epochs
+                by_time = (time.perf_counter() - t0) / im.time_budget if deadline is not None else 0.0
+                return cosine_lr(im.lr, max(by_epochs, by_time))
+        metrics = train_epoch(agent, opt, data.samples, im, rng, deadline, average, lr_at)
+        metrics["train/lr"] = opt.param_groups[0]["lr"]
+        policy = average.model if average is not None else agent  # what is validated, saved and rolled out
+        out_of_time = deadline is not None and time.perf_counter() > deadline
+        last = epoch == im.epochs or out_of_time
+        if validator is not None and (epoch % im.validate_every == 0 or last):
+            metrics.update(validator.run(policy).metrics)
+            if selection_score(metrics) > best:
+                best = selection_score(metrics)
+                save_agent(policy, ckpt / "best", env_cfg, {"epoch": epoch, "val": metrics, "source": "imitation"})
+        if dagger is not None and im.dagger_every and epoch % im.dagger_every == 0 and not last:
+            metrics.update(dagger(policy, rng))
+        metrics["wall_s"] = time.perf_counter() - t0
+        history.append({"epoch": epoch, **metrics})
+        mlflow.log_metrics(metrics, step=epoch)
+        val = primary_metric(metrics) if "val/policy_mean" in metrics else None
+        print(f"[{job}] epoch {epoch}: loss {metrics['train/policy_loss']:.4f} accuracy "
+              f"{metrics['train/accuracy']:.4f} value {metrics['train/value_loss']:.4f}"
+              + (f"  {val} {metrics[val]:.4f}" if val else "")
+              + "".join(f" /{b} {metrics[f'val/ratio_to_{b}']:.4f}" for b in ("exact", "fleet", "ramp", "features",
+                                                                               "greedy") if f"val/ratio_to_{b}" in metrics)
+              + (f"  dagger +{metrics['dagger/states_added']:.0f} states" if "dagger/states_added" in metrics else "")
+              + f"  ({metrics['wall_s']:.0f} s)", flush=True)
+        if out_of_time:
+            print(f"[{job}] time budget of {im.time_budget:.0f} s reached", flush=True)
+            break
+    policy = average.model if average is not None else agent
+    save_agent(policy, ckpt / "last", env_cfg, {"epoch": history[-1]["epoch"], "source": "imitation"})
+    if validator is None:
+        save_agent(policy, ckpt / "best", env_cfg, {"epoch": history[-1]["epoch"], "source": "imitation"})
+    png = imitation_curve(history, run_dir / "learning_curve")
+    mlflow.log_artifact(str(png))
+    mlflow.log_artifact(str(png.with_suffix(".svg")))
+    with atomic_path(run_dir / "history.json") as tmp:
+        tmp.write_text(json.dumps({"config": record, "history": history}, indent=1))
+    mlflow.log_metric("perf/train_wall_s", time.perf_counter() - t0)
+    return history

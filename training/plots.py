@@ -51,23 +51,28 @@ def learning_curve(history: list[dict], out: str | Path) -> Path:
 
 
 def imitation_curve(history: list[dict], out: str | Path) -> Path:
-    """Expert-action accuracy and validation ratios (to the exact optimum, RAMP, Greedy) against wall time."""
+    """Expert-action accuracy and validation ratios against wall time: to the exact optimum, RAMP and Greedy (the
+    single pass), or to the fleet solver, the features-only decoder and the fleet greedy (fleets)."""
     out = Path(out)
     t = [h["wall_s"] for h in history]
     fig, ax = plt.subplots(1, 2, figsize=(10, 3.6))
     ax[0].plot(t, [h.get("train/accuracy", float("nan")) for h in history], marker=".", color="C0")
     ax[0].set_xlabel("wall time (s)")
     ax[0].set_ylabel("training accuracy (argmax optimal)")
-    val = [h for h in history if "val/ratio_to_exact" in h]
+    val = [h for h in history if "val/policy_mean" in h]
+    shown = False
     for key, label, color in (("val/ratio_to_exact", "policy / optimum", "C3"),
+                              ("val/ratio_to_fleet", "policy / fleet solver", "C3"),
                               ("val/ratio_to_ramp", "policy / RAMP", "C2"),
+                              ("val/ratio_to_features", "policy / features-only decoder", "C2"),
                               ("val/ratio_to_greedy", "policy / Greedy", "C1")):
-        if val:
+        if val and key in val[-1]:
             ax[1].plot([h["wall_s"] for h in val], [h[key] for h in val], marker="o", label=label, color=color)
+            shown = True
     ax[1].axhline(1.0, color="gray", lw=0.8, ls="--")
     ax[1].set_xlabel("wall time (s)")
     ax[1].set_ylabel("validation ratio of means")
-    if val:
+    if shown:
         ax[1].legend()
     return _save(fig, out)
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from eosp.config import RunConfig, to_dict
+from eosp.config import FleetEnvConfig, RunConfig, to_dict
 from eosp.reward import reward
 
 
@@ -30,6 +30,8 @@ def estimate_value_scale(cfg: RunConfig, episodes: int = 8) -> float:
 
 
 def ppo_config(cfg: RunConfig):
+    """PPO on the single pass (`cfg` a RunConfig), or on the constellation (a FleetRunConfig: multi-agent env
+    runners over the demo set's fleets, every satellite mapped to the one shared module)."""
     from ray.rllib.algorithms.ppo import PPOConfig
     from ray.rllib.core.rl_module.rl_module import RLModuleSpec
 
@@ -42,12 +44,18 @@ def ppo_config(cfg: RunConfig):
     t = cfg.train
     scale = cfg.model.value_scale or 1.0
     env_config = to_dict(cfg.env)
-    env_config["shards"] = [str(Path(t.train_data).resolve())]
+    fleet = isinstance(cfg.env, FleetEnvConfig)
+    if fleet:  # the demo set's fleets, shared out by env-runner index
+        from eosp.training.fleet_demos import read_demo_set
+
+        env_config["fleets"] = [r["fleet"] for r in read_demo_set(t.train_data)]
+    else:
+        env_config["shards"] = [str(Path(t.train_data).resolve())]
     env_config["seed"] = t.seed
     from eosp.training.learner import EOSPPPOLearner
 
     learner = {"learner_class": EOSPPPOLearner}
-    if reward(cfg.env.reward).per_class:
+    if not fleet and reward(cfg.env.reward).per_class:  # the fleet's rewards ('wcr', 'cr') are scalars
         from eosp.training.lexicographic import LexicographicPPOLearner
 
         learner = {"learner_class": LexicographicPPOLearner}
@@ -57,16 +65,21 @@ def ppo_config(cfg: RunConfig):
 
         algo_class = OverlappedPPO
     model_config = {**to_dict(cfg.model), "rollout_values": t.rollout_values}  # the latter: the module's own key
+    env_class, module_spec = EOSPEnv, RLModuleSpec(module_class=EOSPTorchRLModule, model_config=model_config)
+    if fleet:  # one agent per satellite, all acting with one shared module
+        from eosp.training.fleet_env import SHARED_MODULE, FleetMultiAgentEnv, policy_mapping, shared_module_spec
+
+        env_class, module_spec = FleetMultiAgentEnv, shared_module_spec(model_config)
     pc = (
         PPOConfig(algo_class=algo_class)
-        .environment(env=EOSPEnv, env_config=env_config, disable_env_checking=True)
+        .environment(env=env_class, env_config=env_config, disable_env_checking=True)
         .framework("torch")
         .env_runners(num_env_runners=t.num_env_runners, num_envs_per_env_runner=t.num_envs_per_env_runner,
                      num_cpus_per_env_runner=1, rollout_fragment_length="auto",
                      gym_env_vectorize_mode="sync",
                      custom_resources_per_env_runner={t.env_runner_resource: 1} if t.env_runner_resource else {})
         .learners(num_learners=0, num_gpus_per_learner=t.num_gpus_per_learner, **learner)
-        .rl_module(rl_module_spec=RLModuleSpec(module_class=EOSPTorchRLModule, model_config=model_config))
+        .rl_module(rl_module_spec=module_spec)
         .training(train_batch_size_per_learner=t.train_batch_size, minibatch_size=t.minibatch_size,
                   num_epochs=t.num_epochs, lr=t.lr, gamma=t.gamma, lambda_=t.gae_lambda, clip_param=t.clip_param,
                   entropy_coeff=t.entropy_coeff, vf_loss_coeff=t.vf_loss_coeff / scale**2, vf_clip_param=1e12,
@@ -75,4 +88,15 @@ def ppo_config(cfg: RunConfig):
         .debugging(seed=t.seed, log_level="WARN", log_sys_usage=False)  # perf/*: our own, training/loop.py
         .reporting(metrics_num_episodes_for_smoothing=20)
     )
+    if fleet:
+        pc = pc.multi_agent(policies={SHARED_MODULE}, policy_mapping_fn=policy_mapping)
     return pc
+
+
+def module_id(cfg) -> str:
+    """The RLlib module the policy is: the single agent's default one, or the fleet's shared one."""
+    if isinstance(cfg.env, FleetEnvConfig):
+        from eosp.training.fleet_env import SHARED_MODULE
+
+        return SHARED_MODULE
+    return "default_policy"

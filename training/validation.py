@@ -101,7 +101,7 @@ def primary_metric(metrics: dict[str, float]) -> str:
     acquisitions; a policy that loses two class-3 acquisitions on an instance without classes 0-2 (0.92
     x its optimum) moves it by 1e-5.  Nor the ratio of the means (``val/ratio_to_X``), for the same reason:
     it can rise while this falls.  The targets are means of per-instance ratios too."""
-    for s in ("exact", "ramp", "greedy"):
+    for s in ("exact", "fleet", "ramp", "greedy"):  # fleet: the fleet solver (fleet policies, FleetValidator)
         v = metrics.get(f"val/mean_ratio_to_{s}")
         if v is not None and np.isfinite(v):
             return f"val/mean_ratio_to_{s}"
@@ -115,7 +115,8 @@ def selection_score(metrics: dict[str, float]) -> float:
 
 def describe_metric(key: str) -> str:
     """A plot label for a validation metric key, naming which mean it is."""
-    names = {"exact": "optimum", "ramp": "RAMP", "greedy": "Greedy"}
+    names = {"exact": "optimum", "ramp": "RAMP", "greedy": "Greedy", "fleet": "fleet solver",
+             "features": "features-only decoder"}
     if key.startswith("val/mean_ratio_to_"):
         return f"mean of per-instance ratios, policy / {names.get(key[18:], key[18:])}"
     if key.startswith("val/ratio_to_"):
@@ -183,6 +184,42 @@ class Validator:
             nodes, _ = rollout(agent, p, self.env_cfg)
             values.append(self.score(p.inst, nodes))
         policy = np.asarray(values)
+        metrics = compare(policy, self.baselines)
+        metrics[SELECTION_KEY] = selection_score(metrics)
+        return ValidationResult(metrics, self.names, policy, self.baselines)
+
+
+class FleetValidator:
+    """Greedy decoding of a fleet policy on held-out fleets (a demo set of jobs/build_fleet_demos.py) against the
+    fleet solver's schedules there (``fleet``), the fleet greedy (``greedy``) and the features-only decoder
+    (``features``, :data:`eosp.solvers.fleet_policy.DEFAULT_RULE`); values are WCRs, the baselines computed once."""
+
+    def __init__(self, demo_set: str | Path, env_cfg, max_fleets: int = 0):
+        from dataclasses import replace
+
+        from eosp.envs.constellation import load_fleet
+        from eosp.fleet.check import validate
+        from eosp.fleet.greedy import solve as fleet_greedy
+        from eosp.solvers.fleet_policy import DEFAULT_RULE, FEATURE_RULES, decode, rule_scorer
+        from eosp.training.fleet_demos import read_demo_set
+
+        self.env_cfg = replace(env_cfg, fleets=(), max_satellites=0)
+        records = read_demo_set(demo_set)
+        if max_fleets:
+            records = records[:max_fleets]
+        self.fleets = [load_fleet(r["fleet"]) for r in records]
+        self.names = [r["fleet"] for r in records]
+        rule = rule_scorer(FEATURE_RULES[DEFAULT_RULE])
+        self.baselines = {
+            "fleet": np.array([float(r["wcr"]) for r in records]),
+            "greedy": np.array([validate(p.fleet, fleet_greedy(p.fleet, p.opps, p.geo), p.geo).metrics["WCR"]
+                                for p in self.fleets]),
+            "features": np.array([decode(rule, p, self.env_cfg).value for p in self.fleets])}
+
+    def run(self, agent) -> ValidationResult:
+        from eosp.solvers.fleet_policy import decode
+
+        policy = np.array([decode(agent, p, self.env_cfg).value for p in self.fleets])
         metrics = compare(policy, self.baselines)
         metrics[SELECTION_KEY] = selection_score(metrics)
         return ValidationResult(metrics, self.names, policy, self.baselines)

@@ -1,4 +1,5 @@
-"""The options of the fleet kind's solvers (``eosp solve FLEET_DIR --solver greedy|fleet``, jobs/solve_fleet.py)."""
+"""The options of the fleet kind's solvers (``eosp solve FLEET_DIR --solver greedy|fleet|fleet-policy|fleet-sample|
+fleet-features``, jobs/solve_fleet.py)."""
 
 from __future__ import annotations
 
@@ -6,6 +7,7 @@ from dataclasses import dataclass
 
 from eosp.config import WEEK_S, choice, ranged
 from eosp.solvers.base import UtilityConfig
+from eosp.solvers.fleet_policy import DEFAULT_RULE, FEATURE_RULES
 
 PASS_SOLVERS = ("greedy", "ramp", "exact")
 LEARNED_PASS_SOLVERS = ("policy",)  # no model is trained on fleet passes yet: refused with one line
@@ -55,3 +57,56 @@ class FleetConfig(UtilityConfig):
 
     NAME = "fleet"
     BUDGET = "rounds"
+
+
+POLISHES = ("fill", "none")
+
+
+@dataclass
+class FleetPolicyConfig(UtilityConfig):
+    """Options of the fleet policy's greedy decoding (``--solver fleet-policy``): one pass, deterministic."""
+
+    checkpoint: str = ""
+    """A fleet policy (jobs/pretrain_fleet.py, jobs/train_fleet.py: a checkpoint directory); empty: the shipped one
+    (models/pretrained-agents/fleet).  Another observation layout or objective is refused in one line."""
+    polish: str = choice("fill", *POLISHES)
+    """Post-processing of the decoded schedule: 'fill' inserts the tasks it leaves unserved where they still fit
+    (the fleet greedy's insertion by weight, then its battery repair; kept only when it serves more weight); 'none':
+    the decode as is.  The raw decode's WCR is reported beside the result either way."""
+
+    NAME = "fleet-policy"
+    ONE_SHOT = True
+
+
+@dataclass
+class FleetSampleConfig(FleetPolicyConfig):
+    """Options of batched sampling of the fleet policy (``--solver fleet-sample``): the greedy episode first, then
+    rounds of sampled episodes in lockstep (one network call a step for all of them) until the time limit; the
+    best kept, then post-processed."""
+
+    time_limit: float | None = ranged(30.0, 0, WEEK_S, lo_open=True, zero_unsets=True)
+    seed: int = ranged(0, 0)
+    """Seed of the sampled episodes."""
+    samples: int = ranged(16, 1)
+    """Episodes per batched round (the first round's first one is the greedy episode)."""
+    temperature: float = ranged(1.0, 0)
+    """Softmax temperature of the sampled episodes (0: the argmax)."""
+
+    NAME = "fleet-sample"
+    ONE_SHOT = False
+
+
+@dataclass
+class FleetFeaturesConfig(UtilityConfig):
+    """Options of the features-only decoder (``--solver fleet-features``): the fleet policy's decoder with a hand
+    rule over the same observation features in place of the network (the ablation); one pass, deterministic."""
+
+    rule: str = choice(DEFAULT_RULE, *FEATURE_RULES)
+    """The linear rule over node features (eosp.solvers.fleet_policy.FEATURE_RULES); the default, the best on the
+    training fleets (experiments/fleet_rules.py)."""
+    polish: str = choice("fill", *POLISHES)
+    """Post-processing, as fleet-policy's: 'fill' (the unserved tasks inserted where they fit, kept when it serves
+    more) or 'none'; the raw decode's WCR is reported beside the result."""
+
+    NAME = "fleet-features"
+    ONE_SHOT = True

@@ -161,7 +161,9 @@ class FleetKind(KindBase):
     title = "an aeossp fleet directory (eosp import CASE, eosp generate --fleet)"
     words = Words(problem="fleet_dir", schedule="fleet schedule (.parquet) or aeossp solution (.json)",
                   schedules="fleet schedules (.parquet) or aeossp solutions (.json)",
-                  solver="greedy (each task once, by weight) or fleet (passes coordinated by prices, with a bound)",
+                  solver="greedy (each task once, by weight), fleet (passes coordinated by prices, with a bound), "
+                         "fleet-policy (the learned fleet policy, greedy decoding), fleet-sample (its batched samples, "
+                         "the best kept) or fleet-features (the same decoder with a hand rule over the same features)",
                   out="fleet schedule file (.parquet)", overwrite=None,
                   formats="aeossp solution.json, CSV, CZML (Cesium) or KML (tracks, targets, observations)",
                   source="case_dir", written="fleet directory to write",
@@ -172,7 +174,14 @@ class FleetKind(KindBase):
     solvers = {"greedy": Solver("greedy", "eosp.kinds.fleet.config:GreedyConfig", "eosp.kinds.fleet.solve:solve_greedy",
                                 "each task once, by weight"),
                "fleet": Solver("fleet", "eosp.kinds.fleet.config:FleetConfig", "eosp.kinds.fleet.solve:solve_fleet",
-                               "passes coordinated by prices, with a bound")}
+                               "passes coordinated by prices, with a bound"),
+               "fleet-policy": Solver("fleet-policy", "eosp.kinds.fleet.config:FleetPolicyConfig",
+                                      "eosp.kinds.fleet.policy:solve_policy", "the learned fleet policy, greedy decoding"),
+               "fleet-sample": Solver("fleet-sample", "eosp.kinds.fleet.config:FleetSampleConfig",
+                                      "eosp.kinds.fleet.policy:solve_sample", "batched samples of the fleet policy"),
+               "fleet-features": Solver("fleet-features", "eosp.kinds.fleet.config:FleetFeaturesConfig",
+                                        "eosp.kinds.fleet.policy:solve_features",
+                                        "the fleet policy's decoder with a hand rule, no network")}
     sources = (Source("an astro-reason aeossp_standard case (mission.yaml, satellites.yaml, tasks.yaml)",
                       f"{HERE}:is_case", f"{HERE}:import_case"),)
     generators = (Generator("--fleet", "eosp.fleet.generate:FleetGenConfig", f"{HERE}:generate"),)
@@ -259,6 +268,10 @@ class FleetKind(KindBase):
         if getattr(cfg, "pass_solver", "") == "policy":
             raise InputError("--pass-solver", "policy: no model trained on fleet passes is shipped yet; use exact, "
                                               "ramp or greedy")
+        if solver in ("fleet-policy", "fleet-sample"):  # a missing, corrupt or foreign checkpoint: before any reading
+            from eosp.models.pretrained import load_fleet_pretrained
+
+            load_fleet_pretrained(cfg.checkpoint)
 
     def before_solve(self, problem: FleetData, path: str) -> None:
         """The pass graphs' memory over the horizon estimated, then the fleet feasible (a battery that idling alone
@@ -305,6 +318,14 @@ class FleetKind(KindBase):
             info = {"value": m["WCR"], "solver": solver, "seconds": round(seconds, 3)}
             return info, (f"{out}: {n} observations, WCR {m['WCR']:.6f} CR {m['CR']:.6f} "
                           f"TAT {m['TAT'] if m['TAT'] is None else round(m['TAT'], 3)} PC {m['PC']:.3f} "
+                          f"({seconds:.1f} s)")
+        if solver in ("fleet-policy", "fleet-sample", "fleet-features"):
+            i = res.info
+            info = {"value": res.value, "solver": solver, "raw_wcr": i["raw_wcr"], "polish": i["polish"],
+                    "seconds": round(seconds, 3)}
+            extra = f", {i['episodes']} episodes" if "episodes" in i else ""
+            return info, (f"{out}: {n} observations, WCR {res.value:.6f} (raw decode {i['raw_wcr']:.6f}, polish "
+                          f"{i['polish']}); {i['decisions']} decisions, {i['decisions_per_s']:.0f} a second{extra} "
                           f"({seconds:.1f} s)")
         info = {"value": res.value, "solver": "fleet", "pass_solver": cfg.pass_solver, "seconds": round(seconds, 3),
                 "bound": res.bound, "gap": res.gap, "bound_source": res.bound_kind}
