@@ -215,21 +215,9 @@ class DualRound:
         self.probs = [read_problem(p) for p in paths]
 
     def rounds(self, lams: list) -> list:
-        import numpy as np
+        from eosp.kinds.fleet.warmstart import dual_round
 
-        from eosp.kinds.fleet.config import FleetConfig
-        from eosp.kinds.fleet.problem import path_tasks, priced, solve_round_pass
-
-        cfg, out = FleetConfig(), []
-        for prob, lam in zip(self.probs, lams):
-            count = np.zeros(len(prob.weight))
-            total = float(lam.sum())
-            for pg in prob.passes:
-                res = solve_round_pass(pg, priced(prob.weight, lam, pg.tasks), cfg)
-                total += res.bound if res.bound is not None else res.value
-                count[path_tasks(prob, pg.pass_id, res.nodes)] += 1
-            out.append((total / prob.total_weight, count))
-        return out
+        return [dual_round(prob, lam) for prob, lam in zip(self.probs, lams)]
 
 
 def dual_descent(model, graphs: list, actors: list, cfg: PriceTrainConfig, log) -> object:

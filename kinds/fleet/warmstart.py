@@ -21,6 +21,8 @@ pass can serve; features are scale-free (weights over the fleet's mean weight, t
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from eosp.kinds.fleet.problem import Problem
@@ -102,17 +104,23 @@ def start_prices(prob: Problem, kind: str, model_dir: str | None = None) -> np.n
     return np.where(g.contested, predict(model, g) * g.weight, 0.0)
 
 
-def dual_value(prob: Problem, lam: np.ndarray) -> float:
-    """L(lam) as fractions of the total weight: one price round (each pass's proven term, see
-    :func:`eosp.kinds.fleet.problem.solve_round_pass`) plus the prices; inf when a pass term is not proven."""
+def dual_round(prob: Problem, lam: np.ndarray) -> tuple[float, np.ndarray]:
+    """One price round under `lam`: L(lam) as a fraction of the total weight (each pass's proven term, see
+    :func:`eosp.kinds.fleet.problem.solve_round_pass`, plus the prices; inf when a pass term is not proven) and
+    how many passes serve each task (L's subgradient is 1 - that count)."""
     from eosp.kinds.fleet.config import FleetConfig
-    from eosp.kinds.fleet.problem import priced, solve_round_pass
+    from eosp.kinds.fleet.problem import path_tasks, priced, solve_round_pass
 
     cfg = FleetConfig()
     total = float(lam.sum())
+    count = np.zeros(len(prob.weight))
     for pg in prob.passes:
-        b = solve_round_pass(pg, priced(prob.weight, lam, pg.tasks), cfg).bound
-        if b is None:
-            return float("inf")
-        total += b
-    return total / prob.total_weight
+        res = solve_round_pass(pg, priced(prob.weight, lam, pg.tasks), cfg)
+        total += math.inf if res.bound is None else res.bound
+        count[path_tasks(prob, pg.pass_id, res.nodes)] += 1
+    return total / prob.total_weight, count
+
+
+def dual_value(prob: Problem, lam: np.ndarray) -> float:
+    """L(lam) as a fraction of the total weight (:func:`dual_round`)."""
+    return dual_round(prob, lam)[0]
