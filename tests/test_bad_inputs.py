@@ -1511,3 +1511,37 @@ if __name__ == "__main__":
           f"nothing written)")
     for b in bad:
         print("  not clean:", b)
+
+
+def test_ctrl_c_at_any_moment_of_the_onera_search_leaves_a_whole_plan(tmp_path):
+    """The plan is edited in place (insert, propagate the start times, journal the edit): a Ctrl-C that lands
+    inside an edit must wait for its end (eosp.interrupt.HeldInterrupt).  SIGINT at many moments of the greedy and
+    the search (raised from a SIGALRM handler, so that it lands between two bytecodes of this very thread, as a
+    Ctrl-C does): every interrupted plan is accepted by the checker, with the value the solver reports."""
+    import random
+    import signal
+
+    from eosp.kinds.onera.search import OneraConfig, solve
+    from eosp.onera.check import validate
+    from eosp.onera.model import read_pb
+
+    (tmp_path / "i.pb").write_text(_onera_instance(400))
+    f = read_pb(tmp_path / "i.pb")
+    solve(f, OneraConfig(time_limit=None, moves=20))  # warm, so that the moments below fall in the search
+    rng = random.Random(0)
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
+    alarm = signal.signal(signal.SIGALRM, lambda *_: signal.raise_signal(signal.SIGINT))
+    try:
+        for _ in range(40):
+            signal.setitimer(signal.ITIMER_REAL, rng.uniform(0.001, 0.3))
+            try:
+                sol = solve(f, OneraConfig(time_limit=5.0, bound="conflict-free"))
+            finally:
+                signal.setitimer(signal.ITIMER_REAL, 0)
+            assert sol.info["status"] == "interrupted", sol.info["status"]
+            res = validate(f, sol.schedule)
+            assert res.valid, res.first
+            assert abs(res.value - sol.value) < 1e-6
+    finally:
+        signal.signal(signal.SIGALRM, alarm)
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler  # the handler is given back

@@ -35,6 +35,7 @@ from eosp.fleet.energy import EnergyWindows
 from eosp.fleet.timeline import Timeline, repair_battery, timelines, to_schedule
 from eosp.fleet.model import Schedule
 from eosp.kinds.fleet.config import FleetConfig
+from eosp.interrupt import HeldInterrupt
 from eosp.kinds.fleet.pool import InProcessPool, PassPool
 from eosp.kinds.fleet.prices import Prices
 from eosp.kinds.fleet.problem import (PassResult, Primal, Problem, path_tasks, path_wh, priced, rewalk,
@@ -116,14 +117,16 @@ class Coordinator:
         return ((s < 0) | (s == p)) & ~self.barred[self.prob.passes[p].satellite, tasks]
 
     def _assign(self, primal: Primal, p: int, path: np.ndarray) -> list[int]:
-        """Give pass p the schedule `path`; returns the tasks it freed."""
+        """Give pass p the schedule `path`; returns the tasks it freed.  Whole or not at all: a Ctrl-C waits for
+        the end of the edit (the first schedule, interrupted while it is built, is the answer)."""
         old = path_tasks(self.prob, p, primal.paths[p])
         new = path_tasks(self.prob, p, path)
         freed = np.setdiff1d(old, new)
-        primal.served[freed] = -1
-        primal.served[new] = p
-        primal.paths[p] = path
-        primal.value += float(self.prob.weight[new].sum() - self.prob.weight[old].sum())
+        with HeldInterrupt():
+            primal.served[freed] = -1
+            primal.served[new] = p
+            primal.paths[p] = path
+            primal.value += float(self.prob.weight[new].sum() - self.prob.weight[old].sum())
         return freed.tolist()
 
     def descend(self, primal: Primal, queue: list[int], deadline: float | None) -> None:

@@ -32,6 +32,7 @@ import numpy as np
 from eosp.config import WEEK_S, choice, ranged
 from eosp.solvers.base import UtilityConfig
 from eosp.errors import InputError
+from eosp.interrupt import HeldInterrupt
 from eosp.onera.check import best_values, periodic_value
 from eosp.onera.model import PERIODIC, STEREO, TAU_MAX_S, OneraFleet, OneraSchedule
 from eosp.problem import Result
@@ -301,6 +302,7 @@ class Search:
         self.f = f
         self.plan = Plan(f)
         self.moves = 0  # moves tried so far (also when Ctrl-C stops the search)
+        self.held: HeldInterrupt | None = None  # set by solve(): Ctrl-C is answered between two whole edits
         o, r = f.observations, f.requests
         self.rng = random.Random(seed)
         first = r.first.tolist()
@@ -399,9 +401,14 @@ class Search:
     def greedy(self, order: list[int] | None = None) -> None:
         """Every request of `order` (default: by value) once, then the periodic ones' other slots."""
         order = self.order if order is None else order
+        held = self.held
         for k in order:
+            if held is not None and held.seen:  # Ctrl-C, answered between two whole placements
+                raise KeyboardInterrupt
             self.place(k, full=False)
         for k in order:
+            if held is not None and held.seen:
+                raise KeyboardInterrupt
             if self.plan.KIND[k] == PERIODIC:
                 self.place(k)
 
@@ -424,7 +431,10 @@ class Search:
         n_sat = len(f.satellites)
         obj = self.objective
         moves = 0
+        held = self.held
         while not stop.reached(moves, obj):
+            if held is not None and held.seen:  # Ctrl-C between two moves: the plan is whole here
+                raise KeyboardInterrupt
             moves += 1
             self.moves += 1
             s = rng.randrange(n_sat)
@@ -505,15 +515,18 @@ def solve(f: OneraFleet, cfg: BoundConfig | None = None) -> Solution:
     trace: list = []
     status = "done"
     try:
-        search.greedy()
-        trace.append((time.perf_counter() - t0, search.objective))
-        if isinstance(cfg, OneraConfig):
-            stop = Stop(None if limit is None else t0 + limit - reserve, cfg.moves, float(search.best.sum()))
-            moves = search.lns(stop, cfg.span_s, trace, t0)
-            status = "optimal" if search.objective >= stop.target - 1e-9 else "budget" if moves == cfg.moves \
-                else "time_limit"
+        with HeldInterrupt() as search.held:  # Ctrl-C is answered between edits of the plan, never inside one
+            search.greedy()
+            trace.append((time.perf_counter() - t0, search.objective))
+            if isinstance(cfg, OneraConfig):
+                stop = Stop(None if limit is None else t0 + limit - reserve, cfg.moves, float(search.best.sum()))
+                moves = search.lns(stop, cfg.span_s, trace, t0)
+                status = "optimal" if search.objective >= stop.target - 1e-9 else "budget" if moves == cfg.moves \
+                    else "time_limit"
     except KeyboardInterrupt:
         status = "interrupted"
+    finally:
+        search.held = None
     if not trace:
         trace.append((time.perf_counter() - t0, search.objective))
     greedy_value = trace[0][1]

@@ -1,0 +1,60 @@
+"""eosp.interrupt.HeldInterrupt: Ctrl-C recorded inside the block, delivered at its end, never lost."""
+
+import signal
+import threading
+
+import pytest
+
+from eosp.interrupt import HeldInterrupt
+
+
+def test_a_ctrl_c_inside_the_block_waits_for_its_end():
+    steps = []
+    with pytest.raises(KeyboardInterrupt):
+        with HeldInterrupt() as held:
+            signal.raise_signal(signal.SIGINT)
+            steps.append(held.seen)  # still running: the signal was only recorded
+            steps.append("edit finished")
+    assert steps == [True, "edit finished"]
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
+
+
+def test_the_block_without_ctrl_c_changes_nothing_and_nested_blocks_deliver_once():
+    with HeldInterrupt() as held:
+        pass
+    assert not held.seen and signal.getsignal(signal.SIGINT) is signal.default_int_handler
+    with pytest.raises(KeyboardInterrupt):
+        with HeldInterrupt() as outer:
+            with HeldInterrupt() as inner:
+                signal.raise_signal(signal.SIGINT)
+            assert inner.seen and outer.seen  # the inner block delivers to the outer one, still holding it
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
+
+
+def test_a_handler_set_by_the_program_runs_at_the_end_and_an_ignored_sigint_stays_ignored():
+    calls = []
+    previous = signal.signal(signal.SIGINT, lambda *_: calls.append("handler"))
+    try:
+        with HeldInterrupt():
+            signal.raise_signal(signal.SIGINT)
+            assert calls == []
+        assert calls == ["handler"]
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
+        with HeldInterrupt() as held:
+            signal.raise_signal(signal.SIGINT)
+        assert not held.seen and signal.getsignal(signal.SIGINT) == signal.SIG_IGN
+    finally:
+        signal.signal(signal.SIGINT, previous)
+
+
+def test_outside_the_main_thread_the_block_is_plain():
+    seen = []
+
+    def work():
+        with HeldInterrupt() as held:
+            seen.append(held.seen)
+
+    t = threading.Thread(target=work)
+    t.start()
+    t.join()
+    assert seen == [False] and signal.getsignal(signal.SIGINT) is signal.default_int_handler
