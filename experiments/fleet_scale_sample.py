@@ -7,7 +7,8 @@ Generates the fleet (``eosp generate --fleet`` settings, seed 0), scans the oppo
 opportunities: the sample gives its per-satellite figures without holding it), splits them into passes, and
 for the first ``--solve`` sampled satellites builds every pass graph and solves each pass with the exact
 solver (5 s limit a pass, as the fleet solver does) at the tasks' weights: pass sizes and solve seconds by
-size, the inputs of the cluster-sizing table in docs/results.md.
+size, and the bytes of those pass graphs per opportunity (arrays of the graph and of its bound graph), the
+inputs of the cluster-sizing table in docs/results.md.
 """
 
 from __future__ import annotations
@@ -44,7 +45,7 @@ def main() -> None:
     geo = Geometry(fleet)
     los = LineOfSight(fleet, geo)
     sample = list(range(0, args.satellites, args.every))
-    n_opp, sizes, timings = 0, [], []
+    n_opp, sizes, timings, graph_bytes, graph_opps, arcs = 0, [], [], 0, 0, 0
     t1 = time.perf_counter()
     cfg = FleetConfig(pass_solver="exact")
     for i, k in enumerate(sample):
@@ -61,6 +62,9 @@ def main() -> None:
             off = opps.pass_offsets()
             for p in range(opps.n_passes):
                 pg = build_pass(fleet, opps, los, p, off)
+                graph_bytes += pg.nbytes
+                graph_opps += len(pg.rows)
+                arcs += pg.graph.n_arcs + (pg.bound_graph.n_arcs if pg.bound_graph is not None else 0)
                 s = time.perf_counter()
                 solve_pass_graph(pg, fleet.tasks.weight[pg.tasks].astype(np.float64), cfg)
                 timings.append((len(pg.rows), time.perf_counter() - s))
@@ -75,6 +79,10 @@ def main() -> None:
                       "estimated_passes": int(len(sizes) / len(sample) * args.satellites),
                       "pass_size_median": float(np.median(sizes)), "pass_size_p95": float(np.percentile(sizes, 95)),
                       "pass_size_max": int(sizes.max()),
+                      "graph_bytes_per_opportunity": round(graph_bytes / max(1, graph_opps), 1),
+                      "arcs_per_opportunity": round(arcs / max(1, graph_opps), 1),
+                      "estimated_graph_gb": round(graph_bytes / max(1, graph_opps) * per_sat * args.satellites / 1e9,
+                                                  2),
                       "peak_gb": round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1e6, 2)}))
     print("\n| pass opportunities | passes solved | median s | p95 s | max s | total s |\n|---|---|---|---|---|---|")
     for lo, hi in SIZES:

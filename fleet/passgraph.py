@@ -96,6 +96,15 @@ class PassGraph:
     def n_tasks(self) -> int:
         return len(self.tasks)
 
+    @property
+    def nbytes(self) -> int:
+        """Bytes of its arrays (a bound graph's node arrays are the pass graph's own: counted once)."""
+        arrays = [self.tasks, self.rows, self.duration, self.energy_wh, self.graph.node_acq, self.graph.node_time,
+                  self.graph.indptr, self.graph.dst, self.graph.acq_ptr]
+        if self.bound_graph is not None:
+            arrays += [self.bound_graph.indptr, self.bound_graph.dst]
+        return sum(a.nbytes for a in arrays)
+
 
 @numba.njit(cache=True, inline="always")
 def _need(u, v, rate, acc, settle):
