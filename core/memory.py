@@ -89,3 +89,14 @@ def require_memory(file: object, need: int, what: str) -> None:
     if have is not None and need > have:
         raise InputError(file, f"too large for the memory available: {what} needs about {need / GiB:.1f} GiB, "
                                f"{max(have, 0) / GiB:.1f} GiB available")
+
+
+def peak_rss_gb() -> float | None:
+    """This process's peak resident memory so far (VmHWM), in GB; None where /proc does not say."""
+    try:
+        for line in Path("/proc/self/status").read_text().splitlines():
+            if line.startswith("VmHWM:"):
+                return int(line.split()[1]) * 1024 / 1e9
+    except (OSError, ValueError, IndexError):
+        pass
+    return None

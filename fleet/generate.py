@@ -263,11 +263,11 @@ LAND_MASK_BYTES = 900 * 1024 ** 2  # global-land-mask's 1 km grid, loaded by the
 
 
 def estimate_bytes(cfg: FleetGenConfig) -> int:
-    """Peak memory of generating the fleet and computing its opportunities, estimated before any work
-    (:func:`eosp.fleet.opportunities.scan_bytes`: the horizon's instants on the 5 s grid times the satellites, and
-    the opportunities expected from the tasks' windows; the land mask when tasks are placed on land)."""
+    """Peak memory of drawing the fleet and propagating it, estimated before any work
+    (:func:`eosp.fleet.opportunities.scan_bytes`: the horizon's instants on the 5 s grid times the satellites; the
+    land mask when tasks are placed on land).  The opportunities are estimated once the fleet is drawn, from a
+    sample of its satellites (:func:`eosp.fleet.opportunities.require_scan_memory`)."""
     from eosp.fleet.opportunities import instants, scan_bytes
 
-    mean_window = 0.5 * (cfg.window_min_h + min(cfg.window_max_h, cfg.hours)) * 3600.0
     mask = LAND_MASK_BYTES if cfg.placement in ("land", "clusters") else 0
-    return mask + scan_bytes(cfg.satellites, cfg.tasks, instants(cfg.hours * 3600.0, 5), mean_window)
+    return mask + scan_bytes(cfg.satellites, instants(cfg.hours * 3600.0, 5))

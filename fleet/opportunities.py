@@ -74,22 +74,48 @@ SATELLITE_INSTANT_BYTES = 48
 OPPORTUNITY_BYTES = 416
 
 
-def expected_opportunities(n_sat: int, n_tasks: int, mean_window_s: float) -> float:
-    """Opportunities to expect before the scan: a satellite sees a given task about once per 12 h for about a
-    minute (12 starts on the 5 s grid), within the task's window."""
-    return n_sat * n_tasks * max(mean_window_s, 3600.0) / 43200.0 * 12
-
-
 def instants(horizon_s: float, base_step_s: float) -> int:
     """Base-grid instants of a horizon (both ends)."""
     return int(horizon_s // max(base_step_s, 1e-9)) + 1
 
 
-def scan_bytes(n_sat: int, n_tasks: int, n_instants: int, mean_window_s: float) -> int:
-    """Peak memory of propagating the satellites over the horizon and scanning their opportunities, estimated
-    before any work (the horizon's length counts as much as the fleet's size: a year at 5 s is 6.3 M instants)."""
+def scan_bytes(n_sat: int, n_instants: int, n_opportunities: float = 0.0) -> int:
+    """Peak memory of propagating the satellites over the horizon and scanning `n_opportunities` opportunities
+    (the horizon's length counts as much as the fleet's size: a year at 5 s is 6.3 M instants)."""
     return int(BASE_BYTES + n_instants * (INSTANT_BYTES + SATELLITE_INSTANT_BYTES * n_sat)
-               + expected_opportunities(n_sat, n_tasks, mean_window_s) * OPPORTUNITY_BYTES)
+               + n_opportunities * OPPORTUNITY_BYTES)
+
+
+SAMPLE_SATELLITES = 8  # satellites scanned to estimate a fleet's opportunities (spread over the sensors)
+SAMPLE_MARGIN = 1.5  # the estimate's margin over the sample's mean (satellites of one sensor differ in their orbits)
+
+
+def sample_scan(fleet: Fleet, geo: Geometry, count: int = SAMPLE_SATELLITES) -> dict:
+    """The opportunities of a few satellites (:func:`satellite_opportunities`), spread evenly over each sensor's
+    satellites in proportion to their number (one at least per sensor): what :func:`expected_opportunities` scales
+    up, and what :func:`compute` then does not scan again: satellite -> (task, start)."""
+    sensors = fleet.satellites.sensor
+    out = {}
+    for sensor in np.unique(sensors).tolist():
+        idx = np.flatnonzero(sensors == sensor)
+        take = max(1, round(count * len(idx) / len(sensors)))
+        for k in idx[np.unique(np.linspace(0, len(idx) - 1, min(take, len(idx))).round().astype(np.int64))].tolist():
+            out[k] = satellite_opportunities(fleet, geo, k)
+    return out
+
+
+def expected_opportunities(fleet: Fleet, sample: dict[int, tuple[np.ndarray, np.ndarray]]) -> float:
+    """The fleet's opportunities estimated from :func:`sample_scan`: per sensor, its satellites times the sampled
+    mean, with :data:`SAMPLE_MARGIN`.  A formula from the windows alone cannot do this: where the windows are drawn
+    around the satellites' accesses (the aeossp cases) a satellite-task pair has six times the opportunities of
+    the uniform case, and where tasks are long the passes leave few starts (generated fleets: a fifth of it)."""
+    sensors = fleet.satellites.sensor
+    total = 0.0
+    for sensor in np.unique(sensors).tolist():
+        idx = np.flatnonzero(sensors == sensor)
+        counts = [len(sample[k][0]) for k in idx.tolist() if k in sample]
+        total += len(idx) * float(np.mean(counts)) * (SAMPLE_MARGIN if len(counts) < len(idx) else 1.0)
+    return total
 
 
 # Memory of the geometry a check or a solve keeps over the whole horizon (frame rotations on the base grid, sunlight,
@@ -117,19 +143,25 @@ def require_check_memory(fleet: Fleet, where: object) -> None:
                                 f"({n:,} instants)")
 
 
-def require_scan_memory(fleet: Fleet, where: object) -> None:
+def require_scan_memory(fleet: Fleet, where: object) -> tuple[Geometry, dict]:
     """Refuse (one line with the estimate, :func:`eosp.memory.require_memory`) a fleet whose opportunity scan cannot
-    fit in memory, before any propagation."""
+    fit in memory: the horizon's geometry first, before any propagation; then the opportunities, from a sample of
+    satellites (:func:`sample_scan`, a few seconds at 1,000 satellites).  Returns the Geometry and the sample, for
+    :func:`compute` to go on with."""
     from math import gcd
 
     from eosp.memory import require_memory
 
     h, tk = fleet.horizon, fleet.tasks
     n = instants(h.seconds, gcd(h.action_step_s, h.geometry_step_s))
-    window = float(np.mean(tk.due_s - tk.release_s)) if len(tk) else 0.0
-    require_memory(where, scan_bytes(len(fleet.satellites), len(tk), n, window),
-                   f"the opportunities of {len(fleet.satellites)} satellites and {len(tk)} tasks over {h.seconds:,} s "
-                   f"({n:,} instants of the {gcd(h.action_step_s, h.geometry_step_s)} s grid)")
+    what = (f"the opportunities of {len(fleet.satellites)} satellites and {len(tk)} tasks over {h.seconds:,} s "
+            f"({n:,} instants of the {gcd(h.action_step_s, h.geometry_step_s)} s grid)")
+    require_memory(where, scan_bytes(len(fleet.satellites), n), what)
+    geo = Geometry(fleet)
+    sample = sample_scan(fleet, geo)
+    expected = expected_opportunities(fleet, sample)
+    require_memory(where, scan_bytes(len(fleet.satellites), n, expected), f"{what}, about {expected:,.0f} expected")
+    return geo, sample
 
 
 def pass_view(fleet: Fleet, opps: Opportunities, p: int, offsets: np.ndarray | None = None) -> PassView:
@@ -254,12 +286,13 @@ def passes(fleet: Fleet, sat_of: np.ndarray, task: np.ndarray, start: np.ndarray
     return np.cumsum(new) - 1
 
 
-def compute(fleet: Fleet, geo: Geometry | None = None) -> Opportunities:
-    """Every opportunity of the fleet, with its pass."""
+def compute(fleet: Fleet, geo: Geometry | None = None, scanned: dict | None = None) -> Opportunities:
+    """Every opportunity of the fleet, with its pass (`scanned`: satellites already scanned, :func:`sample_scan`)."""
     geo = geo or Geometry(fleet)
+    scanned = scanned or {}
     tasks, sats, starts = [], [], []
     for k in range(len(fleet.satellites)):
-        t, s = satellite_opportunities(fleet, geo, k)
+        t, s = scanned[k] if k in scanned else satellite_opportunities(fleet, geo, k)
         order = np.lexsort((t, s))
         tasks.append(t[order])
         starts.append(s[order])

@@ -42,12 +42,31 @@ from eosp.sim.slew import bang_coast_bang
 
 
 # Memory of a fleet's pass graphs (Problem.build, a worker's graphs), on top of the whole horizon's geometry
-# (eosp.fleet.opportunities.horizon_bytes): per opportunity its graph (nodes, arcs, lines of sight: 1.1 GB in all for
-# 766,306 opportunities of 200 satellites over 24 h, docs/results.md).
-GRAPH_BYTES = 1000
+# (eosp.fleet.opportunities.horizon_bytes).  Per opportunity, besides its arcs: its node, its lines of sight, its
+# share of the pass's objects and of the solver's state (about 550 bytes measured with 200 satellites, 766,306
+# opportunities).  Arcs: from each node at most one to each other task of its pass, int32; measured 0.42-0.44 of
+# (nodes x tasks) a pass on generated fleets of 200 and 1,000 satellites (docs/results.md), counted at 0.5 with
+# room for the bound graphs some passes need.
+NODE_BYTES = 600
+PAIR_BYTES = 2.5  # per (node, task of its pass): 0.5 arcs x 4 bytes, x 1.25
 
 
-def require_solve_memory(fleet: Fleet, n_opportunities: int, where: object, processes: int = 1) -> None:
+def node_task_pairs(opps: Opportunities, n_tasks: int) -> int:
+    """Sum over the passes of nodes x distinct tasks: what the pass graphs' arcs scale with (one arc at most per
+    node and task).  A pass of a dense fleet holds more tasks, so its graph grows faster than its opportunities."""
+    if len(opps) == 0:
+        return 0
+    key = np.unique(opps.pass_id.astype(np.int64) * max(1, n_tasks) + opps.task)
+    tasks_per_pass = np.bincount(key // max(1, n_tasks), minlength=opps.n_passes)
+    return int((np.diff(opps.pass_offsets()) * tasks_per_pass).sum())
+
+
+def graph_bytes(opps: Opportunities, n_tasks: int) -> int:
+    """Estimated memory of every pass graph of `opps` and the solver's state around them."""
+    return int(len(opps) * NODE_BYTES + node_task_pairs(opps, n_tasks) * PAIR_BYTES)
+
+
+def require_solve_memory(fleet: Fleet, opps: Opportunities, where: object, processes: int = 1) -> None:
     """Refuse (one line with the estimate) a fleet whose pass graphs cannot fit in memory, before building them.
     `processes`: processes on this machine that each build the geometry of the whole horizon and a share of the
     graphs (the driver and local Ray actors; forked workers share the driver's)."""
@@ -55,9 +74,9 @@ def require_solve_memory(fleet: Fleet, n_opportunities: int, where: object, proc
     from eosp.memory import require_memory
 
     geometry, n = horizon_bytes(fleet, processes)
-    need = geometry + n_opportunities * GRAPH_BYTES * (2 if processes > 1 else 1)
+    need = geometry + graph_bytes(opps, len(fleet.tasks)) * (2 if processes > 1 else 1)
     on = f" in {processes} processes" if processes > 1 else ""
-    require_memory(where, int(need), f"the pass graphs of {n_opportunities:,} opportunities of "
+    require_memory(where, int(need), f"the pass graphs of {len(opps):,} opportunities of "
                                      f"{len(fleet.satellites)} satellites over {fleet.horizon.seconds:,} s "
                                      f"({n:,} instants){on}")
 
@@ -69,7 +88,7 @@ def require_solvable(fleet: Fleet, opps: Opportunities, where: object, geo=None,
     from eosp.fleet.check import require_feasible
     from eosp.fleet.geometry import Geometry
 
-    require_solve_memory(fleet, len(opps), where, processes)
+    require_solve_memory(fleet, opps, where, processes)
     geo = geo or Geometry(fleet)
     require_feasible(fleet, where, geo)
     return geo

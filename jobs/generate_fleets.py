@@ -41,13 +41,12 @@ class FleetSetConfig:
 def build_fleet(gen: FleetGenConfig, path: str) -> dict:
     """Generate one fleet, compute its opportunities, write it; returns its record."""
     from eosp.fleet.generate import generate
-    from eosp.fleet.geometry import Geometry
     from eosp.fleet.io import fingerprint, write_fleet
-    from eosp.fleet.opportunities import compute
+    from eosp.fleet.opportunities import compute, require_scan_memory
 
     t0 = time.perf_counter()
     fleet = generate(gen)
-    opps = compute(fleet, Geometry(fleet))
+    opps = compute(fleet, *require_scan_memory(fleet, "--gen.satellites/--gen.tasks/--gen.hours"))
     write_fleet(fleet, opps, path, overwrite=True)
     return {"fleet": Path(path).name, "case_id": fleet.case_id, "fingerprint": fingerprint(fleet),
             "generator": to_dict(gen), "satellites": len(fleet.satellites), "tasks": len(fleet.tasks),

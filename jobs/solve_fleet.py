@@ -311,6 +311,7 @@ def run(job: SolveFleetJob) -> dict:
     from eosp.jobs.tracking import use_experiment
     from eosp.kinds.fleet.problem import Problem
     from eosp.kinds.fleet.solve import solve
+    from eosp.memory import peak_rss_gb
 
     import logging
 
@@ -318,6 +319,7 @@ def run(job: SolveFleetJob) -> dict:
     t0 = time.perf_counter()
     fleet, opps = read_fleet(job.fleet_dir)
     t_read = time.perf_counter()  # --fleet.time-limit counts from here
+    peak = {"read": peak_rss_gb()}  # the driver's peak resident memory after each step (GB)
     fp = fingerprint(fleet)
     run_dir = Path(job.run_dir)
     saved = _load_state(run_dir, fleet, fp) if run_dir.is_dir() else None
@@ -329,6 +331,7 @@ def run(job: SolveFleetJob) -> dict:
                                             "fleet_dir": str(Path(job.fleet_dir).resolve())}, indent=1))
     prob = Problem.build(fleet, opps)
     t_build = time.perf_counter() - t0
+    peak["graphs"] = peak_rss_gb()
     pool = None
     if job.fleet.workers > 1:
         init_ray(job.ray.address, max(job.ray.num_cpus, job.fleet.workers))
@@ -346,6 +349,7 @@ def run(job: SolveFleetJob) -> dict:
             if pool is not None:
                 pool.close()
         wall = time.perf_counter() - t0
+        peak["solve"] = peak_rss_gb()
         info = {"value": sol.value, "bound": sol.bound, "gap": sol.gap, "solver": "fleet", "seconds": round(wall, 3),
                 "pass_solver": job.fleet.pass_solver, "rounds": sol.info["rounds"]}
         write_schedule(sol.schedule, fleet, run_dir / "schedule.parquet", overwrite=True, info=info)
@@ -369,6 +373,8 @@ def run(job: SolveFleetJob) -> dict:
                   "workers": job.fleet.workers, "nodes": 0 if pool is None else len(set(pool.nodes)),
                   "resumed_from_round": 0 if resume is None else resume.rounds_done,
                   "price_round_s": sol.info["price_round_s"], "interrupted": sol.info["interrupted"],
+                  "driver_peak_gb": {k: None if v is None else round(v, 3) for k, v in peak.items()},
+                  "graph_mb": round(sum(pg.nbytes for pg in prob.passes) / 1e6, 1),
                   "history": [(round(t + t_build, 3), v, b) for t, v, b in sol.history]}
         (run_dir / "result.json").write_text(json.dumps(result, indent=1))
         mlflow.log_metrics({"final/value": sol.value, "final/bound": sol.bound or 0.0, "final/gap": sol.gap or 0.0,

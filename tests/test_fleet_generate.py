@@ -101,3 +101,25 @@ def test_generate_cli_writes_a_fleet_and_refuses_bad_requests(tmp_path, capsys):
         assert not (tmp_path / "other").exists()
     assert main(["generate", "--fleet", "--out", str(out)]) == 2  # never over an existing directory silently
     assert "already exists" in capsys.readouterr().err
+
+
+def test_the_opportunities_estimated_from_a_sample_cover_the_scan_and_are_not_scanned_twice(monkeypatch):
+    """The memory check scans a few satellites per sensor (fleet.opportunities.sample_scan) and scales them up with
+    a margin: on a 24-satellite fleet the estimate lies between the real count and three times it, and compute()
+    scans only the satellites the sample did not."""
+    from eosp.fleet import opportunities as op
+    from eosp.fleet.geometry import Geometry
+
+    fleet = generate(FleetGenConfig(satellites=24, tasks=1500, hours=6.0, infrared_fraction=0.25))
+    geo = Geometry(fleet)
+    sample = op.sample_scan(fleet, geo)
+    assert 2 <= len(sample) <= op.SAMPLE_SATELLITES + 1
+    assert set(fleet.satellites.sensor[list(sample)].tolist()) == set(fleet.satellites.sensor.tolist())
+    scanned = []
+    real = op.satellite_opportunities
+    monkeypatch.setattr(op, "satellite_opportunities", lambda f, g, k: scanned.append(k) or real(f, g, k))
+    opps = op.compute(fleet, geo, sample)
+    assert sorted(scanned + list(sample)) == list(range(24))
+    expected = op.expected_opportunities(fleet, sample)
+    assert len(opps) <= expected <= 3 * len(opps), (expected, len(opps))
+    assert len(op.compute(fleet, geo)) == len(opps)  # the sample's arrays are the scan's own

@@ -165,3 +165,23 @@ def test_two_worker_processes_give_the_same_run_as_one(problem):
                       problem=problem)
                 for w in (1, 2))
     assert one.schedule.task.tolist() == two.schedule.task.tolist() and one.bound == two.bound
+
+
+def test_the_graph_memory_estimate_counts_nodes_by_tasks_and_covers_the_built_graphs():
+    """The solve's memory check (fleet.passgraph.graph_bytes) scales with nodes x tasks of each pass, counted from
+    the opportunities alone: equal to the count over the built graphs, which have at most one arc per node and
+    task, and whose arrays the estimate covers."""
+    from eosp.fleet.generate import FleetGenConfig, generate
+    from eosp.fleet.passgraph import PAIR_BYTES, build_passes, graph_bytes, node_task_pairs
+
+    fleet = generate(FleetGenConfig(satellites=6, tasks=600, hours=4.0, window_min_h=1.0, window_max_h=3.0))
+    geo = Geometry(fleet)
+    opps = compute(fleet, geo)
+    passes = build_passes(fleet, opps, LineOfSight(fleet, geo))
+    assert len(opps) > 100
+    assert node_task_pairs(opps, len(fleet.tasks)) == sum(len(pg.rows) * pg.n_tasks for pg in passes)
+    for pg in passes:
+        assert pg.graph.n_arcs <= len(pg.rows) * pg.n_tasks + pg.n_tasks  # the source's arcs, one per task
+    arcs = sum(pg.graph.n_arcs + (0 if pg.bound_graph is None else pg.bound_graph.n_arcs) for pg in passes)
+    assert arcs * 4 <= node_task_pairs(opps, len(fleet.tasks)) * PAIR_BYTES
+    assert sum(pg.nbytes for pg in passes) <= graph_bytes(opps, len(fleet.tasks))

@@ -56,7 +56,6 @@ def import_case(paths: list[str], out: str, overwrite: bool = False) -> str:
     from eosp.atomic import check_output_dir
     from eosp.fleet.aeossp import read_case
     from eosp.fleet.check import require_feasible
-    from eosp.fleet.geometry import Geometry
     from eosp.fleet.io import is_fleet_dir, write_fleet, written_names
     from eosp.fleet.opportunities import compute, require_check_memory, require_scan_memory
 
@@ -64,10 +63,10 @@ def import_case(paths: list[str], out: str, overwrite: bool = False) -> str:
     check_output_dir(out, overwrite=overwrite, owned=is_fleet_dir, what="fleet directory", names=written_names)
     t0 = time.perf_counter()
     fleet = read_case(case_dir)
-    require_scan_memory(fleet, Path(case_dir) / "mission.yaml")  # the horizon's length as much as the fleet's size
-    require_check_memory(fleet, Path(case_dir) / "mission.yaml")  # and the feasibility check below
-    geo = Geometry(fleet)
-    opps = compute(fleet, geo)
+    require_check_memory(fleet, Path(case_dir) / "mission.yaml")  # the feasibility check below
+    # the horizon's length as much as the fleet's size, then the opportunities from a sample of satellites
+    geo, sample = require_scan_memory(fleet, Path(case_dir) / "mission.yaml")
+    opps = compute(fleet, geo, sample)
     require_feasible(fleet, case_dir, geo)  # a battery that idling alone runs dry: no schedule is valid
     write_fleet(fleet, opps, out, overwrite=overwrite)
     return _written(out, fleet, opps, t0)
@@ -76,14 +75,14 @@ def import_case(paths: list[str], out: str, overwrite: bool = False) -> str:
 def generate(cfg, out: str, overwrite: bool = False) -> str:
     """Draw a synthetic fleet (:mod:`eosp.fleet.generate`), compute its opportunities, write the fleet directory.
 
-    The memory it needs is estimated from the request and checked against what the machine has before any
-    work (one line, exit 2, instead of the kernel's out-of-memory killer hours later)."""
+    The memory it needs is estimated and checked against what the machine has before the work it is for (one
+    line, exit 2, instead of the kernel's out-of-memory killer hours later): drawing and propagating from the
+    request, the opportunities from a sample of the drawn satellites."""
     from eosp.atomic import check_output_dir
     from eosp.fleet.generate import check, estimate_bytes
     from eosp.fleet.generate import generate as draw
-    from eosp.fleet.geometry import Geometry
     from eosp.fleet.io import is_fleet_dir, write_fleet, written_names
-    from eosp.fleet.opportunities import compute
+    from eosp.fleet.opportunities import compute, require_scan_memory
     from eosp.memory import require_memory
 
     check_output_dir(out, overwrite=overwrite, owned=is_fleet_dir, what="fleet directory", names=written_names)
@@ -97,7 +96,7 @@ def generate(cfg, out: str, overwrite: bool = False) -> str:
                    f"({cfg.hours * 720:,.0f} instants of the 5 s grid)")
     t0 = time.perf_counter()
     fleet = draw(cfg)
-    opps = compute(fleet, Geometry(fleet))
+    opps = compute(fleet, *require_scan_memory(fleet, "--satellites/--tasks/--hours"))
     write_fleet(fleet, opps, out, overwrite=overwrite)
     return _written(out, fleet, opps, t0)
 
