@@ -205,7 +205,9 @@ def build_pass(fleet: Fleet, opps: Opportunities, los: LineOfSight, p: int, offs
     graph = DiscreteGraph(node_acq, node_time, *_arcs(*args, MARGIN_S + NUMERICAL_EPS, False), acq_ptr)
     loose = DiscreteGraph(node_acq, node_time, *_arcs(*args, -(MARGIN_S + NUMERICAL_EPS), True), acq_ptr)
     fifo = fifo_violations(loose) == 0
-    if fifo and _same_arcs(_without_repeats(loose), graph) and bridge_triples(loose) == 0:
+    if fifo and _same_arcs(_without_repeats(loose), graph) and not has_bridge_triple(
+            loose, _tracking_fits(los_start, los_end, node_time, node_end, slew, MARGIN_S + NUMERICAL_EPS,
+                                  tracking_slack(slew))):
         loose = None  # the pass graph serves the bound (bound_problem)
     return PassGraph(p, sat, tasks.astype(np.int32), rows.astype(np.int64), duration, graph,
                      observation_wh(fleet, sat, tasks), loose, fifo)
@@ -229,6 +231,93 @@ def bridge_triples(graph: DiscreteGraph) -> int:
     """Consecutive arcs u -> v -> x after which u has no arc to x's acquisition arriving by x's time: places
     where leaving v out of a schedule can break it (v a bridge)."""
     return int(_bridge_triples(graph.node_acq, graph.node_time, graph.indptr, graph.dst, graph.acq_ptr))
+
+
+@numba.njit(cache=True)
+def _has_bridge_triple(node_acq, node_time, indptr, dst, n_acq, u_end):
+    """:func:`_bridge_triples` > 0 over the nodes u < `u_end`, in one pass over the two-arc paths without a search:
+    per node u, the earliest time at which each acquisition is reached in two arcs (a dense row, reset after u),
+    against the time of u's own arc to it (one at most an acquisition: arcs go to the earliest node that can
+    follow)."""
+    inf = np.inf
+    best = np.full(n_acq, inf)
+    direct = np.full(n_acq, inf)
+    touched = np.empty(n_acq, np.int64)
+    for u in range(u_end):
+        m = 0
+        for a in range(indptr[u], indptr[u + 1]):
+            v = dst[a]
+            for b in range(indptr[v], indptr[v + 1]):
+                x = dst[b]
+                k = node_acq[x]
+                if best[k] == inf:
+                    touched[m] = k
+                    m += 1
+                if node_time[x] < best[k]:
+                    best[k] = node_time[x]
+        for a in range(indptr[u], indptr[u + 1]):
+            v = dst[a]
+            k = node_acq[v]
+            if node_time[v] < direct[k]:
+                direct[k] = node_time[v]
+        found = False
+        for i in range(m):
+            k = touched[i]
+            if direct[k] > best[k]:
+                found = True
+            best[k] = inf
+        for a in range(indptr[u], indptr[u + 1]):
+            direct[node_acq[dst[a]]] = inf
+        if found:
+            return True
+    return False
+
+
+@numba.njit(cache=True)
+def _tracking_fits(los_start, los_end, node_time, node_end, slew, margin, slack):
+    """Whether every observation turns the line of sight by less than a slew could in its time: for every node v
+    but the source, slew(angle(start, end of v)) + `slack` <= duration(v) + settling - `margin` (lines of sight
+    of norm above 1e-9)."""
+    rate, acc, settle = slew[0], slew[1], slew[2]
+    for v in range(1, node_time.shape[0]):
+        su, eu = los_start[v], los_end[v]
+        if np.sqrt(su[0] * su[0] + su[1] * su[1] + su[2] * su[2]) <= 1e-9 or \
+                np.sqrt(eu[0] * eu[0] + eu[1] * eu[1] + eu[2] * eu[2]) <= 1e-9:
+            return False
+        if _need(su, eu, rate, acc, settle) - settle + slack > node_end[v] - node_time[v] + settle - margin:
+            return False
+    return True
+
+
+ANGLE_SLACK_DEG = 1.0e-4  # more than the rounding of four computed angles (arccos near 1: about 1e-6 degrees each)
+
+
+def tracking_slack(slew: np.ndarray) -> float:
+    """Seconds that cover what the slew function's rounding and its cut at SMALL_DEG can add to the triangle
+    argument of :func:`has_bridge_triple`: three times the concave slew of 2e-9 degrees (the function is 0 below
+    1e-9 degrees, its concave extension is not) plus the slew of :data:`ANGLE_SLACK_DEG`."""
+    return 3.0 * bang_coast_bang(2.0e-9, slew[0], slew[1]) + bang_coast_bang(ANGLE_SLACK_DEG, slew[0], slew[1])
+
+
+def has_bridge_triple(graph: DiscreteGraph, tracking_fits: bool = False) -> bool:
+    """Whether :func:`bridge_triples` finds any (what :func:`build_pass` asks), in O(two-arc paths).
+
+    `tracking_fits` (:func:`_tracking_fits` holds on the graph's pass, margins of the loose graph): then no node
+    but the source can start a bridge triple, and only the source's row is searched.  Why: let u -> v -> x be
+    arcs of the loose graph, u not the source, e_u the line of sight at u's end, s_v and e_v at v's start and end,
+    s_x at x's start, f the bang-coast-bang slew (settling s apart), m the loose margin.  The arcs say
+    t_v - end_u >= f(e_u, s_v) + s - m and t_x - end_v >= f(e_v, s_x) + s - m, so
+    t_x - end_u >= f(e_u, s_v) + f(e_v, s_x) + d_v + 2 s - 2 m.  Angles obey the triangle inequality,
+    angle(e_u, s_x) <= angle(e_u, s_v) + angle(s_v, e_v) + angle(e_v, s_x), and f is increasing and, but for its
+    cut to 0 below 1e-9 degrees, concave with f(0) = 0, hence subadditive: f(e_u, s_x) <= f(e_u, s_v) +
+    f(s_v, e_v) + f(e_v, s_x) + :func:`tracking_slack` (the cut and the angles' rounding).  With tracking_fits,
+    f(s_v, e_v) + slack <= d_v + s - m, so t_x - end_u >= f(e_u, s_x) + s - m: x itself can follow u, and u's
+    arc to x's acquisition (the earliest node of it that can follow u, searched from the first starting after u
+    ends, which x does) arrives by t_x.  The source's rule (a slew from the nadir at the destination's own start)
+    is not covered by this argument: its row is always searched."""
+    u_end = 1 if tracking_fits else graph.n_nodes
+    return bool(_has_bridge_triple(graph.node_acq, graph.node_time, graph.indptr, graph.dst, max(1, graph.n_acq),
+                                   u_end))
 
 
 def _without_repeats(graph: DiscreteGraph) -> DiscreteGraph:

@@ -256,3 +256,54 @@ def test_a_bound_below_a_schedule_is_refused(monkeypatch):
     assert sol.info["bound_refused"] and "below the schedule found" in sol.info["bound_refused"][0]
     assert sol.info["bound_source"] == "conflict-free" and sol.bound >= sol.value
     assert sol.info["no_lagrangian_bound_because"].startswith("refused:")
+
+
+def _decisions(monkeypatch, fleet) -> list[tuple[bool, bool]]:
+    """(what build_pass decided about a bridge triple, what the exhaustive count says) for every pass whose loose
+    graph is FIFO and equal to its pass graph (the passes where the question is asked)."""
+    from eosp.fleet import passgraph
+
+    seen = []
+    fast = passgraph.has_bridge_triple
+
+    def record(graph, tracking_fits=False):
+        decided = fast(graph, tracking_fits)
+        seen.append((decided, bridge_triples(graph) > 0, tracking_fits))
+        return decided
+
+    monkeypatch.setattr(passgraph, "has_bridge_triple", record)
+    geo = Geometry(fleet)
+    build_passes(fleet, compute(fleet, geo), LineOfSight(fleet, geo))
+    return seen
+
+
+def test_the_tracking_argument_skips_only_rows_without_bridge_triples(monkeypatch):
+    """build_pass searches only the source's row for bridge triples when every observation turns the line of sight
+    slower than a slew could (has_bridge_triple's triangle argument): on a generated fleet (where it holds and the
+    search is cut to one row) and on the bridge fleet (built so that a tracking observation is a bridge: it must
+    not hold there) its answer is the exhaustive count's."""
+    from eosp.fleet.generate import FleetGenConfig, generate
+
+    gen = _decisions(monkeypatch, generate(FleetGenConfig(satellites=6, tasks=500, hours=4.0, window_min_h=1.0,
+                                                          window_max_h=3.0)))
+    assert len(gen) > 10 and all(d == exact for d, exact, _ in gen)
+    assert any(t for _, _, t in gen)  # the shortcut is taken
+    assert all(d == exact for d, exact, _ in _decisions(monkeypatch, bridge_fleet()))
+    # the bridge fleet's chain pass has bridge triples (its bound graph is kept for them): the argument must
+    # not hold there, else the shortcut would have missed them
+    from eosp.fleet.passgraph import _tracking_fits, has_bridge_triple, tracking_slack
+    from eosp.fleet.slew import MARGIN_S
+
+    fleet = bridge_fleet()
+    geo = Geometry(fleet)
+    los = LineOfSight(fleet, geo)
+    (pg,) = [pg for pg in build_passes(fleet, compute(fleet, geo), los) if pg.satellite == 0]
+    g = pg.bound_graph
+    acq = g.node_acq[1:]
+    end = np.r_[0.0, g.node_time[1:] + pg.duration[acq]]
+    los_start = np.vstack([np.zeros((1, 3)), los.los(0, pg.tasks[acq], g.node_time[1:])])
+    los_end = np.vstack([np.zeros((1, 3)), los.los(0, pg.tasks[acq], end[1:])])
+    att = fleet.satellites.attitude
+    slew = np.array([att.max_rate_deg_s[0], att.max_acc_deg_s2[0], att.settling_s[0]])
+    fits = _tracking_fits(los_start, los_end, g.node_time, end, slew, MARGIN_S + NUMERICAL_EPS, tracking_slack(slew))
+    assert bridge_triples(g) > 0 and not fits and has_bridge_triple(g, fits)
