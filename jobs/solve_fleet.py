@@ -324,7 +324,13 @@ def run(job: SolveFleetJob) -> dict:
     run_dir = Path(job.run_dir)
     saved = _load_state(run_dir, fleet, fp) if run_dir.is_dir() else None
     local_actors = job.fleet.workers if job.fleet.workers > 1 and not job.ray.address else 0
+    if local_actors:  # more workers than CPUs: refused before anything is written
+        _require_cpus(job.fleet.workers, "")
     require_solvable(fleet, opps, f"--fleet-dir {job.fleet_dir}", processes=1 + local_actors)
+    if job.fleet.workers > 1:
+        init_ray(job.ray.address, max(job.ray.num_cpus, job.fleet.workers))
+        if job.ray.address:  # a cluster's CPUs are known once connected
+            _require_cpus(job.fleet.workers, job.ray.address)
     use_experiment(job.mlflow_uri, job.experiment)  # before the run dir: a store MLflow refuses leaves nothing behind
     make_run_dir(run_dir, replace=False, kind=RUN_KIND)
     (run_dir / META).write_text(json.dumps({"fingerprint": fp, "case_id": fleet.case_id,
@@ -334,7 +340,6 @@ def run(job: SolveFleetJob) -> dict:
     peak["graphs"] = peak_rss_gb()
     pool = None
     if job.fleet.workers > 1:
-        init_ray(job.ray.address, max(job.ray.num_cpus, job.fleet.workers))
         pool = RayPassPool(prob, job.fleet)
     t_pool = time.perf_counter() - t0
     with mlflow.start_run(run_name=run_dir.name):
@@ -431,6 +436,24 @@ def _main(argv: list[str] | None) -> int:
               f"{Path(job.run_dir) / 'schedule.parquet'} (WCR {r['value']:.6f})", file=sys.stderr, flush=True)
         return 130
     return 0
+
+
+def _require_cpus(workers: int, address: str) -> None:
+    """One line when the workers outnumber the CPUs: the cluster's (Ray's resources) or, for a local Ray, this
+    machine's (a local Ray is started with as many logical CPUs as workers, so its own count says nothing)."""
+    import os
+
+    from eosp.errors import InputError
+
+    if address:
+        import ray
+
+        cpus = float(ray.cluster_resources().get("CPU", 0))
+    else:
+        cpus = float(os.cpu_count() or 1)
+    if workers > cpus:
+        where = "the cluster has" if address else "this machine has"
+        raise InputError(f"--fleet.workers {workers}", f"more than the {cpus:g} CPUs {where}")
 
 
 def _require_ray_address(address: str) -> None:

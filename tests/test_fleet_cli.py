@@ -46,6 +46,7 @@ def test_solve_validate_export(fleet_dir, tmp_path, capsys):
     (["--pass-solver", "bogus"], "--pass-solver"),
     (["--pass-solver", "policy"], "--pass-solver"),
     (["--freeze-until", "2030-01-01T00:00:00Z", "--init", "X"], "--freeze-until"),
+    (["--workers", "256"], "more than this machine's"),
 ])
 def test_bad_fleet_solve_options_are_one_line(fleet_dir, tmp_path, capsys, args, why):
     init = tmp_path / "s.parquet"

@@ -114,6 +114,7 @@ def test_bad_run_dirs_and_addresses_are_refused_in_one_line(fleet_dir, tmp_path,
         (["--run-dir", str(tmp_path / "new"), "--fleet.workers", "2", "--ray.address", "127.0.0.1:1"], "unreachable"),
         (["--run-dir", str(tmp_path / "new"), "--fleet.pass-solver", "policy"], "no model trained on fleet passes"),
         (["--run-dir", str(tmp_path / "new"), "--fleet.rounds", "0"], "--fleet.rounds"),
+        (["--run-dir", str(tmp_path / "new"), "--fleet.workers", "256"], "more than the"),
     ]
     for extra, message in cases:
         try:

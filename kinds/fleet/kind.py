@@ -264,6 +264,11 @@ class FleetKind(KindBase):
         return super().solver_config(solver) if solver in self.solvers else FleetConfig
 
     def before_read(self, solver: str, cfg: Any) -> None:
+        import os
+
+        workers, cpus = getattr(cfg, "workers", 1), os.cpu_count() or 1
+        if workers > cpus:  # forked workers beyond the cores only share them, and each holds its own share of state
+            raise InputError(f"--workers {workers}", f"more than this machine's {cpus} CPUs")
         if getattr(cfg, "pass_solver", "") == "policy":
             raise InputError("--pass-solver", "policy: no model trained on fleet passes is shipped yet; use exact, "
                                               "ramp or greedy")
