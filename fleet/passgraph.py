@@ -140,30 +140,49 @@ def _need(u, v, rate, acc, settle):
 
 
 @numba.njit(cache=True)
-def _arcs(acq_ptr, node_time, node_end, los_start, los_end, nadir, slew, margin, repeats):
-    """CSR arcs: from each node, to the earliest node of every other acquisition that can follow it (and of its
-    own acquisition, a later start, when `repeats`).  `slew` = (max rate, max acceleration, settling); rows come
-    out sorted by destination."""
+def _arcs(acq_ptr, node_time, node_end, los_start, los_end, nadir, slew, margin):
+    """Both graphs of a pass in one scan: the schedule's (`margin` to spare, no arc to the node's own acquisition)
+    and the loose one (`margin` granted, later starts of the node's own acquisition too).  CSR arcs from each node
+    to the earliest node of every acquisition that can follow it; rows sorted by destination.  Each slew is
+    computed once and tested against both margins (the loose arc is found at or before the schedule's one).
+    Returns (indptr, dst) of each and whether the loose graph, its repeats aside, has the same arcs.
+    `slew` = (max rate, max acceleration, settling)."""
     rate, acc, settle = slew[0], slew[1], slew[2]
     n = node_time.shape[0]
     k = acq_ptr.shape[0] - 1
-    indptr = np.zeros(n + 1, dtype=np.int64)
-    dst = np.empty(max(1, n * k), dtype=np.int32)
-    cnt = 0
+    ip_s = np.zeros(n + 1, dtype=np.int64)
+    ip_l = np.zeros(n + 1, dtype=np.int64)
+    dst_s = np.empty(max(1, n * k), dtype=np.int32)
+    dst_l = np.empty(max(1, n * k + k), dtype=np.int32)
+    cs = 0
+    cl = 0
+    same = True
     for b in range(k):  # the source: a first action slews from nadir, its gap counted from the horizon start
+        found_l = -1
+        found_s = -1
         for v in range(acq_ptr[b], acq_ptr[b + 1]):
-            if node_time[v] >= _need(nadir[v], los_start[v], rate, acc, settle) + margin:
-                dst[cnt] = v
-                cnt += 1
+            need = _need(nadir[v], los_start[v], rate, acc, settle)
+            if found_l < 0 and node_time[v] >= need - margin:
+                found_l = v
+            if node_time[v] >= need + margin:
+                found_s = v
                 break
-    indptr[1] = cnt
+        if found_l >= 0:
+            dst_l[cl] = found_l
+            cl += 1
+        if found_s >= 0:
+            dst_s[cs] = found_s
+            cs += 1
+        if found_l != found_s:
+            same = False
+    ip_s[1] = cs
+    ip_l[1] = cl
     acq = 0
     for u in range(1, n):
         while u >= acq_ptr[acq + 1]:
             acq += 1
         for b in range(k):
-            if b == acq and not repeats:
-                continue
+            own = b == acq
             lo, hi = acq_ptr[b], acq_ptr[b + 1]
             while lo < hi:  # first node of b starting after u ends
                 mid = (lo + hi) >> 1
@@ -171,13 +190,29 @@ def _arcs(acq_ptr, node_time, node_end, los_start, los_end, nadir, slew, margin,
                     lo = mid + 1
                 else:
                     hi = mid
+            found_l = -1
+            found_s = -1
             for v in range(lo, acq_ptr[b + 1]):
-                if node_time[v] - node_end[u] >= _need(los_end[u], los_start[v], rate, acc, settle) + margin:
-                    dst[cnt] = v
-                    cnt += 1
+                gap = node_time[v] - node_end[u]
+                need = _need(los_end[u], los_start[v], rate, acc, settle)
+                if found_l < 0 and gap >= need - margin:
+                    found_l = v
+                    if own:
+                        break
+                if not own and gap >= need + margin:
+                    found_s = v
                     break
-        indptr[u + 1] = cnt
-    return indptr, dst[:cnt].copy()
+            if found_l >= 0:
+                dst_l[cl] = found_l
+                cl += 1
+            if found_s >= 0:
+                dst_s[cs] = found_s
+                cs += 1
+            if not own and found_l != found_s:
+                same = False
+        ip_s[u + 1] = cs
+        ip_l[u + 1] = cl
+    return ip_s, dst_s[:cs].copy(), ip_l, dst_l[:cl].copy(), same
 
 
 def build_pass(fleet: Fleet, opps: Opportunities, los: LineOfSight, p: int, offsets: np.ndarray) -> PassGraph:
@@ -200,12 +235,13 @@ def build_pass(fleet: Fleet, opps: Opportunities, los: LineOfSight, p: int, offs
     nadir = np.vstack([np.zeros((1, 3)), los.nadir(sat, start)])
     att = fleet.satellites.attitude
     slew = np.array([att.max_rate_deg_s[sat], att.max_acc_deg_s2[sat], att.settling_s[sat]], dtype=np.float64)
-    args = (acq_ptr, node_time, node_end, los_start, los_end, nadir, slew)
     node_acq = np.r_[-1, local].astype(np.int32)
-    graph = DiscreteGraph(node_acq, node_time, *_arcs(*args, MARGIN_S + NUMERICAL_EPS, False), acq_ptr)
-    loose = DiscreteGraph(node_acq, node_time, *_arcs(*args, -(MARGIN_S + NUMERICAL_EPS), True), acq_ptr)
+    ip_s, dst_s, ip_l, dst_l, same = _arcs(acq_ptr, node_time, node_end, los_start, los_end, nadir, slew,
+                                           MARGIN_S + NUMERICAL_EPS)
+    graph = DiscreteGraph(node_acq, node_time, ip_s, dst_s, acq_ptr)
+    loose = DiscreteGraph(node_acq, node_time, ip_l, dst_l, acq_ptr)
     fifo = fifo_violations(loose) == 0
-    if fifo and _same_arcs(_without_repeats(loose), graph) and not has_bridge_triple(
+    if fifo and same and not has_bridge_triple(
             loose, _tracking_fits(los_start, los_end, node_time, node_end, slew, MARGIN_S + NUMERICAL_EPS,
                                   tracking_slack(slew))):
         loose = None  # the pass graph serves the bound (bound_problem)
@@ -318,17 +354,6 @@ def has_bridge_triple(graph: DiscreteGraph, tracking_fits: bool = False) -> bool
     u_end = 1 if tracking_fits else graph.n_nodes
     return bool(_has_bridge_triple(graph.node_acq, graph.node_time, graph.indptr, graph.dst, max(1, graph.n_acq),
                                    u_end))
-
-
-def _without_repeats(graph: DiscreteGraph) -> DiscreteGraph:
-    src = graph.src()
-    keep = graph.node_acq[src] != graph.node_acq[graph.dst]
-    indptr = np.r_[0, np.cumsum(np.bincount(src[keep], minlength=graph.n_nodes))].astype(np.int64)
-    return graph.with_arcs(indptr, graph.dst[keep])
-
-
-def _same_arcs(a: DiscreteGraph, b: DiscreteGraph) -> bool:
-    return np.array_equal(a.indptr, b.indptr) and np.array_equal(a.dst, b.dst)
 
 
 def bound_problem(pg: PassGraph, value: np.ndarray, time_limit: float | None = None) -> float:

@@ -307,3 +307,51 @@ def test_the_tracking_argument_skips_only_rows_without_bridge_triples(monkeypatc
     slew = np.array([att.max_rate_deg_s[0], att.max_acc_deg_s2[0], att.settling_s[0]])
     fits = _tracking_fits(los_start, los_end, g.node_time, end, slew, MARGIN_S + NUMERICAL_EPS, tracking_slack(slew))
     assert bridge_triples(g) > 0 and not fits and has_bridge_triple(g, fits)
+
+
+def test_both_graphs_of_a_pass_are_the_earliest_followers_by_their_margins():
+    """fleet.passgraph._arcs builds the schedule's graph and the loose graph in one scan: each arc checked against
+    the definition, node by node in Python (the earliest node of each acquisition starting after u ends whose gap
+    covers the slew plus settling, + the margin for the schedule's graph, - it for the loose one, which also has
+    later starts of u's own acquisition), and `same` against a comparison of the arc sets."""
+    from eosp.fleet.generate import FleetGenConfig, generate
+    from eosp.fleet.passgraph import _arcs, _need
+    from eosp.fleet.slew import MARGIN_S
+
+    fleet = generate(FleetGenConfig(satellites=3, tasks=1500, hours=3.0, window_min_h=1.0, window_max_h=2.0, seed=4))
+    geo = Geometry(fleet)
+    los = LineOfSight(fleet, geo)
+    m = MARGIN_S + NUMERICAL_EPS
+    checked = 0
+    for pg in build_passes(fleet, compute(fleet, geo), los):
+        g = pg.graph
+        acq, t = g.node_acq, g.node_time
+        end = np.r_[0.0, t[1:] + pg.duration[acq[1:]]]
+        ls = np.vstack([np.zeros((1, 3)), los.los(pg.satellite, pg.tasks[acq[1:]], t[1:])])
+        le = np.vstack([np.zeros((1, 3)), los.los(pg.satellite, pg.tasks[acq[1:]], end[1:])])
+        nadir = np.vstack([np.zeros((1, 3)), los.nadir(pg.satellite, t[1:])])
+        att = fleet.satellites.attitude
+        slew = np.array([att.max_rate_deg_s[pg.satellite], att.max_acc_deg_s2[pg.satellite],
+                         att.settling_s[pg.satellite]])
+        ip_s, dst_s, ip_l, dst_l, same = _arcs(g.acq_ptr, t, end, ls, le, nadir, slew, m)
+        assert np.array_equal(ip_s, g.indptr) and np.array_equal(dst_s, g.dst)
+        rows = {}
+        for u in range(g.n_nodes):
+            for margin, ip, dst, repeats in ((m, ip_s, dst_s, False), (-m, ip_l, dst_l, True)):
+                want = []
+                for b in range(g.n_acq):
+                    if u and b == acq[u] and not repeats:
+                        continue
+                    for v in range(g.acq_ptr[b], g.acq_ptr[b + 1]):
+                        if u == 0:
+                            ok = t[v] >= _need(nadir[v], ls[v], *slew) + margin
+                        else:
+                            ok = t[v] >= end[u] and t[v] - end[u] >= _need(le[u], ls[v], *slew) + margin
+                        if ok:
+                            want.append(v)
+                            break
+                assert dst[ip[u]:ip[u + 1]].tolist() == want, (pg.pass_id, u, margin)
+                rows[u, repeats] = [v for v in want if not u or acq[v] != acq[u]] if repeats else want
+                checked += 1
+        assert same == all(rows[u, True] == rows[u, False] for u in range(g.n_nodes))
+    assert checked > 400
