@@ -262,12 +262,35 @@ def generate(cfg: FleetGenConfig) -> Fleet:
 LAND_MASK_BYTES = 900 * 1024 ** 2  # global-land-mask's 1 km grid, loaded by the land and clusters placements
 
 
+def expected_opportunities(cfg: FleetGenConfig) -> float:
+    """Opportunities of a fleet the config would draw, from geometry alone, every satellite given the widest
+    template's reach (1.65x the real count of generated 200- and 1,000-satellite days on land): a satellite sees a point a fraction
+    (1 - cos L) / 2 of the time, L the ground angle its off-nadir limit reaches; those visits are passes through a
+    disc of chords up to 2 L / n long (n its mean motion), of mean length pi/4 of that; a pass of chord T leaves
+    (T - d) / step + 1 starts to a task of duration d.  Averaged over the chords, the durations and the windows,
+    per sensor (satellites x tasks of each)."""
+    a = R_EARTH_M + cfg.altitude_km * 1000.0
+    eta = np.radians(max(t[1] for t in TEMPLATES.values()))
+    reach = min(np.arccos(R_EARTH_M / a), np.arcsin(min(1.0, a * np.sin(eta) / R_EARTH_M)) - eta)
+    motion = np.sqrt(MU_EARTH / a ** 3)
+    t_max = 2.0 * reach / motion
+    chords = t_max * np.sqrt(1.0 - ((np.arange(64) + 0.5) / 64) ** 2)
+    durations = np.asarray(DURATIONS_S, dtype=float)[:, None]
+    starts = np.where(chords >= durations, (chords - durations) / 5.0 + 1.0, 0.0).mean()
+    window = min(0.5 * (cfg.window_min_h + cfg.window_max_h), cfg.hours) * 3600.0
+    per_pair = window * (1.0 - np.cos(reach)) / 2.0 / (np.pi / 4.0 * t_max) * starts
+    ir = cfg.infrared_fraction
+    pairs = cfg.satellites * cfg.tasks * (ir * ir + (1.0 - ir) * (1.0 - ir))
+    return float(pairs * per_pair)
+
+
 def estimate_bytes(cfg: FleetGenConfig) -> int:
-    """Peak memory of drawing the fleet and propagating it, estimated before any work
-    (:func:`eosp.fleet.opportunities.scan_bytes`: the horizon's instants on the 5 s grid times the satellites; the
-    land mask when tasks are placed on land).  The opportunities are estimated once the fleet is drawn, from a
-    sample of its satellites (:func:`eosp.fleet.opportunities.require_scan_memory`)."""
+    """Peak memory of drawing the fleet, propagating it and scanning its opportunities, estimated before any work
+    (:func:`eosp.fleet.opportunities.scan_bytes`: the horizon's instants on the 5 s grid times the satellites, and
+    :func:`expected_opportunities`; the land mask when tasks are placed on land).  Once the fleet is drawn its
+    opportunities are estimated again from a sample of its satellites
+    (:func:`eosp.fleet.opportunities.require_scan_memory`)."""
     from eosp.fleet.opportunities import instants, scan_bytes
 
     mask = LAND_MASK_BYTES if cfg.placement in ("land", "clusters") else 0
-    return mask + scan_bytes(cfg.satellites, instants(cfg.hours * 3600.0, 5))
+    return mask + scan_bytes(cfg.satellites, instants(cfg.hours * 3600.0, 5), expected_opportunities(cfg))

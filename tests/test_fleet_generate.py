@@ -110,7 +110,8 @@ def test_the_opportunities_estimated_from_a_sample_cover_the_scan_and_are_not_sc
     from eosp.fleet import opportunities as op
     from eosp.fleet.geometry import Geometry
 
-    fleet = generate(FleetGenConfig(satellites=24, tasks=1500, hours=6.0, infrared_fraction=0.25))
+    cfg = FleetGenConfig(satellites=24, tasks=1500, hours=6.0, infrared_fraction=0.25)
+    fleet = generate(cfg)
     geo = Geometry(fleet)
     sample = op.sample_scan(fleet, geo)
     assert 2 <= len(sample) <= op.SAMPLE_SATELLITES + 1
@@ -122,4 +123,7 @@ def test_the_opportunities_estimated_from_a_sample_cover_the_scan_and_are_not_sc
     assert sorted(scanned + list(sample)) == list(range(24))
     expected = op.expected_opportunities(fleet, sample)
     assert len(opps) <= expected <= 3 * len(opps), (expected, len(opps))
+    from eosp.fleet.generate import expected_opportunities  # the estimate before the draw, from the config alone
+
+    assert len(opps) <= expected_opportunities(cfg) <= 3 * len(opps), (expected_opportunities(cfg), len(opps))
     assert len(op.compute(fleet, geo)) == len(opps)  # the sample's arrays are the scan's own
