@@ -72,6 +72,24 @@ def test_any_nonnegative_prices_bound_the_best_schedule(prob, best_value, seed, 
     assert dual_value(prob, lam) >= best_value - 1e-9
 
 
+@pytest.mark.parametrize("share", [0.2, 1.0])
+def test_passes_without_a_provable_bound_problem_keep_the_bound_finite_and_valid(prob, best_value, share):
+    """A pass whose bound graph is not FIFO has no provable bound problem: its term becomes the sum of its tasks'
+    positive values, so the fleet keeps a finite bound, above every schedule, and not below the bound with
+    those passes' own terms."""
+    import dataclasses
+
+    rng = np.random.default_rng(0)
+    lam = heuristic_prices(prob)
+    marked = rng.uniform(size=len(prob.passes)) < share
+    passes = [dataclasses.replace(pg, bound_graph=pg.graph, bound_provable=False) if m else pg
+              for pg, m in zip(prob.passes, marked)]
+    hurt = dataclasses.replace(prob, passes=passes)
+    assert hurt.unprovable == int(marked.sum()) > 0
+    value = dual_value(hurt, lam)
+    assert np.isfinite(value) and value >= best_value - 1e-9 and value >= dual_value(prob, lam) - 1e-9
+
+
 def test_the_heuristic_start_is_below_the_cold_bound(prob):
     assert dual_value(prob, heuristic_prices(prob)) < dual_value(prob, np.zeros(len(prob.weight)))
 

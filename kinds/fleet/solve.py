@@ -135,7 +135,6 @@ def solve(fleet: Fleet, opps: Opportunities, cfg: FleetConfig | None = None, pro
             "bound_graphs": prob.bound_graphs, "bound_refused": list(coord.refused),
             "no_lagrangian_bound_because": None if coord.bound_source == "lagrangian" else (
                 f"pass solver {cfg.pass_solver} proves no pass bound" if cfg.pass_solver != "exact"
-                else f"{prob.unprovable} passes' bound graphs are not FIFO" if prob.unprovable
                 else f"refused: {coord.refused[-1]}" if coord.refused
                 else "none was lower than the conflict-free bound" if coord.rounds_done
                 else "none needed: the conflict-free bound is met" if coord.best_bound <= coord.best.value + 1e-9
