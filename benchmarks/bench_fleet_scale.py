@@ -75,6 +75,8 @@ def main() -> None:
     ap.add_argument("--hours", type=float, default=24.0)
     ap.add_argument("--time-limit", type=float, default=600.0)
     ap.add_argument("--workers", type=int, nargs="+", default=[1, 2])
+    ap.add_argument("--warm-start", default="heuristic", choices=["none", "heuristic", "learned"],
+                    help="where the prices start (the fleet solver's --warm-start)")
     ap.add_argument("--rounds", type=int, default=0, help="a fixed number of price rounds instead of the time limit "
                                                           "(deterministic: the runs must give the same schedule)")
     args = ap.parse_args()
@@ -94,6 +96,7 @@ def main() -> None:
                "--fleet.workers", str(w), "--fleet.time-limit", "0" if args.rounds else str(args.time_limit),
                "--ray.num-cpus", str(max(w, 2)),
                *(["--fleet.rounds", str(args.rounds)] if args.rounds else []),
+               "--fleet.warm-start", args.warm_start,
                "--mlflow-uri", f"sqlite:///{(args.out / 'mlflow.db').resolve()}"]
         before = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss
         t0 = time.perf_counter()
