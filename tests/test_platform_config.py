@@ -419,7 +419,7 @@ def test_job_entry_points_parse_their_arguments(entry_points, capsys):
                 assert eosp.jobs.solve_fleet.main(args) == 0
             job = run.call_args.args[0]
             assert job.fleet_dir.startswith("/shared/fleets/") and job.run_dir.startswith("/shared/runs/"), where
-            assert job.fleet.workers == 16 and job.fleet.time_limit == 600, where
+            assert job.fleet.workers == 8 and job.fleet.time_limit == 600, where
         else:
             continue
         seen.add((where, script))
@@ -564,3 +564,16 @@ def test_no_code_path_unpickles_files():
         for line, call in unsafe_loads(path.read_text(encoding="utf-8")):
             offenders.append(f"{rel}:{line}: {call}")
     assert not offenders, "unsafe loads of files: " + "; ".join(offenders)
+
+
+def test_the_fleet_jobs_workers_fit_the_clusters_cpus(entry_points):
+    """solve_fleet.py refuses more workers than the cluster has CPUs (its actors beyond them would wait for
+    ever): the RayJob asks at most the CPUs of raycluster.yaml's worker groups at their replica counts."""
+    cluster = yaml.safe_load((KUBERAY / "raycluster.yaml").read_text())
+    cpus = sum(int(g["replicas"]) * int(g["template"]["spec"]["containers"][0]["resources"]["requests"]["cpu"])
+               for g in cluster["spec"]["workerGroupSpecs"])
+    runs = [args for where, script, args in entry_points if script == "solve_fleet.py" and ":" in where]
+    assert runs
+    for args in runs:
+        workers = int(args[args.index("--fleet.workers") + 1]) if "--fleet.workers" in args else 1
+        assert workers <= cpus, (workers, cpus)
