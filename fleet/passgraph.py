@@ -42,12 +42,13 @@ from eosp.sim.slew import bang_coast_bang
 
 
 # Memory of a fleet's pass graphs (Problem.build, a worker's graphs), on top of the whole horizon's geometry
-# (eosp.fleet.opportunities.horizon_bytes).  Per opportunity, besides its arcs: its node, its lines of sight, its
-# share of the pass's objects and of the solver's state (about 550 bytes measured with 200 satellites, 766,306
-# opportunities).  Arcs: from each node at most one to each other task of its pass, int32; measured 0.42-0.44 of
-# (nodes x tasks) a pass on generated fleets of 200 and 1,000 satellites (docs/results.md), counted at 0.5 with
-# room for the bound graphs some passes need.
-NODE_BYTES = 600
+# (eosp.fleet.opportunities.horizon_bytes), fitted with margin to the solver's peak on generated days of 200
+# satellites (0.9 GB: 766,306 opportunities, 13,041 passes) and 1,000 satellites (8.7 GB: 19.5 M opportunities,
+# 62,247 passes, docs/results.md).  Per opportunity its node, lines of sight and share of the solver's state; per
+# pass its objects and arrays; arcs: from each node at most one to each other task of its pass, int32, measured
+# 0.42-0.49 of (nodes x tasks) a pass, counted at 0.5 with room for the bound graphs some passes need.
+NODE_BYTES = 150
+PASS_BYTES = 30_000
 PAIR_BYTES = 2.5  # per (node, task of its pass): 0.5 arcs x 4 bytes, x 1.25
 
 
@@ -63,7 +64,7 @@ def node_task_pairs(opps: Opportunities, n_tasks: int) -> int:
 
 def graph_bytes(opps: Opportunities, n_tasks: int) -> int:
     """Estimated memory of every pass graph of `opps` and the solver's state around them."""
-    return int(len(opps) * NODE_BYTES + node_task_pairs(opps, n_tasks) * PAIR_BYTES)
+    return int(len(opps) * NODE_BYTES + opps.n_passes * PASS_BYTES + node_task_pairs(opps, n_tasks) * PAIR_BYTES)
 
 
 def require_solve_memory(fleet: Fleet, opps: Opportunities, where: object, processes: int = 1) -> None:
