@@ -262,7 +262,7 @@ def generate(cfg: FleetGenConfig) -> Fleet:
 LAND_MASK_BYTES = 900 * 1024 ** 2  # global-land-mask's 1 km grid, loaded by the land and clusters placements
 
 
-def expected_opportunities(cfg: FleetGenConfig) -> float:
+def config_opportunities(cfg: FleetGenConfig) -> float:
     """Opportunities of a fleet the config would draw, from geometry alone, every satellite given the widest
     template's reach (1.65x the real count of generated 200- and 1,000-satellite days on land): a satellite sees a point a fraction
     (1 - cos L) / 2 of the time, L the ground angle its off-nadir limit reaches; those visits are passes through a
@@ -287,10 +287,10 @@ def expected_opportunities(cfg: FleetGenConfig) -> float:
 def estimate_bytes(cfg: FleetGenConfig) -> int:
     """Peak memory of drawing the fleet, propagating it and scanning its opportunities, estimated before any work
     (:func:`eosp.fleet.opportunities.scan_bytes`: the horizon's instants on the 5 s grid times the satellites, and
-    :func:`expected_opportunities`; the land mask when tasks are placed on land).  Once the fleet is drawn its
+    :func:`config_opportunities`; the land mask when tasks are placed on land).  Once the fleet is drawn its
     opportunities are estimated again from a sample of its satellites
     (:func:`eosp.fleet.opportunities.require_scan_memory`)."""
     from eosp.fleet.opportunities import instants, scan_bytes
 
     mask = LAND_MASK_BYTES if cfg.placement in ("land", "clusters") else 0
-    return mask + scan_bytes(cfg.satellites, instants(cfg.hours * 3600.0, 5), expected_opportunities(cfg))
+    return mask + scan_bytes(cfg.satellites, instants(cfg.hours * 3600.0, 5), config_opportunities(cfg))

@@ -123,7 +123,7 @@ def test_the_opportunities_estimated_from_a_sample_cover_the_scan_and_are_not_sc
     assert sorted(scanned + list(sample)) == list(range(24))
     expected = op.expected_opportunities(fleet, sample)
     assert len(opps) <= expected <= 3 * len(opps), (expected, len(opps))
-    from eosp.fleet.generate import expected_opportunities  # the estimate before the draw, from the config alone
+    from eosp.fleet.generate import config_opportunities  # the estimate before the draw, from the config alone
 
-    assert len(opps) <= expected_opportunities(cfg) <= 3 * len(opps), (expected_opportunities(cfg), len(opps))
+    assert len(opps) <= config_opportunities(cfg) <= 3 * len(opps), (config_opportunities(cfg), len(opps))
     assert len(op.compute(fleet, geo)) == len(opps)  # the sample's arrays are the scan's own
