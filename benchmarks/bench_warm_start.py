@@ -39,12 +39,13 @@ def run(case: str, start: str, args: argparse.Namespace) -> dict:
     prob = read_problem(case)  # outside the clock: reading and opportunities are the same for every start
     t0 = time.perf_counter()
     prob.build_s = 0.0
-    cfg = FleetConfig(time_limit=args.time_limit, warm_start=start, seed=args.seed)
+    cfg = FleetConfig(time_limit=args.time_limit, warm_start=start, seed=args.seed, price_model=args.price_model)
     sol = solve(prob.fleet, prob.opps, cfg, problem=prob, t0=t0)
     wall = time.perf_counter() - t0
     row = {"case": case_name(case), "start": start, "rounds": sol.info["rounds"], "wall_s": round(wall, 1),
            "final_wcr": round(sol.value, 4), "final_bound": round(sol.bound, 4)}
-    row["start_bound"] = round(dual_value(prob, start_prices(prob, start)), 4)  # L(start), outside the clock
+    # L(start), outside the clock
+    row["start_bound"] = round(dual_value(prob, start_prices(prob, start, args.price_model or None)), 4)
     for t in args.at:
         v, b = at(sol.history, t)
         row[f"wcr@{t:g}"], row[f"gap@{t:g}"] = round(v, 4), round(b - v, 4)
@@ -63,6 +64,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--at", type=float, nargs="+", default=[5.0, 10.0, 30.0])
     ap.add_argument("--starts", nargs="+", default=list(STARTS), choices=STARTS)
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--price-model", default="", help="price model directory of --warm-start learned (default: the "
+                    "shipped one)")
     ap.add_argument("--out", default="runs/warm-start")
     args = ap.parse_args(argv)
     out = Path(args.out)

@@ -5,10 +5,11 @@
 
 1. Data, one Ray task per fleet (an aeossp case or a fleet directory): its task-opportunity graph
    (:func:`eosp.kinds.fleet.warmstart.task_graph`) and the reference prices, those of the best Lagrangian bound
-   of ``--rounds`` price rounds of the fleet solver from a cold start, written to ``DATA/<name>/`` as Parquet
-   (tasks.parquet with the target, passes.parquet, edges.parquet) with record.json last; a rerun keeps every
-   fleet that has its record (resumable).  Dual optima are not unique: the target is one good point, and the
-   model is judged by the bound its prices give (L(lam), below), not by its distance to that point.
+   of ``--rounds`` price rounds of the fleet solver (from its default start, the ceiling prices included),
+   written to ``DATA/<name>/`` as Parquet (tasks.parquet with the target, passes.parquet, edges.parquet) with
+   record.json last; a rerun keeps every fleet that has its record (resumable).  Dual optima are not unique:
+   the target is one good point, and the model is judged by the bound its prices give (L(lam), below), not by
+   its distance to that point.
 2. Training: the network of :mod:`eosp.models.prices`, full batch per fleet, weighted squared error between the
    predicted and reference price fractions (weights: the task weights, since an error on a heavy task moves
    L most); then, with ``--dual-epochs``, descent on the dual itself: L is convex in the prices with subgradient
@@ -32,6 +33,7 @@ from eosp.config import RayConfig, ranged
 from eosp.models.prices import PriceModelConfig
 
 KIND = "price-data"
+DATA_VERSION = 2  # 1 (unversioned): the task weights' column overwrote the "weight" feature (w / mean w)
 
 
 @dataclass
@@ -80,7 +82,8 @@ def read_problem(path: str):
 
 
 def reference_prices(prob, rounds: int):
-    """The prices of the best proven Lagrangian bound in `rounds` cold price rounds, the bound and the time."""
+    """The prices of the best proven Lagrangian bound of a fleet solve of `rounds` price rounds (its default start;
+    the ceiling prices of its round 0 count too), the bound, the best value and the time."""
     import numpy as np
 
     from eosp.kinds.fleet.config import FleetConfig
@@ -89,12 +92,20 @@ def reference_prices(prob, rounds: int):
     best = {"L": np.inf, "lam": np.zeros(len(prob.weight))}
 
     class Recording(Coordinator):
-        def price_round(self, deadline):
-            lam = self.prices.lam.copy()
-            before = self.best_bound
-            total = super().price_round(deadline)
+        def _keep(self, lam, before):
             if self.bound_source == "lagrangian" and self.best_bound < before and self.best_bound < best["L"]:
                 best["L"], best["lam"] = self.best_bound, lam
+
+        def price_round(self, deadline):
+            lam, before = self.prices.lam.copy(), self.best_bound
+            total = super().price_round(deadline)
+            self._keep(lam, before)
+            return total
+
+        def ceiling_round(self, deadline):
+            before = self.best_bound
+            total = super().ceiling_round(deadline)
+            self._keep(self.ceiling_prices(), before)
             return total
 
     t0 = time.perf_counter()
@@ -122,13 +133,13 @@ def build_one(path: str, out: str, rounds: int) -> dict:
     d = Path(out)
     d.mkdir(parents=True, exist_ok=True)
     tasks = {n: g.x_task[:, i] for i, n in enumerate(TASK_FEATURES)}
-    pq.write_table(pa.table({**tasks, "weight": g.weight, "contested": g.contested, "target": target}),
+    pq.write_table(pa.table({**tasks, "task_weight": g.weight, "contested": g.contested, "target": target}),
                    d / "tasks.parquet")
     pq.write_table(pa.table({n: g.x_pass[:, i] for i, n in enumerate(PASS_FEATURES)}), d / "passes.parquet")
     pq.write_table(pa.table({"task": g.edge_task, "pass": g.edge_pass,
                              **{n: g.x_edge[:, i] for i, n in enumerate(EDGE_FEATURES)}}), d / "edges.parquet")
     W = prob.total_weight
-    rec = {"fleet": str(path), "tasks": len(g.weight), "passes": len(g.x_pass), "edges": len(g.edge_task),
+    rec = {"data_version": DATA_VERSION, "fleet": str(path), "tasks": len(g.weight), "passes": len(g.x_pass), "edges": len(g.edge_task),
            "contested": int(g.contested.sum()), "rounds": rounds,
            "bound_over_weight": L / W if np.isfinite(L) else None,
            "value_over_weight": value / W, "reference_s": round(ref_s, 2), "seconds": round(time.perf_counter() - t0, 2)}
@@ -145,11 +156,18 @@ def read_graph(d: Path):
     from eosp.models.prices import EDGE_FEATURES, PASS_FEATURES, TASK_FEATURES, TaskGraph
 
     try:
+        version = json.loads((d / "record.json").read_text()).get("data_version")
+    except (OSError, ValueError, AttributeError) as exc:
+        raise InputError(d / "record.json", f"unreadable ({type(exc).__name__}): build it again") from None
+    if version != DATA_VERSION:
+        raise InputError(d, f"training data of version {version}, this eosp reads version {DATA_VERSION}: "
+                            "build it again (another --data directory)")
+    try:
         t, p, e = (pq.read_table(d / f).to_pydict() for f in ("tasks.parquet", "passes.parquet", "edges.parquet"))
         cols = lambda tab, names: np.column_stack([np.asarray(tab[n], np.float32) for n in names])  # noqa: E731
         g = TaskGraph(cols(t, TASK_FEATURES), cols(p, PASS_FEATURES).reshape(-1, len(PASS_FEATURES)),
                       np.asarray(e["task"], np.int64), np.asarray(e["pass"], np.int64), cols(e, EDGE_FEATURES),
-                      np.asarray(t["weight"], np.float64), np.asarray(t["contested"], bool))
+                      np.asarray(t["task_weight"], np.float64), np.asarray(t["contested"], bool))
     except (OSError, KeyError, ValueError) as exc:
         raise InputError(d, f"not training data of this eosp ({type(exc).__name__}: {exc}): build it again") from None
     return g, np.asarray(t["target"], np.float64)

@@ -355,3 +355,44 @@ def test_both_graphs_of_a_pass_are_the_earliest_followers_by_their_margins():
                 checked += 1
         assert same == all(rows[u, True] == rows[u, False] for u in range(g.n_nodes))
     assert checked > 400
+
+
+@pytest.mark.parametrize("weights", [[1.0, 3.0, 1.0], [2.0, 1.0, 2.0]])
+def test_the_ceiling_prices_bound_the_brute_force_and_stay_below_conflict_free(weights):
+    """Every contested task priced at its weight: L is at least the best any schedule serves (brute force on
+    the checker's rules, bridges kept) and never above the conflict-free bound; the solver keeps the lower."""
+    from eosp.kinds.fleet.config import FleetConfig
+    from eosp.kinds.fleet.coordinator import Coordinator
+    from eosp.kinds.fleet.problem import Problem
+
+    fleet = bridge_fleet(shared=True, weights=weights)
+    prob = Problem.build(fleet, compute(fleet, Geometry(fleet)))
+    coord = Coordinator(prob, FleetConfig(rounds=1, time_limit=None))
+    free = coord.conflict_free()
+    ceiling = coord.ceiling_round(None)
+    best = brute_force(fleet)
+    lam = coord.ceiling_prices()
+    assert lam[[len(h) > 1 for h in prob.task_passes]].tolist() == fleet.tasks.weight[
+        [len(h) > 1 for h in prob.task_passes]].tolist() and lam.sum() > 0
+    assert best - 1e-9 <= ceiling <= free + 1e-9
+    assert coord.best_bound == pytest.approx(min(free, ceiling))
+
+
+def test_the_ceiling_bound_is_below_conflict_free_where_passes_are_crowded():
+    """A pass that cannot take all the tasks only it can serve: L at the ceiling prices is below the
+    conflict-free bound, and a solve's bound is never above it."""
+    from eosp.fleet.generate import FleetGenConfig, generate
+    from eosp.kinds.fleet.config import FleetConfig
+    from eosp.kinds.fleet.coordinator import Coordinator
+    from eosp.kinds.fleet.problem import Problem
+    from eosp.kinds.fleet.solve import solve
+
+    fleet = generate(FleetGenConfig(satellites=3, tasks=400, hours=3.0, placement="cities", seed=5))
+    opps = compute(fleet)
+    prob = Problem.build(fleet, opps)
+    coord = Coordinator(prob, FleetConfig(rounds=1, time_limit=None))
+    ceiling = coord.ceiling_round(None)
+    assert ceiling < coord.conflict_free() - 1e-6
+    sol = solve(fleet, opps, FleetConfig(rounds=3, time_limit=None), problem=prob)
+    W = fleet.tasks.weight.sum()
+    assert sol.check.valid and sol.value - 1e-9 <= sol.bound <= ceiling / W + 1e-9

@@ -55,3 +55,33 @@ def test_data_training_mlflow_resume_and_refusal(tmp_path):
     r = job(*common, "--out", tmp_path / "model2", "--epochs", 1, cwd=tmp_path)
     assert r.returncode == 0, r.stderr[-2000:]
     assert "resuming: 2 of 2 fleets' data complete" in r.stdout
+
+
+def test_the_training_data_reads_back_as_the_features_the_solver_computes(tmp_path):
+    """What the network learns from is what it is given at solve time: every feature column of the data read
+    back equals :func:`task_graph` of the fleet (a column of task weights once overwrote the weight feature),
+    and data of another version is refused in one line."""
+    import json
+
+    import numpy as np
+
+    sys.path.insert(0, str(ROOT / "jobs"))
+    from train_prices import build_one, read_graph, read_problem
+
+    from eosp.errors import InputError
+    from eosp.kinds.fleet.warmstart import task_graph
+
+    f = generate(FleetGenConfig(satellites=4, tasks=300, hours=3.0, window_min_h=1.0, window_max_h=3.0,
+                                placement="cities", seed=3))
+    write_fleet(f, compute(f), tmp_path / "fleet")
+    rec = build_one(str(tmp_path / "fleet"), str(tmp_path / "data" / "a"), rounds=1)
+    g, target = read_graph(tmp_path / "data" / "a")
+    want = task_graph(read_problem(str(tmp_path / "fleet")))
+    assert want.weight.mean() != pytest.approx(1.0)  # the weight feature differs from the raw weights here
+    for name in ("x_task", "x_pass", "x_edge", "edge_task", "edge_pass", "weight", "contested"):
+        np.testing.assert_array_equal(getattr(g, name), getattr(want, name), err_msg=name)
+    assert ((target >= 0) & (target <= 1)).all() and rec["tasks"] == 300
+    record = tmp_path / "data" / "a" / "record.json"
+    record.write_text(json.dumps({k: v for k, v in json.loads(record.read_text()).items() if k != "data_version"}))
+    with pytest.raises(InputError, match="build it again"):
+        read_graph(tmp_path / "data" / "a")
