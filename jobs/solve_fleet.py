@@ -326,7 +326,7 @@ def run(job: SolveFleetJob) -> dict:
     local_actors = job.fleet.workers if job.fleet.workers > 1 and not job.ray.address else 0
     if local_actors:  # more workers than CPUs: refused before anything is written
         _require_cpus(job.fleet.workers, "")
-    require_solvable(fleet, opps, f"--fleet-dir {job.fleet_dir}", processes=1 + local_actors)
+    geo = require_solvable(fleet, opps, f"--fleet-dir {job.fleet_dir}", processes=1 + local_actors)
     if job.fleet.workers > 1:
         init_ray(job.ray.address, max(job.ray.num_cpus, job.fleet.workers))
         if job.ray.address:  # a cluster's CPUs are known once connected
@@ -335,7 +335,7 @@ def run(job: SolveFleetJob) -> dict:
     make_run_dir(run_dir, replace=False, kind=RUN_KIND)
     (run_dir / META).write_text(json.dumps({"fingerprint": fp, "case_id": fleet.case_id,
                                             "fleet_dir": str(Path(job.fleet_dir).resolve())}, indent=1))
-    prob = Problem.build(fleet, opps)
+    prob = Problem.build(fleet, opps, geo)  # the Geometry the feasibility check built (not built twice)
     t_build = time.perf_counter() - t0
     peak["graphs"] = peak_rss_gb()
     pool = None
@@ -378,6 +378,7 @@ def run(job: SolveFleetJob) -> dict:
                   "workers": job.fleet.workers, "nodes": 0 if pool is None else len(set(pool.nodes)),
                   "resumed_from_round": 0 if resume is None else resume.rounds_done,
                   "price_round_s": sol.info["price_round_s"], "interrupted": sol.info["interrupted"],
+                  "check_reserve_s": sol.info["check_reserve_s"], "final_check_s": sol.info["final_check_s"],
                   "driver_peak_gb": {k: None if v is None else round(v, 3) for k, v in peak.items()},
                   "graph_mb": round(sum(pg.nbytes for pg in prob.passes) / 1e6, 1),
                   "read_s": round(t_read - t0, 2),  # the solve's history counts from the read (the graphs in it)

@@ -6,6 +6,8 @@ served at most once, and each satellite's battery runs from one pass to the next
 windows over runs of passes, :mod:`eosp.fleet.energy`).  Relaxing both with prices separates the passes; a
 price round solves every pass under the prices on a pass pool (:mod:`eosp.kinds.fleet.pool`), proves the
 Lagrangian bound when every pass term is an optimum or a bound the exact solver proved, and moves the prices.
+Before the first round the bound is also taken at the ceiling prices (every contested task at its weight,
+:meth:`Coordinator.ceiling_round`), never above the conflict-free bound and cheap to compute.
 
 Schedules come from the same pass solver with true weights:
 

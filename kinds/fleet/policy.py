@@ -34,7 +34,7 @@ def prepared_of(data, t0: float):
     from eosp.envs.constellation_data import prepare_fleet
     from eosp.fleet.geometry import Geometry
 
-    pf = prepare_fleet(data.fleet, data.opps, geo=Geometry(data.fleet))
+    pf = prepare_fleet(data.fleet, data.opps, geo=data.geo or Geometry(data.fleet))  # the kind's checks built one
     return pf, time.perf_counter() - t0
 
 
