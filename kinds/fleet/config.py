@@ -51,8 +51,10 @@ class FleetConfig(UtilityConfig):
     warm_start: str = choice("heuristic", "none", "heuristic", "learned")
     """Where the task prices start: none (0), heuristic (weight x (1 - 1/satellites that can serve the task)) or
     learned (the shipped price network over the task-opportunity graph, eosp.kinds.fleet.warmstart).  The
-    default is the best by measurement (docs/results.md): at 200 satellites heuristic's gap at 60 s beats the cold
-    start's at 600 s; on the aeossp cases at 10 s its WCR is never 0.3% below the cold start's."""
+    default is the best by measurement (docs/results.md): at 200 satellites heuristic's WCR and gap at 60 s beat
+    the other starts' at 600 s; on the aeossp cases at 10 s learned proves the lowest gap, heuristic the best WCR
+    on average.  Round 0 also bounds with the ceiling prices (every contested task at its weight) whatever the
+    start."""
     price_model: str = ""
     """Directory of the price network used by --warm-start learned (prices.pt, prices.json from
     jobs/train_prices.py); empty: the shipped one."""

@@ -390,8 +390,8 @@ class Coordinator:
             self.keep(first)
         self.first_s = time.perf_counter() - self.t0
         if not self.interrupted:
-            if deadline is not None:  # what is left after the rounds: the final check of a schedule like this one
-                self.check_s = self.check_estimate(first)
+            if deadline is not None and time.perf_counter() < deadline:  # past it: no round, nothing to reserve
+                self.check_s = self.check_estimate(first)  # kept for the final check of a schedule like this one
                 deadline -= self.check_s
             try:
                 self._rounds(deadline, rng)
