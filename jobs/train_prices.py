@@ -139,8 +139,8 @@ def build_one(path: str, out: str, rounds: int) -> dict:
     pq.write_table(pa.table({"task": g.edge_task, "pass": g.edge_pass,
                              **{n: g.x_edge[:, i] for i, n in enumerate(EDGE_FEATURES)}}), d / "edges.parquet")
     W = prob.total_weight
-    rec = {"data_version": DATA_VERSION, "fleet": str(path), "tasks": len(g.weight), "passes": len(g.x_pass), "edges": len(g.edge_task),
-           "contested": int(g.contested.sum()), "rounds": rounds,
+    rec = {"data_version": DATA_VERSION, "fleet": str(path), "tasks": len(g.weight), "passes": len(g.x_pass),
+           "edges": len(g.edge_task), "contested": int(g.contested.sum()), "rounds": rounds,
            "bound_over_weight": L / W if np.isfinite(L) else None,
            "value_over_weight": value / W, "reference_s": round(ref_s, 2), "seconds": round(time.perf_counter() - t0, 2)}
     (d / "record.json").write_text(json.dumps(rec, indent=1))
