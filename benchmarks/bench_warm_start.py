@@ -1,10 +1,10 @@
 """Where the prices start, at equal wall time: the fleet solver with --warm-start none, heuristic and learned.
 
 For each case (aeossp case or fleet directory) and start: one solve with ``--time-limit T`` counted after the
-pass graphs are built, the same for every start (the features and the network's prediction are inside it); from the solve's history
-(value and bound after every event) the WCR and the gap (bound - value, as fractions of the total weight) at each
-checkpoint second; and L(start), the bound the start's prices give (one price round, outside the clock).  One process, one
-worker: runs are sequential.
+pass graphs are built, the same for every start (the features and the network's prediction are inside it);
+from the solve's history (value and bound after every event) the WCR and the gap (bound - value, as fractions of
+the total weight) at each checkpoint second; and L(start), the bound the start's prices give (one price round,
+outside the clock).  One process, one worker: runs are sequential.
 
     python benchmarks/bench_warm_start.py CASE ... --time-limit 30 --at 5 10 30 --out runs/warm-start
 """

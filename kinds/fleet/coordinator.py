@@ -231,8 +231,8 @@ class Coordinator:
         weight plus each pass's best schedule of the tasks only it can serve: never above the conflict-free
         bound, below it where passes cannot take all their own tasks, and cheap (most utilities are 0).  Where
         rounds are expensive it is the best bound for a long time: on a generated 200-satellite day (seed 7) L is
-        0.6680 of the weight here against 0.8816 for the heuristic start and 0.6717 conflict-free, which 26 price
-        rounds from the heuristic start never got below."""
+        0.6680 of the weight here against 0.8816 for the heuristic start and 0.6717 conflict-free, which 63 price
+        rounds from any start never got below."""
         got = self._dual_round(self.ceiling_prices(), deadline)
         if got is None:
             return None
