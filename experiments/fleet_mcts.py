@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import argparse
 import csv
+import json
 import time
 from pathlib import Path
 
@@ -43,8 +44,9 @@ def main() -> None:
     env_cfg = FleetEnvConfig(**{**env_cfg.__dict__, "fleets": ()})
     paths = []
     for f in a.fleets:
-        paths += [r["fleet"] for r in read_demo_set(f)] if (Path(f) / "manifest.json").exists() else \
-            [str(x) for x in expand_fleets([f])]
+        manifest = Path(f) / "manifest.json"
+        is_demo_set = manifest.exists() and "demos" in json.loads(manifest.read_text())
+        paths += [r["fleet"] for r in read_demo_set(f)] if is_demo_set else [str(x) for x in expand_fleets([f])]
     rows = []
     for path in paths:
         pf = load_fleet(path)

@@ -170,7 +170,7 @@ def run(cfg: RunConfig, tc: TuneConfig) -> dict:
         shutil.copytree(d, out_best)
         best_cfg.model.value_scale = json.loads((Path(d) / "trial.json").read_text())["value_scale"]
     (sweep_dir / "best_config.json").write_text(json.dumps(to_dict(best_cfg), indent=1))
-    summary = {"best_score": float(best.metrics.get(metric, float("nan"))), "hidden_dim": best_cfg.model.hidden_dim,
+    summary = {"best_score": best_of(best, metric)[0], "hidden_dim": best_cfg.model.hidden_dim,
                "n_layers": best_cfg.model.n_layers, "lr": best_cfg.train.lr, "trials": len(results)}
     client.log_metric(parent_id, "best_score", summary["best_score"])
     for k in ("hidden_dim", "n_layers", "lr"):
@@ -182,6 +182,16 @@ def run(cfg: RunConfig, tc: TuneConfig) -> dict:
           f"{sweep_dir / 'best_config.json'}, checkpoint {out_best}", flush=True)
     ray.shutdown()
     return summary
+
+
+def best_of(result, metric: str) -> tuple[float, int]:
+    """A trial's best reported `metric` and the iteration it came at: the sweep picks trials and checkpoints by it
+    (``scope="all"``), so it is what to print; a trial's last value can be lower."""
+    df = result.metrics_dataframe
+    if df is None or metric not in df or df[metric].isna().all():
+        return float(result.metrics.get(metric, float("nan"))), int(result.metrics.get("iteration", 0) or 0)
+    i = df[metric].idxmax()
+    return float(df[metric][i]), int(df["iteration"][i]) if "iteration" in df else -1
 
 
 SWEEP_KIND = "sweep"  # the mark (eosp.ownership) of a sweep directory: rerunning the sweep resumes in it

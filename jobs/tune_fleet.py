@@ -75,7 +75,7 @@ def run(cfg: FleetPretrainConfig, tc: TuneConfig) -> dict:
 
     from eosp.config import default_mlflow_uri
     from eosp.jobs.ray_init import init_ray
-    from eosp.jobs.tune import sweep
+    from eosp.jobs.tune import best_of, sweep
 
     init_ray(cfg.ray.address, cfg.ray.num_cpus)
     im = cfg.imitation
@@ -100,9 +100,10 @@ def run(cfg: FleetPretrainConfig, tc: TuneConfig) -> dict:
     (sweep_dir / "best_config.json").write_text(json.dumps(to_dict(best_cfg), indent=1))
     rows = [{"hidden_dim": r.config["hidden_dim"], "n_layers": r.config["n_layers"], "lr": r.config["lr"],
              "epochs": r.metrics.get("iteration"), metric: r.metrics.get(metric),
-             "val_policy_mean": r.metrics.get("val_policy_mean")} for r in results]
+             "val_policy_mean": r.metrics.get("val_policy_mean"), "best": best_of(r, metric)[0],
+             "best_epoch": best_of(r, metric)[1]} for r in results]
     (sweep_dir / "trials.json").write_text(json.dumps(rows, indent=1))
-    summary = {"best_score": float(best.metrics.get(metric, float("nan"))), "hidden_dim": best_cfg.model.hidden_dim,
+    summary = {"best_score": best_of(best, metric)[0], "hidden_dim": best_cfg.model.hidden_dim,
                "n_layers": best_cfg.model.n_layers, "lr": best_cfg.imitation.lr, "trials": rows}
     client.log_metric(parent_id, "best_score", summary["best_score"])
     for k in ("hidden_dim", "n_layers", "lr"):
@@ -112,7 +113,8 @@ def run(cfg: FleetPretrainConfig, tc: TuneConfig) -> dict:
     client.set_terminated(parent_id)
     for r in rows:
         print(f"[tune_fleet] hidden_dim {r['hidden_dim']}, n_layers {r['n_layers']}, lr {r['lr']}: {metric} "
-              f"{r[metric]:.4f} after {r['epochs']} epochs (validation WCR {r['val_policy_mean']:.4f})", flush=True)
+              f"{r[metric]:.4f} after {r['epochs']} epochs (validation WCR {r['val_policy_mean']:.4f}), best "
+              f"{r['best']:.4f} at epoch {r['best_epoch']}", flush=True)
     print(f"[tune_fleet] {len(rows)} trials; best {metric} = {summary['best_score']:.6g} with hidden_dim "
           f"{summary['hidden_dim']}, n_layers {summary['n_layers']}, lr {summary['lr']}; config "
           f"{sweep_dir / 'best_config.json'}, checkpoint {out_best}", flush=True)

@@ -40,3 +40,20 @@ def test_two_trial_sweep_in_mlflow(tmp_path):
     best = json.loads((sweep / "best_config.json").read_text())
     assert best["model"]["hidden_dim"] in (8, 16)
     assert (sweep / "best" / "agent.pt").exists()
+
+
+def test_a_trials_best_is_its_best_iteration_not_its_last():
+    """The sweep picks trials and checkpoints by their best iteration (scope "all"): what it prints and logs as
+    the best score is that iteration's value, not the trial's last one (a fleet sweep printed 0.9648, the last
+    epoch, for a trial chosen for its 0.9714)."""
+    from types import SimpleNamespace
+
+    import pandas as pd
+
+    from eosp.jobs.tune import best_of
+
+    df = pd.DataFrame({"iteration": [1, 2, 3, 4], "val_selection_score": [0.96, 0.9714, 0.95, 0.9648]})
+    result = SimpleNamespace(metrics_dataframe=df, metrics={"val_selection_score": 0.9648, "iteration": 4})
+    assert best_of(result, "val_selection_score") == (0.9714, 2)
+    empty = SimpleNamespace(metrics_dataframe=None, metrics={"val_selection_score": 0.5, "iteration": 1})
+    assert best_of(empty, "val_selection_score") == (0.5, 1)
