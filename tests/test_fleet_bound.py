@@ -224,14 +224,16 @@ def test_the_bound_holds_for_any_prices_on_bridge_fleets(duration, gap, east, no
         assert total >= best - 1e-9, (lam, total, best)
 
 
-def test_the_fleet_solver_bounds_its_own_schedules_on_a_bridge_fleet():
+@pytest.mark.parametrize("price_step", ["uniform", "weighted"])
+def test_the_fleet_solver_bounds_its_own_schedules_on_a_bridge_fleet(price_step):
     """The fleet solver on a fleet where B is a bridge and contested: its Lagrangian bound, with the bridge
-    pass's bound problem, stays above the schedule it found and above the brute force."""
+    pass's bound problem, stays above the schedule it found and above the brute force, whichever the step."""
     from eosp.kinds.fleet.config import FleetConfig
     from eosp.kinds.fleet.solve import solve
 
     fleet = bridge_fleet(shared=True, weights=[1.0, 3.0, 1.0])
-    sol = solve(fleet, compute(fleet, Geometry(fleet)), FleetConfig(rounds=8, time_limit=None))
+    sol = solve(fleet, compute(fleet, Geometry(fleet)), FleetConfig(rounds=8, time_limit=None,
+                                                                    price_step=price_step))
     assert sol.info["bound_graphs"] >= 1 and sol.info["bound_refused"] == []
     best = brute_force(fleet) / fleet.tasks.weight.sum()
     assert sol.bound >= best - 1e-9 >= sol.value - 2e-9
@@ -396,3 +398,26 @@ def test_the_ceiling_bound_is_below_conflict_free_where_passes_are_crowded():
     sol = solve(fleet, opps, FleetConfig(rounds=3, time_limit=None), problem=prob)
     W = fleet.tasks.weight.sum()
     assert sol.check.valid and sol.value - 1e-9 <= sol.bound <= ceiling / W + 1e-9
+
+
+@settings(max_examples=30, deadline=None)
+@given(seed=st.integers(0, 10_000), share=st.floats(0.1, 1.0))
+def test_the_weighted_step_moves_each_price_in_proportion_to_its_weight(seed, share):
+    """Polyak's step in the metric of the weights: from prices proportional to the weights, the tasks that no
+    pass serves all lose the same share of their price, those served twice gain the same share, and the step
+    closes the same gap as the uniform one (sum of scale * g * move = target)."""
+    from eosp.kinds.fleet.prices import Prices
+
+    rng = np.random.default_rng(seed)
+    w = rng.integers(1, 10, 40).astype(np.float64)
+    served = rng.integers(0, 3, 40).astype(np.float64)
+    prices = Prices(share * w)
+    prices.step_towards(served, dual=10.0, best=9.0, scale=w)
+    ratio = prices.lam / (share * w)
+    for k in (0, 2):
+        moved = ratio[served == k]
+        if len(moved):
+            assert np.allclose(moved, moved[0])
+    assert np.allclose(ratio[served == 1], 1.0)
+    g = 1.0 - served
+    assert float(g @ (share * w - prices.lam)) == pytest.approx(1.0) or (prices.lam == 0).any()

@@ -216,7 +216,8 @@ class Coordinator:
             return None
         total, proven, count, pass_wh, self.round_paths = got
         self._bound_from(total, proven, f"round {self.rounds_done + 1}")
-        self.prices.step_towards(count, total, self.best.value, pass_wh)
+        scale = self.prob.weight if self.cfg.price_step == "weighted" else None
+        self.prices.step_towards(count, total, self.best.value, pass_wh, scale)
         self.spend = self.cfg.energy_price * self.prices.pass_price()
         return total
 

@@ -23,8 +23,9 @@ p (repeats allowed, each credited once; E_p(x) the sum of e_o over all its obser
 A price round gives the pass terms (:meth:`Prices.dual`); the prices then take one projected subgradient step
 by Polyak's rule towards the best schedule known (:meth:`Prices.step_towards`): a task's component is 1 - (the
 passes serving it), a window's ``(R_w - energy of the round's paths in w) / scale_w`` (each window's inequality
-measured in typical observations of its satellite), each part with its own Polyak norm; the
-step factor is halved when the bound stalls for three rounds (:meth:`Prices.stalled`).
+measured in typical observations of its satellite), each part with its own Polyak norm, the task prices' in
+the metric of the task weights by default (``--price-step weighted``: each price moves in proportion to its
+weight); the step factor is halved when the bound stalls for three rounds (:meth:`Prices.stalled`).
 """
 
 from __future__ import annotations
@@ -72,22 +73,28 @@ class Prices:
             total += t
         return total
 
-    def step_towards(self, served: np.ndarray, dual: float, best: float, pass_wh: np.ndarray | None = None) -> None:
+    def step_towards(self, served: np.ndarray, dual: float, best: float, pass_wh: np.ndarray | None = None,
+                     scale: np.ndarray | None = None) -> None:
         """Move the prices by a subgradient step: `served[i]` is how many passes of the round serve task i, and
         `pass_wh[p]` the energy (sum of e_o) of pass p's path of the round (None: no window); the step Polyak's
         towards the best value known `best` from the dual value `dual`, taken by the task prices and the
         multipliers each with its own norm (the multipliers :data:`ENERGY_SHARE` of theirs): one norm over both
         let thousands of windows shrink the task prices' steps until the bound stalled above the conflict-free
         one (test_hard); any nonnegative prices give a valid bound, so the step rule is a matter of speed only;
-        a price or multiplier at 0 cannot go lower."""
+        a price or multiplier at 0 cannot go lower.  With `scale` (a positive number per task: ``--price-step
+        weighted`` gives the task weights) the task prices' step is Polyak's in that metric: price i moves by
+        ``target * scale[i] * g[i] / sum(scale * g^2)``, so a task's price moves in proportion to its weight (from
+        prices proportional to the weights, as the heuristic start and the ceiling prices are, the uniform step moves
+        a light and a heavy task by the same amount)."""
         g = 1.0 - served
         g[(self.lam <= 0) & (g > 0)] = 0.0
         win = self.windows
         h = (win.rhs_wh - win.used(pass_wh)) / win.scale_wh if pass_wh is not None else np.zeros(len(win))
         h[(self.mu <= 0) & (h > 0)] = 0.0
         target = self.factor * max(dual - best, 1e-6 * dual)
-        if float(g @ g) > 0:
-            self.lam = np.maximum(0.0, self.lam - target / float(g @ g) * g)
+        d = g if scale is None else scale * g
+        if float(g @ d) > 0:
+            self.lam = np.maximum(0.0, self.lam - target / float(g @ d) * d)
         if float(h @ h) > 0:
             self.mu = np.maximum(0.0, self.mu - ENERGY_SHARE * target / float(h @ h) * h)
 
