@@ -36,18 +36,18 @@ import time
 from pathlib import Path
 
 # the fleet solver at 120 s (docs/results.md, "Fleets: the astro-reason aeossp_standard benchmark"): the better WCR
-# and the lower bound (rounded up) of its two 120 s tables (2026-12-03, prices from 0; 2026-12-05, the anytime curves
-# with the ceiling prices): both bounds are valid, so is the lower
+# and the lowest bound (rounded up) of its 120 s tables (2026-12-03, prices from 0; 2026-12-05, the anytime curves
+# with the ceiling prices, with the uniform and with the weighted price step): every one is valid, so is the lowest
 FLEET_120S = {
-    "test/case_0001": (0.7102, 0.7132), "test/case_0002": (0.7860, 0.7906), "test/case_0003": (0.7942, 0.7971),
-    "test/case_0004": (0.7446, 0.7475), "test/case_0005": (0.7957, 0.7992), "test_easy/case_0001": (0.8812, 0.8908),
-    "test_easy/case_0002": (0.8463, 0.8594), "test_easy/case_0003": (0.8221, 0.8277),
-    "test_easy/case_0004": (0.8333, 0.8393), "test_easy/case_0005": (0.8025, 0.8087),
-    "test_hard/case_0001": (0.8456, 0.8630), "test_hard/case_0002": (0.8232, 0.8399),
-    "test_hard/case_0003": (0.8745, 0.8909), "test_hard/case_0004": (0.8774, 0.8960),
-    "test_hard/case_0005": (0.8425, 0.8660), "test_horizon_2022/case_0001": (0.7272, 0.7285),
-    "test_horizon_2022/case_0002": (0.7704, 0.7762), "test_horizon_2022/case_0003": (0.7842, 0.7856),
-    "test_horizon_2022/case_0004": (0.7850, 0.7886), "test_horizon_2022/case_0005": (0.8033, 0.8077),
+    "test/case_0001": (0.7109, 0.7128), "test/case_0002": (0.7871, 0.7900), "test/case_0003": (0.7944, 0.7955),
+    "test/case_0004": (0.7446, 0.7466), "test/case_0005": (0.7962, 0.7986), "test_easy/case_0001": (0.8812, 0.8908),
+    "test_easy/case_0002": (0.8463, 0.8536), "test_easy/case_0003": (0.8221, 0.8277),
+    "test_easy/case_0004": (0.8336, 0.8368), "test_easy/case_0005": (0.8028, 0.8081),
+    "test_hard/case_0001": (0.8457, 0.8630), "test_hard/case_0002": (0.8232, 0.8397),
+    "test_hard/case_0003": (0.8752, 0.8882), "test_hard/case_0004": (0.8774, 0.8908),
+    "test_hard/case_0005": (0.8425, 0.8647), "test_horizon_2022/case_0001": (0.7272, 0.7285),
+    "test_horizon_2022/case_0002": (0.7704, 0.7755), "test_horizon_2022/case_0003": (0.7842, 0.7854),
+    "test_horizon_2022/case_0004": (0.7851, 0.7878), "test_horizon_2022/case_0005": (0.8033, 0.8077),
 }
 
 
