@@ -6,7 +6,8 @@ decisions, one column per fleet, and how often the policy chose to skip.
 
 A feature far outside the training fleets' range (a task seen by many more other passes, more passes left) is
 where a network's scores stop meaning what they meant in training (docs/results.md, "The learned fleet
-scheduler": the 200-satellite day).
+scheduler": the 200-satellite day).  With ``--clip FEATURE=MAX ...`` each fleet is then decoded to the end with
+those features capped in every observation the network reads, and the raw WCR printed beside the plain decode's.
 """
 
 from __future__ import annotations
@@ -19,6 +20,8 @@ def main() -> None:
     p.add_argument("fleets", nargs="+", help="fleet directories")
     p.add_argument("--decisions", type=int, default=3000, help="decisions of each decode to look at")
     p.add_argument("--checkpoint", default="", help="a fleet policy checkpoint; empty: the shipped one")
+    p.add_argument("--clip", nargs="*", default=[], metavar="FEATURE=MAX",
+                   help="also decode each fleet with these node features capped (in feature units)")
     a = p.parse_args()
     import numpy as np
     import torch
@@ -55,6 +58,30 @@ def main() -> None:
         cells = [f"{np.median(x[:, j]):8.2f}{np.percentile(x[:, j], 99):8.2f}{x[:, j].max():8.2f}    "
                  for x in seen.values()]
         print(name.ljust(30) + "".join(cells))
+    if a.clip:
+        from eosp.solvers.fleet_policy import decode
+
+        caps = {}
+        for item in a.clip:
+            name, _, value = item.partition("=")
+            if name not in FLEET_NODE_FEATURES:
+                raise SystemExit(f"error: --clip {item}: unknown feature (known: {', '.join(FLEET_NODE_FEATURES)})")
+            caps[FLEET_NODE_FEATURES.index(name)] = float(value)
+
+        def capped(obss: list[dict]) -> tuple:
+            out = []
+            for o in obss:
+                x = o["x"].copy()
+                for j, v in caps.items():
+                    np.minimum(x[:, j], v, out=x[:, j])
+                out.append({**o, "x": x})
+            return evaluate(out)
+
+        for path in a.fleets:
+            prepared = load_fleet(path)
+            plain, clipped = decode(evaluate, prepared, env_cfg), decode(capped, prepared, env_cfg)
+            print(f"{path}: raw decode WCR {plain.value:.4f} ({plain.decisions} decisions), with {' '.join(a.clip)} "
+                  f"{clipped.value:.4f} ({clipped.decisions} decisions)", flush=True)
 
 
 if __name__ == "__main__":

@@ -211,7 +211,8 @@ def test_manifests_kinds_and_api_fields():
                                                                 for v in g["rayStartParams"].values()]:
                 assert isinstance(value, str)  # map[string]string
     assert kinds["RayCluster"] == ["eosp"]
-    assert set(kinds["RayJob"]) == {"eosp-train", "eosp-tune", "eosp-evaluate", "eosp-build-shards", "eosp-solve-fleet"}
+    assert set(kinds["RayJob"]) == {"eosp-train", "eosp-tune", "eosp-evaluate", "eosp-build-shards", "eosp-solve-fleet",
+                                    "eosp-solve-fleet-1000"}
     assert set(kinds["PersistentVolumeClaim"]) == {"eosp-shared", "eosp-mlflow"}
     assert kinds["Deployment"] == ["mlflow"] and kinds["Service"] == ["mlflow"]
 
@@ -351,7 +352,8 @@ def entry_points(tmp_path_factory) -> list[tuple[str, str, list[str]]]:
 
 def test_rayjob_entry_points_survive_the_submitter_shell(entry_points):
     jobs = {where.split(":")[1] for where, _, _ in entry_points if ":" in where}
-    assert jobs == {"eosp-train", "eosp-tune", "eosp-evaluate", "eosp-build-shards", "eosp-solve-fleet"}
+    assert jobs == {"eosp-train", "eosp-tune", "eosp-evaluate", "eosp-build-shards", "eosp-solve-fleet",
+                    "eosp-solve-fleet-1000"}
     by_job = {}
     for where, script, args in entry_points:
         by_job.setdefault(where, []).append((script, args))
@@ -419,7 +421,9 @@ def test_job_entry_points_parse_their_arguments(entry_points, capsys):
                 assert eosp.jobs.solve_fleet.main(args) == 0
             job = run.call_args.args[0]
             assert job.fleet_dir.startswith("/shared/fleets/") and job.run_dir.startswith("/shared/runs/"), where
-            assert job.fleet.workers == 8 and job.fleet.time_limit == 600, where
+            # the 200-satellite day for 10 minutes, the 1,000-satellite one for 30
+            limit = 1800 if "1000" in where else 600
+            assert job.fleet.workers == 8 and job.fleet.time_limit == limit, where
         else:
             continue
         seen.add((where, script))
