@@ -48,7 +48,8 @@ def run_case(case: Path, split: str, args: argparse.Namespace) -> dict:
     prob = Problem.build(fleet, opps)
     t_build = time.perf_counter() - t0
     cfg = FleetConfig(pass_solver=args.pass_solver, time_limit=args.time_limit, seed=args.seed,
-                      warm_start=args.warm_start, price_step=args.price_step)
+                      warm_start=args.warm_start, price_step=args.price_step,
+                      energy_bound=args.energy_bound)
     sol = solve(fleet, opps, cfg, problem=prob, t0=t_read)
     solve_s = time.perf_counter() - t_read
     wall = time.perf_counter() - t0
@@ -124,6 +125,7 @@ def main() -> None:
                    help="where the prices start (the fleet solver's --warm-start)")
     p.add_argument("--price-step", default="weighted", choices=["uniform", "weighted"],
                    help="the fleet solver's --price-step")
+    p.add_argument("--energy-bound", action="store_true", help="the fleet solver's --energy-bound")
     p.add_argument("--at", type=float, nargs="*", default=[5.0, 10.0, 30.0, 120.0],
                    help="seconds after reading at which the anytime curve is sampled")
     p.add_argument("--out", default="runs/bench-fleet")
