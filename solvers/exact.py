@@ -28,6 +28,11 @@ Steps:
    multipliers of its open acquisitions, which it cannot use again) cannot beat
    the incumbent.  When the sweep ends, the incumbent is optimal.
 
+An instance of at most :data:`SMALL_INSTANCE` acquisitions (most passes of a fleet under its prices) skips
+steps 1-2: the sweep alone, with nothing to cut against, is cheaper there than the incumbent and the bound it
+would use (on a generated 200-satellite day they took three quarters of the pass solves' time); should it not
+finish, the steps run as for any instance.
+
 With a time (or label memory) limit the sweep stops and the result is the best
 schedule known, with ``info["bound"]`` = min(Lagrangian bound, max(incumbent,
 best bound of a label not swept yet)), ``info["gap"]`` = (bound - value) / bound
@@ -67,6 +72,9 @@ class ExactConfig(SolverConfig):
     NAME = "exact"
 
 
+SMALL_INSTANCE = 12  # acquisitions: up to this many, the label sweep runs alone first
+
+
 def solve(inst: Instance, cfg: ExactConfig | None = None) -> Solution:
     cfg = cfg or ExactConfig()
     cfg.validate()
@@ -79,6 +87,14 @@ def solve(inst: Instance, cfg: ExactConfig | None = None) -> Solution:
 
     def left() -> float | None:
         return None if time_limit is None else max(0.0, time_limit - (time.perf_counter() - t0))
+
+    if inst.n_acq <= SMALL_INSTANCE:
+        res = label_search(g, w, beam=0, time_limit=left(), max_labels=max_labels, on_limit="stop")
+        if res.complete:
+            INCUMBENT.offer(res.nodes, res.value)
+            info = {"solver": "exact", "start": "label_search", "start_value": float(res.value),
+                    "labels": res.labels, "pruned": res.pruned, "dominated": res.dominated}
+            return _done(res.nodes, res.value, res.value, "optimal", info, t0)
 
     starts = [greedy(inst, GreedyConfig(mode=mode))]
     INCUMBENT.offer(starts[0].nodes, starts[0].value)  # what Ctrl-C writes while RAMP runs

@@ -410,3 +410,20 @@ def test_the_demo_comparison_of_the_shipped_model_is_bounded_by_the_proven_optim
         assert np.all(c.values[s] <= c.values["exact"] * (1 + 1e-9))
     assert c.ratio("exact") == pytest.approx(np.mean(c.values["policy"] / c.values["exact"]))
     assert "conflict" in reading([c]) and "policy/optimum" in c.line()
+
+
+@pytest.mark.parametrize("family,n,seed", TINY)
+def test_the_small_instance_sweep_and_the_full_exact_path_agree_with_brute_force(family, n, seed, monkeypatch):
+    """Up to SMALL_INSTANCE acquisitions the exact solver runs the label sweep alone; with the shortcut off it
+    runs greedy, RAMP, the Lagrangian bound and the cut sweep: both reach the brute-force optimum."""
+    import eosp.solvers.exact as exact
+
+    inst = tiny_instance(family, n, seed)
+    assert inst.n_acq <= exact.SMALL_INSTANCE
+    best = brute_force(inst, "utility")
+    short = run_solver("exact", inst, mode="utility")
+    assert short.info["start"] == "label_search" and short.value == pytest.approx(best, rel=1e-12)
+    monkeypatch.setattr(exact, "SMALL_INSTANCE", 0)
+    full = run_solver("exact", inst, mode="utility")
+    assert full.info["start"] in ("greedy", "ramp") and full.value == pytest.approx(best, rel=1e-12)
+    assert_valid(inst, short, "utility")
