@@ -37,17 +37,18 @@ from pathlib import Path
 
 # the fleet solver at 120 s (docs/results.md, "Fleets: the astro-reason aeossp_standard benchmark"): the better WCR
 # and the lowest bound (rounded up) of its 120 s tables (2026-12-03, prices from 0; 2026-12-05, the anytime curves
-# with the ceiling prices, with the uniform and with the weighted price step): every one is valid, so is the lowest
+# with the ceiling prices, with the uniform and the weighted price step, with the small-pass sweep): every one is
+# valid, so is the lowest
 FLEET_120S = {
-    "test/case_0001": (0.7109, 0.7128), "test/case_0002": (0.7871, 0.7900), "test/case_0003": (0.7944, 0.7955),
-    "test/case_0004": (0.7446, 0.7466), "test/case_0005": (0.7962, 0.7986), "test_easy/case_0001": (0.8812, 0.8908),
-    "test_easy/case_0002": (0.8463, 0.8536), "test_easy/case_0003": (0.8221, 0.8277),
-    "test_easy/case_0004": (0.8336, 0.8368), "test_easy/case_0005": (0.8028, 0.8081),
-    "test_hard/case_0001": (0.8457, 0.8630), "test_hard/case_0002": (0.8232, 0.8397),
-    "test_hard/case_0003": (0.8752, 0.8882), "test_hard/case_0004": (0.8774, 0.8908),
-    "test_hard/case_0005": (0.8425, 0.8647), "test_horizon_2022/case_0001": (0.7272, 0.7285),
-    "test_horizon_2022/case_0002": (0.7704, 0.7755), "test_horizon_2022/case_0003": (0.7842, 0.7854),
-    "test_horizon_2022/case_0004": (0.7851, 0.7878), "test_horizon_2022/case_0005": (0.8033, 0.8077),
+    "test/case_0001": (0.7109, 0.7126), "test/case_0002": (0.7873, 0.7897), "test/case_0003": (0.7944, 0.7954),
+    "test/case_0004": (0.7446, 0.7465), "test/case_0005": (0.7962, 0.7985), "test_easy/case_0001": (0.8812, 0.8908),
+    "test_easy/case_0002": (0.8463, 0.8533), "test_easy/case_0003": (0.8228, 0.8272),
+    "test_easy/case_0004": (0.8336, 0.8368), "test_easy/case_0005": (0.8028, 0.8080),
+    "test_hard/case_0001": (0.8457, 0.8627), "test_hard/case_0002": (0.8234, 0.8395),
+    "test_hard/case_0003": (0.8754, 0.8874), "test_hard/case_0004": (0.8774, 0.8894),
+    "test_hard/case_0005": (0.8425, 0.8644), "test_horizon_2022/case_0001": (0.7272, 0.7285),
+    "test_horizon_2022/case_0002": (0.7708, 0.7753), "test_horizon_2022/case_0003": (0.7842, 0.7852),
+    "test_horizon_2022/case_0004": (0.7851, 0.7875), "test_horizon_2022/case_0005": (0.8034, 0.8077),
 }
 
 
