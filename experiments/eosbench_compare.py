@@ -9,7 +9,8 @@ Usage::
 DIR holds the schedule files their ``main_scheduler.py`` wrote for SCENARIO (``scheduler_<scenario>_c<class>_<algo>
 _<objective>.json``, their metrics and runtime inside).  With ``--their-python`` and ``--their-repo`` the same files
 (and eosp's) are replayed through their ``ConstraintModel`` and metrics by ``experiments/eosbench_theirs.py check``,
-and the verdicts and metrics compared (to 1e-9).  eosp's solver runs once per transition reading at the time limit.
+and the verdicts and metrics compared (to 1e-9).  eosp's solver runs once per transition reading at the time limit
+(none with ``--time-limit 0``).
 
 Prints one Markdown row per schedule: source, TP, TCR, TM, BD, runtime, valid (documented / code reading, eosp's
 checker), their checker's verdict and whether its metrics agree, the bound and gap (eosp's rows); appends one JSON
@@ -66,7 +67,8 @@ def main() -> None:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("scenario")
     p.add_argument("--schedules", required=True, help="folder of their schedule files for this scenario")
-    p.add_argument("--time-limit", type=float, default=30.0, help="seconds of eosp's solver per reading")
+    p.add_argument("--time-limit", type=float, default=30.0,
+                   help="seconds of eosp's solver per reading (0: not run, their schedules judged alone)")
     p.add_argument("--their-python", help="interpreter of their environment (enables their checker)")
     p.add_argument("--their-repo", help="their repository (with --their-python)")
     p.add_argument("--log", help="JSON lines appended here")
@@ -82,7 +84,7 @@ def main() -> None:
         rows.append({"source": Path(f).stem.removeprefix(f"scheduler_{stem}_"), "path": f,
                      "runtime_s": meta.get("RT"), "bound": None, "gap": None})
     with tempfile.TemporaryDirectory() as tmp:
-        for reading in ("documented", "code"):
+        for reading in ("documented", "code") if ns.time_limit > 0 else ():
             t1 = time.perf_counter()
             res = solve(scen, EosBenchConfig(time_limit=ns.time_limit, transition=reading))
             secs = time.perf_counter() - t1
