@@ -71,6 +71,7 @@ class FleetArrays(NamedTuple):
     tail_drop: np.ndarray  # float64 [K, G + 1]: max over g <= i <= j of C[i] - C[j]
     lit_half: np.ndarray  # uint8 [K, H]: checker's sunlight at every half-step instant
     lit_base: np.ndarray  # int8 [K, B]: sunlight over each base step: 1 / 0 certain, -1 uncertain
+    scales: np.ndarray  # float64 [2]: mean passes, mean distinct satellites, of a task with any (features' units)
 
 
 @dataclass(eq=False)
@@ -198,6 +199,9 @@ def prepare_fleet(fleet: Fleet, opps: Opportunities, passes: list[PassGraph] | N
     grid_us = np.unique(np.r_[np.arange(0, total_us, res_us, dtype=np.int64), total_us])
     lit_half, lit_base = _sunlight(fleet, geo, total_us, half_us)
     delta, tail_min, tail_drop = _battery_tables(fleet, grid_us, lit_half, half_us)
+    seen = np.bincount(acq_task, minlength=len(tasks)) > 0
+    task_sat = np.unique(acq_task * len(sats) + pass_sat[acq_pass]) // len(sats)
+    scales = np.array([len(acq_task) / max(1, seen.sum()), len(task_sat) / max(1, seen.sum())], dtype=np.float64)
     arrays = FleetArrays(
         np.array([total_us, res_us, half_us, base_us], dtype=np.int64),
         np.stack([att.max_rate_deg_s, att.max_acc_deg_s2, att.settling_s], axis=1).astype(np.float64),
@@ -206,6 +210,6 @@ def prepare_fleet(fleet: Fleet, opps: Opportunities, passes: list[PassGraph] | N
         sat_pass_ptr, pass_sat, pass_first_us, pass_entry_us.astype(np.int64), node_off[:-1].astype(np.int64),
         acq_off.astype(np.int64), acq_task, acq_pass, acq_lo, acq_hi, acq_share, node_acq, node_start_us,
         node_end_us, node_time, node_finish, los0, los1, nadir, indptr, dst, w, task_acq_ptr,
-        order.astype(np.int64), grid_us, delta, tail_min, tail_drop, lit_half, lit_base)
+        order.astype(np.int64), grid_us, delta, tail_min, tail_drop, lit_half, lit_base, scales)
     fifo = sum(fifo_violations(pg.graph) for pg in passes)
     return PreparedFleet(name, fleet, opps, geo, arrays, int(n_acq.max()), int(fifo), time.perf_counter() - t0)

@@ -10,6 +10,12 @@ already, what it is worth elsewhere (the other passes that can still observe it:
 satellites, how soon), and the battery (after each candidate, now).  Times are relative to the satellite's
 clock in units of :data:`TIME_SCALE` seconds, clipped to [-10, 10].
 
+Counts that grow with the fleet are in the fleet's own units, so that a policy trained on 5-50 satellites reads
+a 200-satellite day in the range it learned: ``other_passes_rel`` and ``other_satellites_rel`` divide by the mean
+number of passes, and of distinct satellites, that see a task of this fleet (``FleetArrays.scales``; 1.0-3.4 on
+the training fleets, 10 on a generated 200-satellite day), ``passes_left_share`` is the share of the
+satellite's passes still ahead.
+
 Edges are the single pass's "earliest" edges: out of the last observation, one to every selectable task's
 candidate (flag 1); out of every other task still ahead, from its first opportunity after the clock, the
 arcs of the pass graph to the `max_out_degree` earliest starts of other tasks shown (flag 0).  Edge
@@ -34,9 +40,9 @@ FLEET_NODE_FEATURES = (
     "scheduled", "removed", "selectable", "last",
     "window_start", "window_end", "latest_start", "earliest_start", "alive_fraction",
     "duration", "weight", "weight_share",
-    "served", "bridge", "other_passes", "other_satellites", "other_soonest", "own_later_passes",
+    "served", "bridge", "other_passes_rel", "other_satellites_rel", "other_soonest", "own_later_passes",
     "charge_after", "headroom_after", "skip",
-    "charge_now", "horizon_left", "passes_left", "next_pass_in",
+    "charge_now", "horizon_left", "passes_left_share", "next_pass_in",
 )
 N_FLEET_FEATURES = len(FLEET_NODE_FEATURES)
 N_EDGE_FEATURES = 2
@@ -83,13 +89,14 @@ def _agent_features(fa, ep, k, x, n_slots):
     now = ep.sat_clock[k] if ep.sat_clock[k] != NEVER else fa.dims[0]
     cap = fa.sat_power[k, 0]
     left = fa.sat_pass_ptr[k + 1] - 1 - p if p >= 0 else 0
+    total = max(1, fa.sat_pass_ptr[k + 1] - fa.sat_pass_ptr[k])
     nxt = 10.0
     if p >= 0 and p + 1 < fa.sat_pass_ptr[k + 1]:
         nxt = _rel(fa.pass_first_us[p + 1], now)
     for s in range(n_slots):
         x[s, CHARGE_NOW] = ep.bat_wh[k] / cap if cap > 0 else 0.0
         x[s, HORIZON_LEFT] = (fa.dims[0] - now) / fa.dims[0]
-        x[s, PASSES_LEFT] = left / 10.0
+        x[s, PASSES_LEFT] = left / total
         x[s, NEXT_PASS_IN] = nxt
     x[0, SKIP] = 1.0
     x[0, WINDOW_START] = nxt
@@ -248,8 +255,8 @@ def observe(fa, ep, k, params, out):
         x[s, SERVED] = 1.0 if served >= 0 else 0.0
         x[s, BRIDGE_F] = 1.0 if (sel and served >= 0) else 0.0
         count, sats, soonest, own = _other_opportunities(fa, ep, k, t, p, stamp, s)
-        x[s, OTHER_PASSES] = count / 10.0
-        x[s, OTHER_SATS] = sats / 10.0
+        x[s, OTHER_PASSES] = count / fa.scales[0]
+        x[s, OTHER_SATS] = sats / fa.scales[1]
         x[s, OTHER_SOONEST] = _rel(soonest, now) if soonest != NEVER else 10.0
         x[s, OWN_LATER] = own / 10.0
         if sel:

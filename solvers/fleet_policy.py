@@ -39,7 +39,7 @@ FEATURE_RULES: dict[str, dict[str, float]] = {
     # soonest, traded against weight (a weight point = 0.2 x 300 s of delay / 5)
     "earliest_weight": {"earliest_start": -1.0, "weight": 1.0, **SKIP_LAST},
     # soonest, with tasks no other pass can still observe first among near-equals
-    "earliest_scarce": {"earliest_start": -1.0, "weight": 0.2, "other_passes": -1.0, **SKIP_LAST},
+    "earliest_scarce": {"earliest_start": -1.0, "weight": 0.2, "other_passes_rel": -0.2, **SKIP_LAST},
     # soonest, with the task's share of the pass's weight
     "earliest_share": {"earliest_start": -1.0, "weight_share": 1.0, **SKIP_LAST},
 }

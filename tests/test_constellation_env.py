@@ -465,3 +465,42 @@ def test_benchmark_refuses_bad_input_in_one_line(fleet_dir, args, message):
     assert r.returncode == 2, r.stderr
     lines = r.stderr.strip().splitlines()
     assert len(lines) == 1 and message in lines[0] and "Traceback" not in r.stderr, r.stderr
+
+
+def test_fleet_size_counts_are_in_the_fleets_own_units():
+    """`other_passes_rel` and `other_satellites_rel` are counts divided by the fleet's mean passes and distinct
+    satellites per observable task (FleetArrays.scales, checked against a plain count over the passes' tasks);
+    `passes_left_share` is the share of the acting satellite's passes still ahead."""
+    from eosp.envs.constellation_obs import OTHER_PASSES, OTHER_SATS, PASSES_LEFT
+
+    pf, _ = greedy_case(1)
+    fa = pf.arrays
+    passes_of, sats_of = {}, {}
+    for p in range(len(fa.pass_sat)):
+        for t in fa.acq_task[fa.pass_acq_ptr[p]:fa.pass_acq_ptr[p + 1]].tolist():
+            passes_of[t] = passes_of.get(t, 0) + 1
+            sats_of.setdefault(t, set()).add(int(fa.pass_sat[p]))
+    assert np.isclose(fa.scales[0], np.mean(list(passes_of.values())))
+    assert np.isclose(fa.scales[1], np.mean([len(s) for s in sats_of.values()]))
+    env = ConstellationEnv(FleetEnvConfig(max_nodes=128), source=pf)
+    obs, _ = env.reset(seed=0)
+    seen = 0
+    while obs and seen < 40:
+        (agent, o), = obs.items()
+        k = int(agent.split("_")[1])
+        n = int(o["n_nodes"][0])
+        x = o["x"][:n].astype(np.float64)
+        p = int(env.ep.sat_pass[k])
+        total = fa.sat_pass_ptr[k + 1] - fa.sat_pass_ptr[k]
+        assert np.allclose(x[:, PASSES_LEFT], (fa.sat_pass_ptr[k + 1] - 1 - p) / total, atol=1e-6)
+        a0 = fa.pass_acq_ptr[p]
+        for s in range(1, n):
+            t = int(fa.acq_task[a0 + int(env.ep.slot_acq[s])])
+            count, sats = x[s, OTHER_PASSES] * fa.scales[0], x[s, OTHER_SATS] * fa.scales[1]
+            assert abs(count - round(count)) < 1e-3 and abs(sats - round(sats)) < 1e-3
+            assert round(count) <= passes_of[t] - 1 and round(sats) <= min(len(sats_of[t]), round(count))
+        seen += 1
+        obs, _, term, _, _ = env.step({agent: int(np.flatnonzero(o["action_mask"])[-1])})
+        if term["__all__"]:
+            break
+    assert seen >= 5
