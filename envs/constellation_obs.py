@@ -47,8 +47,9 @@ FLEET_NODE_FEATURES = (
 N_FLEET_FEATURES = len(FLEET_NODE_FEATURES)
 N_EDGE_FEATURES = 2
 (SCHEDULED, REMOVED, SELECTABLE, LAST, WINDOW_START, WINDOW_END, LATEST_START, EARLIEST_START, ALIVE_FRACTION,
- DURATION, WEIGHT, WEIGHT_SHARE, SERVED, BRIDGE_F, OTHER_PASSES, OTHER_SATS, OTHER_SOONEST, OWN_LATER,
- CHARGE_AFTER, HEADROOM_AFTER, SKIP, CHARGE_NOW, HORIZON_LEFT, PASSES_LEFT, NEXT_PASS_IN) = range(N_FLEET_FEATURES)
+ DURATION, WEIGHT, WEIGHT_SHARE, SERVED, BRIDGE_F, OTHER_PASSES_REL, OTHER_SATS_REL, OTHER_SOONEST, OWN_LATER,
+ CHARGE_AFTER, HEADROOM_AFTER, SKIP, CHARGE_NOW, HORIZON_LEFT, PASSES_LEFT_SHARE,
+ NEXT_PASS_IN) = range(N_FLEET_FEATURES)
 
 
 class ObsArrays(NamedTuple):
@@ -96,7 +97,7 @@ def _agent_features(fa, ep, k, x, n_slots):
     for s in range(n_slots):
         x[s, CHARGE_NOW] = ep.bat_wh[k] / cap if cap > 0 else 0.0
         x[s, HORIZON_LEFT] = (fa.dims[0] - now) / fa.dims[0]
-        x[s, PASSES_LEFT] = left / total
+        x[s, PASSES_LEFT_SHARE] = left / total
         x[s, NEXT_PASS_IN] = nxt
     x[0, SKIP] = 1.0
     x[0, WINDOW_START] = nxt
@@ -255,8 +256,8 @@ def observe(fa, ep, k, params, out):
         x[s, SERVED] = 1.0 if served >= 0 else 0.0
         x[s, BRIDGE_F] = 1.0 if (sel and served >= 0) else 0.0
         count, sats, soonest, own = _other_opportunities(fa, ep, k, t, p, stamp, s)
-        x[s, OTHER_PASSES] = count / fa.scales[0]
-        x[s, OTHER_SATS] = sats / fa.scales[1]
+        x[s, OTHER_PASSES_REL] = count / fa.scales[0]
+        x[s, OTHER_SATS_REL] = sats / fa.scales[1]
         x[s, OTHER_SOONEST] = _rel(soonest, now) if soonest != NEVER else 10.0
         x[s, OWN_LATER] = own / 10.0
         if sel:

@@ -471,7 +471,7 @@ def test_fleet_size_counts_are_in_the_fleets_own_units():
     """`other_passes_rel` and `other_satellites_rel` are counts divided by the fleet's mean passes and distinct
     satellites per observable task (FleetArrays.scales, checked against a plain count over the passes' tasks);
     `passes_left_share` is the share of the acting satellite's passes still ahead."""
-    from eosp.envs.constellation_obs import OTHER_PASSES, OTHER_SATS, PASSES_LEFT
+    from eosp.envs.constellation_obs import OTHER_PASSES_REL, OTHER_SATS_REL, PASSES_LEFT_SHARE
 
     pf, _ = greedy_case(1)
     fa = pf.arrays
@@ -492,11 +492,11 @@ def test_fleet_size_counts_are_in_the_fleets_own_units():
         x = o["x"][:n].astype(np.float64)
         p = int(env.ep.sat_pass[k])
         total = fa.sat_pass_ptr[k + 1] - fa.sat_pass_ptr[k]
-        assert np.allclose(x[:, PASSES_LEFT], (fa.sat_pass_ptr[k + 1] - 1 - p) / total, atol=1e-6)
+        assert np.allclose(x[:, PASSES_LEFT_SHARE], (fa.sat_pass_ptr[k + 1] - 1 - p) / total, atol=1e-6)
         a0 = fa.pass_acq_ptr[p]
         for s in range(1, n):
             t = int(fa.acq_task[a0 + int(env.ep.slot_acq[s])])
-            count, sats = x[s, OTHER_PASSES] * fa.scales[0], x[s, OTHER_SATS] * fa.scales[1]
+            count, sats = x[s, OTHER_PASSES_REL] * fa.scales[0], x[s, OTHER_SATS_REL] * fa.scales[1]
             assert abs(count - round(count)) < 1e-3 and abs(sats - round(sats)) < 1e-3
             assert round(count) <= passes_of[t] - 1 and round(sats) <= min(len(sats_of[t]), round(count))
         seen += 1
