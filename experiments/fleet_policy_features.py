@@ -66,8 +66,8 @@ def main() -> None:
         prepared = load_fleet(path)
         plain = decode(recording, prepared, env_cfg)
         seen[path] = np.concatenate(xs)
-        print(f"{path}: {len(xs)} decisions, skip chosen {sum(skips)} ({sum(skips) / max(1, len(xs)):.1%}), "
-              f"{len(seen[path])} admissible slots", flush=True)
+        print(f"{path}: raw decode WCR {plain.value:.4f}; of its first {len(xs)} decisions skip chosen {sum(skips)} "
+              f"({sum(skips) / max(1, len(xs)):.1%}), {len(seen[path])} admissible slots", flush=True)
         if caps:
             clipped = decode(capped, prepared, env_cfg)
             lines.append(f"{path}: raw decode WCR {plain.value:.4f} ({plain.decisions} decisions), with "
@@ -78,6 +78,7 @@ def main() -> None:
                  for x in seen.values()]
         print(name.ljust(30) + "".join(cells))
     print("\n".join(lines))
+
 
 if __name__ == "__main__":
     main()
