@@ -170,6 +170,33 @@ def test_the_energy_bound_holds_for_any_prices_where_the_battery_binds(n_tasks, 
         assert lagrangian(prob, lam, mu) >= best - 1e-9, (lam, mu, best)
 
 
+@settings(max_examples=8, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(n_tasks=st.integers(6, 10), seed=st.integers(0, 1000), initial=st.floats(0.9, 2.6),
+       sunlit=st.sampled_from([0.0, 40.0]), prices_seed=st.integers(0, 1000))
+def test_the_energy_search_lowers_l_at_fixed_prices_and_stays_a_bound(n_tasks, seed, initial, sunlit, prices_seed):
+    """The windows' line search at fixed task prices: the L it returns is L at its multipliers (recomputed here
+    pass by pass), never above L before it, and never below the best valid schedule (brute force)."""
+    from eosp.kinds.fleet.config import FleetConfig
+    from eosp.kinds.fleet.coordinator import Coordinator
+
+    fleet = weak_battery(n_tasks, seed, initial_wh=initial, sunlit_w=sunlit)
+    prob = problem_of(fleet)
+    best, _ = brute_force(fleet)
+    coord = Coordinator(prob, FleetConfig(rounds=1, time_limit=None, energy_bound=True))
+    rng = np.random.default_rng(prices_seed)
+    lam = rng.uniform(0, 0.8, n_tasks) * prob.weight * (rng.random(n_tasks) < 0.5)
+    for _ in range(3):  # successive searches at the same prices, from the multipliers the last one left
+        before = lagrangian(prob, lam, coord.prices.mu)
+        total, proven, _, pass_wh, _ = coord._dual_round(lam, None)
+        assert proven and abs(total - before) < 1e-6
+        got = coord.energy_search(lam, total, pass_wh, None)
+        if got is None:
+            break
+        assert got <= before + 1e-9
+        assert abs(got - lagrangian(prob, lam, coord.prices.mu)) < 1e-6
+        assert got >= best - 1e-9
+
+
 def test_energy_makes_the_bound_tighter_than_any_energy_blind_bound():
     """Where the battery binds, the fleet solver's bound falls below the best schedule without a battery (which
     every energy-relaxed bound is at least), stays above the best valid one, and its schedule is valid."""

@@ -42,6 +42,9 @@ class FleetConfig(UtilityConfig):
     """Price the battery's energy windows in the Lagrangian bound (eosp.fleet.energy; valid either way).  Off by
     default: on test_hard (120 s) the bound with them stayed at the conflict-free one while the bound without
     them reached a 3.5% gap (docs/results.md)."""
+    energy_search: bool = True
+    """With --energy-bound, move the energy windows' multipliers by line searches at each round's task prices
+    (a window per satellite, the bound never raised by them) instead of subgradient steps."""
     energy_price: float = ranged(1.0, 0)
     """With --energy-bound, the share of the bound's energy prices (what a Wh is worth in each pass, from the
     battery's energy windows) that the schedules' pass problems pay (construction, coordinate descent, moves):

@@ -44,6 +44,7 @@ from eosp.kinds.fleet.problem import (PassResult, Primal, Problem, path_tasks, p
                                       solve_pass)
 
 CHECK_MARGIN = 1.5  # the final check's estimate times this (a better schedule has more actions, a loaded machine)
+ENERGY_STEPS = 12  # bisection steps of an energy window's multiplier (Coordinator.energy_search)
 CHECK_SLACK_S = 0.2  # seconds added to it (the time the first steps after the deadline take)
 
 
@@ -80,6 +81,8 @@ class Coordinator:
         n = len(self.prob.fleet.tasks)
         self.windows = self.prob.windows if self.cfg.energy_bound else EnergyWindows.none(len(self.prob.passes))
         self.prices = Prices.zero(n, self.windows)
+        self._pass_sat = np.array([pg.satellite for pg in self.prob.passes], dtype=np.int64)
+        self._terms = np.zeros(len(self.prob.passes))  # the pass terms of the last price round
         self.spend = np.zeros(len(self.prob.passes))  # price of a Wh in each pass for the schedules (energy_price)
         self.pool = self.pool or InProcessPool(self.prob, self.cfg)
         self.round_paths = [np.zeros(0, np.int64)] * len(self.prob.passes)
@@ -196,6 +199,7 @@ class Coordinator:
             count[path_tasks(self.prob, p, res.nodes)] += 1
             pass_wh[p] = path_wh(pg, res.nodes)
         total = Prices(lam, self.prices.windows, self.prices.mu).dual(terms)
+        self._terms = np.asarray(terms, dtype=np.float64)  # the round's pass terms (the energy search starts there)
         return total, proven, count, pass_wh, paths
 
     def _bound_from(self, total: float, proven: bool, what: str) -> None:
@@ -216,10 +220,103 @@ class Coordinator:
             return None
         total, proven, count, pass_wh, self.round_paths = got
         self._bound_from(total, proven, f"round {self.rounds_done + 1}")
+        lam = self.prices.lam.copy()
         scale = self.prob.weight if self.cfg.price_step == "weighted" else None
-        self.prices.step_towards(count, total, self.best.value, pass_wh, scale)
+        search = self.cfg.energy_search and len(self.windows) > 0
+        self.prices.step_towards(count, total, self.best.value, None if search else pass_wh, scale)
+        if search and proven:
+            lower = self.energy_search(lam, total, pass_wh, deadline)
+            if lower is not None:
+                self._bound_from(lower, True, f"round {self.rounds_done + 1}, energy search")
+                total = lower
         self.spend = self.cfg.energy_price * self.prices.pass_price()
         return total
+
+    def energy_search(self, lam: np.ndarray, total: float, pass_wh: np.ndarray,
+                      deadline: float | None) -> float | None:
+        """Line searches of the energy windows' multipliers at the task prices `lam` of the round just solved (its
+        L(lam, mu) = `total`, its pass terms and each pass's energy `pass_wh`): on every satellite the window its
+        round's paths overspend most (in typical observations) gets the multiplier increase x (per Wh) that
+        minimises ``phi(x) = sum over its passes of their terms at pass price + x, + x R_w``, by bisection on
+        where the passes' energy crosses R_w (:data:`ENERGY_STEPS` solves of the window's passes, every
+        satellite's window solved together on the pool).  A window whose multiplier is above 0 and
+        whose passes spend less than it allows may be the satellite's instead (x then between minus its multiplier
+        and 0).  Returns L(lam, mu) with the new multipliers (None when no window moves, a term is not proven, or
+        the deadline came).
+
+        Why a search, not only the subgradient steps: at fixed task prices each window's phi is convex and
+        piecewise linear in x (a pass term is the maximum over its paths of linear functions of its price), so
+        the x it keeps never raises L (phi(0) is evaluated, and an x is kept only when lower); the Polyak steps
+        of the multipliers, sized by the task prices' gap, kept the bound above the conflict-free one where the
+        battery binds (test_hard).  Windows of different satellites share no pass, so the searches are
+        independent; x is kept per window in :attr:`Prices.mu` (units of its `scale_wh`) and paid by the
+        schedules' pass problems as every multiplier is (``--energy-price``)."""
+        win = self.windows
+        pass_sat = self._pass_sat
+        over = (win.used(pass_wh) - win.rhs_wh) / win.scale_wh
+        mu_wh = self.prices.mu / win.scale_wh  # each window's multiplier per Wh
+        slope = np.where(over > 1e-6, over, np.where((mu_wh > 0) & (over < -1e-6), -over, 0.0))
+        cand = np.flatnonzero(slope > 0)
+        if not (over > 1e-6).any():  # nothing overspent: L gains little from lowering multipliers alone
+            return None
+        cand = cand[np.lexsort((-slope[cand], pass_sat[win.lo[cand]]))]
+        chosen = cand[np.r_[True, pass_sat[win.lo[cand[1:]]] != pass_sat[win.lo[cand[:-1]]]]]
+        lens = win.hi[chosen] - win.lo[chosen] + 1
+        passes = np.concatenate([np.arange(a, b + 1) for a, b in zip(win.lo[chosen], win.hi[chosen])])
+        owner = np.repeat(np.arange(len(chosen)), lens)  # the chosen window of each of `passes`
+        live = ~self.frozen[passes]
+        w = self.prob.weight
+        top = np.zeros(len(chosen))  # past this price of a Wh no observation of the window is worth anything
+        for k, p in zip(owner.tolist(), passes.tolist()):
+            pg = self.prob.passes[p]
+            e = pg.energy_wh
+            if len(e):
+                gain = (w[pg.tasks] - lam[pg.tasks]) / np.maximum(e, 1e-12)
+                top[k] = max(top[k], float(gain.max()))
+        rhs = win.rhs_wh[chosen]
+        best_phi = np.bincount(owner, self._terms[passes], len(chosen))
+        phi0 = best_phi.copy()
+        best_x = np.zeros(len(chosen))
+        up = over[chosen] > 0  # overspent: x up to `top`; else a multiplier above 0 may come down to 0
+        lo = np.where(up, 0.0, -mu_wh[chosen])
+        hi = np.where(up, top * (1 + 1e-9) + 1e-12, 0.0)
+        pi = self.prices.pass_price()
+        todo = passes[live].tolist()
+        for _ in range(ENERGY_STEPS):
+            x = 0.5 * (lo + hi)
+            pp = pi.copy()
+            pp[passes] += x[owner]
+            solved = self.pool.solve_priced(todo, lam, pp, deadline)
+            if solved is None:
+                return None
+            self.pass_solves += len(todo)
+            terms = np.zeros(len(passes))
+            used = np.zeros(len(passes))
+            for i, p in enumerate(passes.tolist()):
+                pg = self.prob.passes[p]
+                if self.frozen[p]:
+                    path = self.initial.paths[p]
+                    acq = pg.graph.node_acq[path]
+                    terms[i] = float(priced(w, lam, pg.tasks[acq], pg.energy_wh[acq], pp[p]).sum())
+                    used[i] = path_wh(pg, path)
+                    continue
+                res = solved[p]
+                if res.bound is None:
+                    return None
+                terms[i], used[i] = res.bound, path_wh(pg, res.nodes)
+            phi = np.bincount(owner, terms, len(chosen)) + x * rhs
+            better = phi < best_phi
+            best_phi, best_x = np.where(better, phi, best_phi), np.where(better, x, best_x)
+            spent = np.bincount(owner, used, len(chosen)) > rhs
+            lo, hi = np.where(spent, x, lo), np.where(spent, hi, x)
+        gain = best_phi - phi0
+        if not (gain < 0).any():
+            return None
+        mu = self.prices.mu.copy()
+        mu[chosen] = np.maximum(0.0, mu[chosen] + best_x * win.scale_wh[chosen])
+        self.prices.mu = mu
+        self.spend = self.cfg.energy_price * self.prices.pass_price()
+        return total + float(gain.sum())
 
     def ceiling_prices(self) -> np.ndarray:
         """Every task more than one pass can serve priced at its weight, the others at 0."""
