@@ -58,9 +58,11 @@ class FleetConfig(UtilityConfig):
     the other starts' at 600 s; on the aeossp cases at 10 s learned proves the lowest gap, heuristic the best WCR
     on average.  Round 0 also bounds with the ceiling prices (every contested task at its weight) whatever the
     start."""
-    price_step: str = choice("weighted", "uniform", "weighted")
-    """The price step after each round (Polyak's, towards the best schedule): weighted (each task's price moves in
-    proportion to the task's weight) or uniform (every price by the same amount per unit of its subgradient).
+    price_step: str = choice("weighted", "uniform", "weighted", "lp")
+    """The price step after each round: Polyak's subgradient step towards the best schedule, weighted (each task's
+    price moves in proportion to the task's weight) or uniform (every price by the same amount per unit of its
+    subgradient); or lp (column generation: the next prices from the duals of a linear program over the passes'
+    schedules found so far, smoothed towards the prices of the lowest bound, eosp.kinds.fleet.master).
     Any prices give a valid bound: the rule changes how fast bound and schedules improve, never what the bound
     means.  Weighted is the default by measurement on the aeossp train split (docs/results.md): at 120 s a lower
     bound on 10 of 10 cases, the median gap 0.60% -> 0.40%."""

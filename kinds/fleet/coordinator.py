@@ -38,6 +38,7 @@ from eosp.fleet.timeline import Timeline, repair_battery, timelines, to_schedule
 from eosp.fleet.model import Schedule
 from eosp.kinds.fleet.config import FleetConfig
 from eosp.interrupt import HeldInterrupt
+from eosp.kinds.fleet.master import Centre, Master
 from eosp.kinds.fleet.pool import InProcessPool, PassPool
 from eosp.kinds.fleet.prices import Prices
 from eosp.kinds.fleet.problem import (PassResult, Primal, Problem, path_tasks, path_wh, priced, rewalk,
@@ -81,6 +82,8 @@ class Coordinator:
         n = len(self.prob.fleet.tasks)
         self.windows = self.prob.windows if self.cfg.energy_bound else EnergyWindows.none(len(self.prob.passes))
         self.prices = Prices.zero(n, self.windows)
+        self.master = Master(self.prob) if self.cfg.price_step == "lp" else None  # the LP of --price-step lp
+        self.centre = Centre(np.zeros(n))  # the prices of the lowest L (set by the first round)
         self._pass_sat = np.array([pg.satellite for pg in self.prob.passes], dtype=np.int64)
         self._terms = np.zeros(len(self.prob.passes))  # the pass terms of the last price round
         self.spend = np.zeros(len(self.prob.passes))  # price of a Wh in each pass for the schedules (energy_price)
@@ -173,8 +176,10 @@ class Coordinator:
     def _dual_round(self, lam: np.ndarray, deadline: float | None) -> tuple | None:
         """Every pass under task prices `lam` and the current energy multipliers (on the pool): L(lam, mu), whether
         every pass term is proven, each task's serve count, each pass's energy and path; None when cut by the
-        deadline."""
+        deadline.  A price above its task's weight is taken at the weight: no pass takes the task either way (its
+        utility is not positive), so the pass terms are the same and L is lower."""
         w = self.prob.weight
+        lam = np.minimum(lam, w)
         pi = self.prices.pass_price()
         todo = np.flatnonzero(~self.frozen).tolist()
         solved = self.pool.solve_priced(todo, lam, pi, deadline)
@@ -223,7 +228,15 @@ class Coordinator:
         lam = self.prices.lam.copy()
         scale = self.prob.weight if self.cfg.price_step == "weighted" else None
         search = self.cfg.energy_search and len(self.windows) > 0
-        self.prices.step_towards(count, total, self.best.value, None if search else pass_wh, scale)
+        if self.master is not None:  # column generation: the round's pass optima are the master's new columns
+            self.centre.observe(lam, total)
+            self.master.add(self.round_paths)
+            duals = self.master.duals(deadline)
+            self.prices.lam = self.centre.lam.copy() if duals is None else self.centre.towards(duals)
+            if not search:
+                self.prices.step_towards(count, total, self.best.value, pass_wh, scale, tasks=False)
+        else:
+            self.prices.step_towards(count, total, self.best.value, None if search else pass_wh, scale)
         if search and proven:
             lower = self.energy_search(lam, total, pass_wh, deadline)
             if lower is not None:
@@ -428,6 +441,8 @@ class Coordinator:
         """`primal` is the best schedule now; a Lagrangian bound below it was wrong: refused (the conflict-free
         bound, which every schedule respects, takes its place), and said."""
         self.best = primal
+        if self.master is not None:  # a schedule kept: its paths are columns (the master then serves at least it)
+            self.master.add(primal.paths)
         if self.bound_source == "lagrangian" and primal.value > self.best_bound + 1e-9 * max(1.0, primal.value):
             self.refused.append(f"a schedule of {primal.value:.6f} above the Lagrangian bound {self.best_bound:.6f}")
             self.best_bound, self.bound_source = self.conflict_free(), "conflict-free"

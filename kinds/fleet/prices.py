@@ -74,7 +74,7 @@ class Prices:
         return total
 
     def step_towards(self, served: np.ndarray, dual: float, best: float, pass_wh: np.ndarray | None = None,
-                     scale: np.ndarray | None = None) -> None:
+                     scale: np.ndarray | None = None, tasks: bool = True) -> None:
         """Move the prices by a subgradient step: `served[i]` is how many passes of the round serve task i, and
         `pass_wh[p]` the energy (sum of e_o) of pass p's path of the round (None: no window); the step Polyak's
         towards the best value known `best` from the dual value `dual`, taken by the task prices and the
@@ -93,7 +93,7 @@ class Prices:
         h[(self.mu <= 0) & (h > 0)] = 0.0
         target = self.factor * max(dual - best, 1e-6 * dual)
         d = g if scale is None else scale * g
-        if float(g @ d) > 0:
+        if tasks and float(g @ d) > 0:  # tasks=False: the multipliers only (the task prices set otherwise)
             self.lam = np.maximum(0.0, self.lam - target / float(g @ d) * d)
         if float(h @ h) > 0:
             self.mu = np.maximum(0.0, self.mu - ENERGY_SHARE * target / float(h @ h) * h)
