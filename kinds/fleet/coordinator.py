@@ -85,6 +85,7 @@ class Coordinator:
         n = len(self.prob.fleet.tasks)
         self.windows = self.prob.windows if self.cfg.energy_bound else EnergyWindows.none(len(self.prob.passes))
         self.prices = Prices.zero(n, self.windows)
+        self._no_shift = np.zeros(n)  # zero task prices, made once (a descent sweep prices every pass twice)
         self.spend = np.zeros(len(self.prob.passes))  # price of a Wh in each pass for the schedules (energy_price)
         self.pool = self.pool or InProcessPool(self.prob, self.cfg)
         self.round_paths = [np.zeros(0, np.int64)] * len(self.prob.passes)
@@ -107,7 +108,7 @@ class Coordinator:
         battery repair barred from this satellite."""
         pg = self.prob.passes[p]
         w = self.prob.weight
-        shift = np.zeros_like(w) if shift is None else np.minimum(shift, 0.999 * w)
+        shift = self._no_shift if shift is None else np.minimum(shift, 0.999 * w)
         util = priced(w, shift, pg.tasks, pg.energy_wh, self.spend[p])
         return np.where(self._available(primal, p), util, 0.0)
 
@@ -115,8 +116,7 @@ class Coordinator:
         """The utility :meth:`_utility` gives pass p's `path` (its tasks are its own)."""
         pg = self.prob.passes[p]
         acq = pg.graph.node_acq[path]
-        return float(priced(self.prob.weight, np.zeros_like(self.prob.weight), pg.tasks[acq], pg.energy_wh[acq],
-                            self.spend[p]).sum())
+        return float(priced(self.prob.weight, self._no_shift, pg.tasks[acq], pg.energy_wh[acq], self.spend[p]).sum())
 
     def _available(self, primal: Primal, p: int) -> np.ndarray:
         tasks = self.prob.passes[p].tasks
@@ -178,6 +178,9 @@ class Coordinator:
         tasks it freed, and p itself when it lost tasks (solved again with what is left)."""
         pg = self.prob.passes[p]
         again = bool(todo[p])  # a lower pass of the batch freed a task p can take
+        if np.array_equal(path, primal.paths[p]):  # the common case near the end: nothing changes
+            todo[p] = again
+            return
         if len(path):
             free = self._available(primal, p)[pg.graph.node_acq[path]]
             if not free.all():
