@@ -34,6 +34,7 @@ import time
 from dataclasses import dataclass, field
 from typing import Callable
 
+import numba
 import numpy as np
 
 from eosp.fleet.check import validate
@@ -50,6 +51,30 @@ from eosp.kinds.fleet.problem import (PassResult, Primal, Problem, path_tasks, p
 CHECK_MARGIN = 1.5  # the final check's estimate times this (a better schedule has more actions, a loaded machine)
 CHECK_SLACK_S = 0.2  # seconds added to it (the time the first steps after the deadline take)
 SWEEP_IN_PROCESS = 8  # a descent sweep of fewer passes is solved on the driver, not sent to the pool
+
+
+@numba.njit(cache=True)
+def disjoint(queued, ptr, idx, claimed):
+    """Mask of `queued` (ascending pass ids): each pass taken when it shares no task with a pass taken before it
+    (a sweep's batch whose results cannot conflict); `claimed` (bool per task) is left all False."""
+    take = np.zeros(len(queued), dtype=np.bool_)
+    for i in range(len(queued)):
+        p = queued[i]
+        free = True
+        for j in range(ptr[p], ptr[p + 1]):
+            if claimed[idx[j]]:
+                free = False
+                break
+        if free:
+            take[i] = True
+            for j in range(ptr[p], ptr[p + 1]):
+                claimed[idx[j]] = True
+    for i in range(len(queued)):
+        if take[i]:
+            p = queued[i]
+            for j in range(ptr[p], ptr[p + 1]):
+                claimed[idx[j]] = False
+    return take
 
 
 @dataclass
@@ -86,6 +111,11 @@ class Coordinator:
         self.windows = self.prob.windows if self.cfg.energy_bound else EnergyWindows.none(len(self.prob.passes))
         self.prices = Prices.zero(n, self.windows)
         self._no_shift = np.zeros(n)  # zero task prices, made once (a descent sweep prices every pass twice)
+        lens = np.array([len(pg.tasks) for pg in self.prob.passes], dtype=np.int64)
+        self._task_ptr = np.r_[0, np.cumsum(lens)].astype(np.int64)  # the passes' tasks, CSR (disjoint batches)
+        self._task_idx = (np.concatenate([pg.tasks for pg in self.prob.passes]).astype(np.int64) if len(lens)
+                          else np.zeros(0, np.int64))
+        self._claimed = np.zeros(n, dtype=np.bool_)
         self.spend = np.zeros(len(self.prob.passes))  # price of a Wh in each pass for the schedules (energy_price)
         self.pool = self.pool or InProcessPool(self.prob, self.cfg)
         self.round_paths = [np.zeros(0, np.int64)] * len(self.prob.passes)
@@ -157,16 +187,17 @@ class Coordinator:
         todo[np.asarray(queue, dtype=np.int64)] = True
         while True:
             todo &= ~self.frozen
-            batch = np.flatnonzero(todo).tolist()
-            if not batch:
+            queued = np.flatnonzero(todo)
+            if len(queued) == 0:
                 return
             if deadline is not None and time.perf_counter() > deadline:
                 return
+            batch = queued[disjoint(queued, self._task_ptr, self._task_idx, self._claimed)].tolist()
             utils = [self._utility(primal, p) for p in batch]
             solved = self._solve_batch(batch, utils, deadline)
             if solved is None:
                 return  # cut by the deadline: the schedule is as the last batch left it (every edit whole)
-            todo[:] = False
+            todo[batch] = False
             for p in batch:
                 self._settle(primal, p, solved[p].nodes, todo)
 
