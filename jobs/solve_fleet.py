@@ -7,15 +7,18 @@
 The same code runs on a laptop (a local Ray with ``--ray.num-cpus``) and on a cluster (``ray job submit``, or
 ``--ray.address``).  Each actor owns the passes of a set of satellites (balanced by opportunities) and builds
 their pass graphs once, where they are solved: the fleet goes to the object store once, and a round sends only
-pass ids and priced utilities and gets paths back.  The driver keeps every graph too (its coordinate descent and
-large-neighbourhood moves solve passes one at a time, where a round trip would cost more than the solve).
+pass ids and prices and gets paths back.  The coordinate descent's sweeps go to the same actors (each gets its
+passes' utilities, which depend on the driver's schedule, as one flat vector).  The driver keeps every graph
+too (small sweeps and the large-neighbourhood moves solve passes one at a time there, where a round trip would
+cost more than the solve).
 
 Faults: an actor that dies mid-round costs nothing but time: the driver solves that actor's passes of the round
 itself (the same deterministic solver, so the round's result is the same), and Ray restarts the actor, which
 builds its graphs again.  After every round the driver writes its state to the run dir (prices, step, bound,
 rounds done, and the best schedule, each file replaced atomically); a driver killed and started again with the
 same run dir resumes from there.  A run dir of another fleet is refused.  (Tests kill an actor in round R with
-the environment variable ``EOSP_FAULT_KILL_ACTOR_ROUND=R``, and the driver after round N has been saved with
+the environment variable ``EOSP_FAULT_KILL_ACTOR_ROUND=R``, in the S-th descent sweep sent to the actors with
+``EOSP_FAULT_KILL_ACTOR_SWEEP=S``, and the driver after round N has been saved with
 ``EOSP_FAULT_KILL_AFTER=N``.)
 
 MLflow: one run per job: value, bound and gap against rounds and wall time, per-pass solve times (CSV and a
@@ -113,6 +116,27 @@ class PassWorker:
         nodes = np.concatenate(paths).astype(np.int64) if paths else np.zeros(0, np.int64)
         return passes, value, bound, offsets, nodes, secs
 
+    def solve_utilities(self, passes: np.ndarray, util: np.ndarray, util_offsets: np.ndarray,
+                        left_s: float | None) -> tuple:
+        """A sweep of the coordinate descent: pass ``passes[i]`` with utilities ``util[util_offsets[i]:
+        util_offsets[i + 1]]`` (the driver's, from its schedule) by the pass solver alone, each solve stopped
+        `left_s` seconds from now; packed as :meth:`solve_priced` (bounds all NaN)."""
+        from eosp.kinds.fleet.problem import solve_pass_graph
+
+        deadline = None if left_s is None else time.perf_counter() + left_s
+        n = len(passes)
+        value, secs = np.zeros(n), np.zeros(n)
+        paths = []
+        for i, p in enumerate(passes.tolist()):
+            t = time.perf_counter()
+            res = solve_pass_graph(self.graphs[p], util[util_offsets[i]:util_offsets[i + 1]], self.cfg, deadline)
+            secs[i] = time.perf_counter() - t
+            value[i] = res.value
+            paths.append(res.nodes)
+        offsets = np.r_[0, np.cumsum([len(x) for x in paths])].astype(np.int64)
+        nodes = np.concatenate(paths).astype(np.int64) if paths else np.zeros(0, np.int64)
+        return passes, value, np.full(n, np.nan), offsets, nodes, secs
+
 
 def assign(prob, workers: int) -> np.ndarray:
     """Worker of every pass: whole satellites per worker (an actor then propagates only its satellites), the
@@ -143,8 +167,10 @@ class RayPassPool:
         self.nodes = ray.get([a.ready.remote() for a in self.actors])  # node of each actor
         self.calls = 0
         self.faults = 0  # actor calls lost to a dead actor (their passes solved by the driver)
-        self.times: list[tuple[int, float, int]] = []  # (pass, seconds, worker) of every pass an actor solved
+        self.times: list[tuple[int, float, int]] = []  # (pass, seconds, worker): price-round passes actors solved
         self.kill_round = int(os.environ.get("EOSP_FAULT_KILL_ACTOR_ROUND", "0") or 0)
+        self.sweeps = 0  # calls of solve_utilities (coordinate-descent sweeps sent to the actors)
+        self.kill_sweep = int(os.environ.get("EOSP_FAULT_KILL_ACTOR_SWEEP", "0") or 0)
 
     def solve_priced(self, passes: list[int], lam: np.ndarray, pass_prices: np.ndarray,
                      deadline: float | None) -> dict | None:
@@ -188,6 +214,53 @@ class RayPassPool:
                 b = float(bound[i])
                 out[p] = PassResult(nodes[offsets[i]:offsets[i + 1]], float(value[i]), None if b != b else b)
             self.times += list(zip(got.tolist(), secs.tolist(), [k] * len(got)))
+        return out
+
+    def solve_utilities(self, passes: list[int], util: np.ndarray, offsets: np.ndarray,
+                        deadline: float | None) -> dict | None:
+        """A sweep of the coordinate descent (:meth:`eosp.kinds.fleet.pool.PassPool.solve_utilities`): each actor
+        gets its own passes' utilities as one flat vector and offsets; an actor that died has its passes solved
+        here (the same deterministic solver); None when the deadline came first."""
+        import ray
+        from ray.exceptions import RayActorError
+
+        from eosp.kinds.fleet.pool import solve_utility_passes
+        from eosp.kinds.fleet.problem import PassResult
+
+        self.sweeps += 1
+        ids = np.asarray(passes, dtype=np.int64)
+        offsets = np.asarray(offsets, dtype=np.int64)
+        owner = self.owner[ids]
+        left = None if deadline is None else max(0.0, deadline - time.perf_counter())
+        refs, parts = [], []
+        for k in range(len(self.actors)):
+            idx = np.flatnonzero(owner == k)
+            if not len(idx):
+                continue
+            lo, hi = offsets[idx], offsets[idx + 1]
+            mine_util = np.concatenate([util[a:b] for a, b in zip(lo.tolist(), hi.tolist())])
+            mine_off = np.r_[0, np.cumsum(hi - lo)].astype(np.int64)
+            refs.append(self.actors[k].solve_utilities.remote(ids[idx], mine_util, mine_off, left))
+            parts.append((k, ids[idx], mine_util, mine_off))
+        if self.sweeps == self.kill_sweep and self.actors:
+            ray.kill(self.actors[0], no_restart=False)  # a worker lost mid-sweep (tests)
+        timeout = None if deadline is None else max(0.0, deadline - time.perf_counter())
+        ready, _ = ray.wait(refs, num_returns=len(refs), timeout=timeout)
+        if len(ready) < len(refs):
+            return None  # the deadline came first
+        out = {}
+        for ref, (k, mine, mine_util, mine_off) in zip(refs, parts):
+            try:
+                got, value, _, offs, nodes, secs = ray.get(ref)
+            except RayActorError:
+                self.faults += 1
+                done = solve_utility_passes(self.prob, self.cfg, mine.tolist(), mine_util, mine_off, deadline)
+                if done is None:
+                    return None
+                out.update(done)
+                continue
+            for i, p in enumerate(got.tolist()):
+                out[p] = PassResult(nodes[offs[i]:offs[i + 1]], float(value[i]), None)
         return out
 
     def close(self) -> None:

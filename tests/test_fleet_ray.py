@@ -86,6 +86,42 @@ def test_two_nodes_give_the_single_process_schedule_and_a_killed_actor_costs_not
         schedule_rows(fleet_dir, tmp_path / "alone/schedule.parquet")
 
 
+def test_ray_sweeps_with_one_and_two_actors_give_the_in_process_schedule(fleet_dir, two_nodes, monkeypatch):
+    """The coordinate descent's sweeps on Ray actors (one actor, then one on each node, then with actor 0 killed in
+    the first sweep sent to them): for fixed rounds and seed the schedule, value, bound and solve count of this
+    process alone."""
+    import ray
+
+    from eosp.kinds.fleet.problem import Problem
+    from eosp.kinds.fleet.solve import solve
+
+    fleet, opps = read_fleet(fleet_dir)
+    prob = Problem.build(fleet, opps)
+
+    def run(workers, pool=True):
+        cfg = FleetConfig(pass_solver="exact", rounds=ROUNDS, time_limit=None, workers=workers, seed=4)
+        ray_pool = job_mod.RayPassPool(prob, cfg) if pool else None
+        try:
+            sol = solve(fleet, opps, cfg, problem=prob, pool=ray_pool)
+        finally:
+            if ray_pool is not None:
+                ray_pool.close()
+        rows = sorted(zip(sol.schedule.satellite.tolist(), sol.schedule.task.tolist(), sol.schedule.start_us.tolist()))
+        return (rows, sol.value, sol.bound, sol.info["pass_solves"]), ray_pool
+
+    if not ray.is_initialized():
+        ray.init(address=two_nodes.address)
+    alone, _ = run(1, pool=False)
+    for workers in (1, 2):
+        got, pool = run(workers)
+        assert pool.sweeps >= 1 and pool.faults == 0
+        assert got == alone, workers
+    monkeypatch.setenv("EOSP_FAULT_KILL_ACTOR_SWEEP", "1")
+    hurt, pool = run(2)
+    assert pool.faults >= 1
+    assert hurt == alone
+
+
 def test_a_killed_driver_resumes_from_its_run_dir(clustered_fleet_dir, tmp_path):
     import os
     import subprocess

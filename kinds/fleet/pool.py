@@ -1,12 +1,14 @@
-"""What solves the passes of a price round: :class:`PassPool`, and its in-process and forked implementations
-(the Ray actors' is :class:`jobs.solve_fleet.RayPassPool`).
+"""What solves the passes of a price round and of a coordinate-descent sweep: :class:`PassPool`, and its
+in-process and forked implementations (the Ray actors' is :class:`jobs.solve_fleet.RayPassPool`).
 
-A pool takes pass ids, the task prices and the passes' energy prices (one vector each, :mod:`eosp.kinds.fleet.
-prices`), never utilities: whoever holds a pass's graph prices its tasks (:func:`eosp.kinds.fleet.problem.priced`),
-so a round sends two vectors of prices and gets paths back.  The pass
-graphs stay where they were built: in this process, in forked children that share them, or on Ray actors that
-own whole satellites.  The same split is where the rest of the loop (coordinate descent, battery repair, the
-moves) can move to the owners of the satellites later: the protocol names passes, never graphs.
+For a price round a pool takes pass ids, the task prices and the passes' energy prices (one vector each,
+:mod:`eosp.kinds.fleet.prices`), never utilities: whoever holds a pass's graph prices its tasks
+(:func:`eosp.kinds.fleet.problem.priced`), so a round sends two vectors of prices and gets paths back.  A sweep of
+the coordinate descent (:meth:`eosp.kinds.fleet.coordinator.Coordinator.descend`) depends on the schedule (a task
+another pass serves is worth 0 to this one), which only the driver holds: it sends each pass's utilities,
+packed as one flat float64 vector and CSR offsets (a sweep of thousands of passes would be thousands of small
+objects otherwise).  The pass graphs stay where they were built: in this process, in forked children that
+share them, or on Ray actors that own whole satellites; the protocol names passes, never graphs.
 """
 
 from __future__ import annotations
@@ -17,7 +19,7 @@ from typing import Protocol
 import numpy as np
 
 from eosp.kinds.fleet.config import FleetConfig
-from eosp.kinds.fleet.problem import PassResult, Problem, priced, solve_round_pass
+from eosp.kinds.fleet.problem import PassResult, Problem, priced, solve_pass, solve_round_pass
 
 
 class PassPool(Protocol):
@@ -28,6 +30,15 @@ class PassPool(Protocol):
         """Every pass p of `passes` with utilities weight - price - pass_prices[p] * energy of its tasks
         (:func:`eosp.kinds.fleet.problem.solve_round_pass`: its path and its term of the bound); None when the
         deadline (a ``time.perf_counter()`` instant) came first (no pass solve runs much past it)."""
+        ...
+
+    def solve_utilities(self, passes: list[int], util: np.ndarray, offsets: np.ndarray,
+                        deadline: float | None) -> dict[int, PassResult] | None:
+        """Every pass ``passes[i]`` with utilities ``util[offsets[i]:offsets[i + 1]]`` (one per task of the pass,
+        :attr:`PassGraph.tasks` order; non-positive ones left out) by the pass solver alone
+        (:func:`eosp.kinds.fleet.problem.solve_pass_graph`: its path and value, no bound problem); None when the
+        deadline came first.  Without a deadline the exact solver is deterministic, so the result is the same
+        wherever a pass is solved."""
         ...
 
     def close(self) -> None: ...
@@ -48,8 +59,24 @@ class InProcessPool:
             out[p] = solve_priced_pass(self.prob, p, prices, pass_prices, self.cfg, deadline)
         return out
 
+    def solve_utilities(self, passes: list[int], util: np.ndarray, offsets: np.ndarray,
+                        deadline: float | None) -> dict[int, PassResult] | None:
+        return solve_utility_passes(self.prob, self.cfg, passes, util, offsets, deadline)
+
     def close(self) -> None:
         pass
+
+
+def solve_utility_passes(prob: Problem, cfg: FleetConfig, passes: list[int], util: np.ndarray, offsets: np.ndarray,
+                         deadline: float | None) -> dict[int, PassResult] | None:
+    """:meth:`PassPool.solve_utilities` in this process, one pass after another (the deadline checked before
+    each)."""
+    out = {}
+    for i, p in enumerate(passes):
+        if deadline is not None and time.perf_counter() > deadline:
+            return None
+        out[p] = solve_pass(prob, p, util[offsets[i]:offsets[i + 1]], cfg, deadline)
+    return out
 
 
 def solve_priced_pass(prob: Problem, p: int, prices: np.ndarray, pass_prices: np.ndarray, cfg: FleetConfig,
@@ -76,6 +103,12 @@ def _solve_chunk(args: tuple[list[int], np.ndarray, np.ndarray, float | None]) -
     return [solve_priced_pass(prob, p, prices, pass_prices, cfg, deadline) for p in passes]
 
 
+def _solve_utility_chunk(args: tuple[list[int], np.ndarray, np.ndarray, float | None]) -> list[PassResult]:
+    passes, util, offsets, deadline = args
+    prob, cfg = _FORKED
+    return [solve_pass(prob, p, util[offsets[i]:offsets[i + 1]], cfg, deadline) for i, p in enumerate(passes)]
+
+
 class ForkPool:
     """Processes that solve passes under given prices.  They are forked once the pass graphs are built, so every
     worker holds them without any copy; a round sends only pass ids and prices, and gets paths back."""
@@ -96,6 +129,25 @@ class ForkPool:
         n = max(1, len(passes) // (4 * self.workers))
         chunks = [(passes[i:i + n], prices, pass_prices, deadline) for i in range(0, len(passes), n)]
         job = self.pool.map_async(_solve_chunk, chunks)
+        timeout = None if deadline is None else max(0.0, deadline - time.perf_counter())
+        try:
+            results = job.get(timeout)
+        except multiprocessing.TimeoutError:
+            return None
+        return {p: r for chunk, res in zip(chunks, results) for p, r in zip(chunk[0], res)}
+
+    def solve_utilities(self, passes: list[int], util: np.ndarray, offsets: np.ndarray,
+                        deadline: float | None) -> dict[int, PassResult] | None:
+        """Every pass of `passes` under its utilities (in chunks, about four per worker, each with its slice of
+        the flat utilities)."""
+        import multiprocessing
+
+        n = max(1, len(passes) // (4 * self.workers))
+        chunks = []
+        for i in range(0, len(passes), n):
+            j = min(i + n, len(passes))
+            chunks.append((passes[i:j], util[offsets[i]:offsets[j]], offsets[i:j + 1] - offsets[i], deadline))
+        job = self.pool.map_async(_solve_utility_chunk, chunks)
         timeout = None if deadline is None else max(0.0, deadline - time.perf_counter())
         try:
             results = job.get(timeout)

@@ -1,0 +1,184 @@
+"""The fleet solver's coordinate descent as a parallel sweep (Coordinator.descend): valid and never worse than its
+start, the same schedule on every pool and any number of workers, and a fixed point (no pass alone, solved with
+the tasks no other pass serves, is worth more than its path), checked by brute force."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from eosp.fleet.check import validate
+from eosp.fleet.generate import FleetGenConfig, generate
+from eosp.fleet.geometry import NUMERICAL_EPS, Geometry
+from eosp.fleet.opportunities import compute
+from eosp.fleet.slew import LineOfSight
+from eosp.kinds.fleet import coordinator as coord_mod
+from eosp.kinds.fleet.config import FleetConfig
+from eosp.kinds.fleet.coordinator import Coordinator
+from eosp.kinds.fleet.pool import ForkPool, InProcessPool
+from eosp.kinds.fleet.problem import Primal, Problem, path_tasks, rewalk
+from tests.test_fleet import synthetic_fleet
+
+
+def generated(seed: int) -> Problem:
+    """A crowded small fleet (tasks in clusters: passes compete for them, so a sweep has conflicts to settle)."""
+    f = generate(FleetGenConfig(satellites=6, tasks=400, hours=4.0, window_min_h=1.0, window_max_h=3.0, seed=seed,
+                                placement="clusters"))
+    return Problem.build(f, compute(f, Geometry(f)))
+
+
+@pytest.fixture(scope="module")
+def crowded():
+    return [generated(s) for s in (5, 6)]
+
+
+def start(coord: Coordinator, seed: int) -> Primal:
+    """A schedule that is no fixed point: passes in a random order, each with the tasks still free and its
+    utilities perturbed at random (the large-neighbourhood move's construction)."""
+    rng = np.random.default_rng(seed)
+    n = len(coord.prob.passes)
+    shift = coord.prob.weight * rng.uniform(0.0, 1.0, len(coord.prob.weight))
+    return coord.construct(rng.permutation(n)[: n // 2 + 1], shift)
+
+
+def consistent(prob: Problem, primal: Primal) -> None:
+    """Every path is a walk of its pass graph, every task served once and by the pass `served` names, the value
+    the weight served."""
+    seen = np.full(len(prob.weight), -1)
+    for p, path in enumerate(primal.paths):
+        assert np.array_equal(rewalk(prob.passes[p], path), path), p
+        tasks = path_tasks(prob, p, path)
+        assert len(set(tasks.tolist())) == len(tasks) and (seen[tasks] < 0).all()
+        seen[tasks] = p
+    assert np.array_equal(seen, primal.served)
+    assert primal.value == pytest.approx(float(prob.weight[seen >= 0].sum()))
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_the_sweep_is_valid_and_never_worse_than_its_start(crowded, seed):
+    for prob in crowded:
+        coord = Coordinator(prob, FleetConfig(rounds=1, time_limit=None))
+        primal = start(coord, seed)
+        before = primal.value
+        consistent(prob, primal)
+        coord.descend(primal, list(range(len(prob.passes))), None)
+        consistent(prob, primal)
+        assert primal.value >= before - 1e-12
+        assert validate(prob.fleet, coord.schedule(primal), prob.geo).valid
+    # from an empty schedule every pass wants every task at once: the settling must keep each task once
+    empty = Coordinator(crowded[0], FleetConfig(rounds=1, time_limit=None))
+    primal = empty.empty()
+    empty.descend(primal, list(range(len(crowded[0].passes))), None)
+    consistent(crowded[0], primal)
+    assert primal.value > 0 and validate(crowded[0].fleet, empty.schedule(primal), crowded[0].geo).valid
+
+
+def test_frozen_passes_are_never_solved_again(crowded):
+    prob = crowded[0]
+    first = Coordinator(prob, FleetConfig(rounds=1, time_limit=None))
+    primal = start(first, 3)
+    frozen = np.zeros(len(prob.passes), dtype=bool)
+    frozen[::3] = True
+    coord = Coordinator(prob, FleetConfig(rounds=1, time_limit=None), initial=primal.copy(), frozen=frozen)
+    kept = [primal.paths[p] for p in np.flatnonzero(frozen)]
+    coord.descend(primal, list(range(len(prob.passes))), None)
+    assert all(np.array_equal(primal.paths[p], k) for p, k in zip(np.flatnonzero(frozen), kept))
+    consistent(prob, primal)
+
+
+def sweep(prob: Problem, pool, seed: int) -> tuple[list, float, int]:
+    coord = Coordinator(prob, FleetConfig(rounds=1, time_limit=None), pool=pool)
+    primal = start(coord, seed)
+    coord.descend(primal, list(range(len(prob.passes))), None)
+    return [p.tolist() for p in primal.paths], primal.value, coord.pass_solves
+
+
+@pytest.mark.parametrize("small", [1, coord_mod.SWEEP_IN_PROCESS])
+def test_the_sweep_gives_the_same_schedule_on_every_pool(crowded, monkeypatch, small):
+    """Whoever solves a batch (this process, two forked workers), and whatever batch is small enough to stay here:
+    the same paths, value and solve count."""
+    monkeypatch.setattr(coord_mod, "SWEEP_IN_PROCESS", small)
+    prob = crowded[1]
+    here = sweep(prob, InProcessPool(prob, FleetConfig()), 4)
+    pool = ForkPool(prob, FleetConfig(workers=2))
+    try:
+        forked = sweep(prob, pool, 4)
+    finally:
+        pool.close()
+    assert forked == here
+
+
+def test_fixed_rounds_give_the_same_schedule_with_one_and_two_workers(crowded):
+    from eosp.kinds.fleet.solve import solve
+
+    prob = crowded[0]
+    one, two = (solve(prob.fleet, prob.opps, FleetConfig(rounds=3, seed=2, workers=w, time_limit=None), problem=prob)
+                for w in (1, 2))
+    assert one.schedule.task.tolist() == two.schedule.task.tolist()
+    assert np.array_equal(one.schedule.start_us, two.schedule.start_us)
+    assert (one.value, one.bound, one.info["pass_solves"]) == (two.value, two.bound, two.info["pass_solves"])
+
+
+def best_alone(prob: Problem, p: int, allowed: np.ndarray) -> float:
+    """The best weight pass p can serve with its `allowed` tasks (a bool per local task), by a search over (tasks
+    used, last opportunity) with the checker's slew rule evaluated pair by pair: independent of the pass graph
+    (as tests/test_fleet_solver.brute_force_pass)."""
+    pg = prob.passes[p]
+    fleet, los, sat = prob.fleet, LineOfSight(prob.fleet, prob.geo), pg.satellite
+    task = prob.opps.task[pg.rows]
+    local = np.searchsorted(pg.tasks, task)
+    keep = allowed[local]
+    rows, local, task = pg.rows[keep], local[keep], task[keep]
+    if not len(rows):
+        return 0.0
+    st = prob.opps.start[rows].astype(float) * fleet.horizon.action_step_s
+    en = st + fleet.tasks.duration_s[task]
+    n = len(rows)
+    l0, l1 = los.los(sat, task, st), los.los(sat, task, en)
+    need = np.array([[los.need_s(sat, l1[u], l0[v]) for v in range(n)] for u in range(n)])
+    ok = (st[None, :] - en[:, None]) + NUMERICAL_EPS >= need
+    first = st + NUMERICAL_EPS >= los.need_s(sat, los.nadir(sat, st), l0)
+    w = prob.weight[pg.tasks]
+    frontier = {(1 << int(local[v]), v) for v in range(n) if first[v]}
+    seen = set(frontier)
+    while frontier:
+        nxt = set()
+        for mask, u in frontier:
+            for v in np.flatnonzero(ok[u]).tolist():
+                if not mask >> int(local[v]) & 1 and (mask | 1 << int(local[v]), v) not in seen:
+                    seen.add((mask | 1 << int(local[v]), v))
+                    nxt.add((mask | 1 << int(local[v]), v))
+        frontier = nxt
+    return max((sum(w[a] for a in range(len(w)) if mask >> a & 1) for mask, _ in seen), default=0.0)
+
+
+def tiny(kind: str, seed: int) -> Problem:
+    if kind == "two passes":  # two passes sharing every task
+        fleet = synthetic_fleet(n_tasks=8, seed=seed)
+    else:  # a handful of passes of 1-8 tasks, some tasks contested
+        sats, tasks = {"6x120": (6, 120), "8x150": (8, 150)}[kind]
+        fleet = generate(FleetGenConfig(satellites=sats, tasks=tasks, hours=3.0, window_min_h=1.0, window_max_h=2.5,
+                                        seed=seed, placement="clusters"))
+    return Problem.build(fleet, compute(fleet, Geometry(fleet)))
+
+
+@pytest.mark.parametrize("kind,seed", [("two passes", 5), ("two passes", 6), ("6x120", 7), ("8x150", 5),
+                                       ("8x150", 7)])
+def test_after_the_sweep_no_pass_alone_is_worth_more(kind, seed):
+    """From an empty schedule (every pass wants every task in the first batch), descend to its end; then no pass,
+    solved alone by brute force with the tasks no other pass serves, serves more weight than its path."""
+    prob = tiny(kind, seed)
+    assert sum(len(h) > 1 for h in prob.task_passes) >= 5  # contested tasks: a sweep has conflicts to settle
+    coord = Coordinator(prob, FleetConfig(rounds=1, time_limit=None))
+    primal = coord.empty()
+    coord.descend(primal, list(range(len(prob.passes))), None)
+    consistent(prob, primal)
+    checked = 0
+    for p, pg in enumerate(prob.passes):
+        if pg.n_tasks > 10:
+            continue
+        mine = path_tasks(prob, p, primal.paths[p])
+        allowed = (primal.served[pg.tasks] < 0) | (primal.served[pg.tasks] == p)
+        assert best_alone(prob, p, allowed) <= float(prob.weight[mine].sum()) + 1e-9, p
+        checked += 1
+    assert checked >= 2 and primal.value > 0
