@@ -224,7 +224,7 @@ def test_the_bound_holds_for_any_prices_on_bridge_fleets(duration, gap, east, no
         assert total >= best - 1e-9, (lam, total, best)
 
 
-@pytest.mark.parametrize("price_step", ["uniform", "weighted"])
+@pytest.mark.parametrize("price_step", ["uniform", "weighted", "lp"])
 def test_the_fleet_solver_bounds_its_own_schedules_on_a_bridge_fleet(price_step):
     """The fleet solver on a fleet where B is a bridge and contested: its Lagrangian bound, with the bridge
     pass's bound problem, stays above the schedule it found and above the brute force, whichever the step."""
