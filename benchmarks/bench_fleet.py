@@ -123,7 +123,7 @@ def main() -> None:
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--warm-start", default="heuristic", choices=["none", "heuristic", "learned"],
                    help="where the prices start (the fleet solver's --warm-start)")
-    p.add_argument("--price-step", default="weighted", choices=["uniform", "weighted", "lp"],
+    p.add_argument("--price-step", default="lp", choices=["uniform", "weighted", "lp"],
                    help="the fleet solver's --price-step")
     p.add_argument("--energy-bound", action="store_true", help="the fleet solver's --energy-bound")
     p.add_argument("--at", type=float, nargs="*", default=[5.0, 10.0, 30.0, 120.0],

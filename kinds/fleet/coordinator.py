@@ -50,6 +50,7 @@ from eosp.kinds.fleet.problem import (PassResult, Primal, Problem, path_tasks, p
                                       solve_pass)
 
 CHECK_MARGIN = 1.5  # the final check's estimate times this (a better schedule has more actions, a loaded machine)
+MASTER_MIN_S = 1.0  # seconds a master LP solve may always take (else at most the round's pass solves' time)
 ENERGY_STEPS = 12  # bisection steps of an energy window's multiplier (Coordinator.energy_search)
 CHECK_SLACK_S = 0.2  # seconds added to it (the time the first steps after the deadline take)
 SWEEP_IN_PROCESS = 8  # a descent sweep of fewer passes is solved on the driver, not sent to the pool
@@ -114,6 +115,7 @@ class Coordinator:
         self.prices = Prices.zero(n, self.windows)
         self.master = Master(self.prob) if self.cfg.price_step == "lp" else None  # the LP of --price-step lp
         self.centre = Centre(np.zeros(n))  # the prices of the lowest L (set by the first round)
+        self.converged = False  # --price-step lp: the bound is L's minimum; rounds are moves only from then on
         self._pass_sat = np.array([pg.satellite for pg in self.prob.passes], dtype=np.int64)
         self._terms = np.zeros(len(self.prob.passes))  # the pass terms of the last price round
         self._no_shift = np.zeros(n)  # zero task prices, made once (a descent sweep prices every pass twice)
@@ -304,9 +306,11 @@ class Coordinator:
     def price_round(self, deadline: float | None) -> float | None:
         """Every pass under the current prices (on the pool); returns L(lam, mu) (None when cut by the deadline),
         keeps the bound when it is proven and lower, and moves the prices."""
+        t_solves = time.perf_counter()
         got = self._dual_round(self.prices.lam, deadline)
         if got is None:
             return None
+        t_solves = time.perf_counter() - t_solves
         total, proven, count, pass_wh, self.round_paths = got
         self._bound_from(total, proven, f"round {self.rounds_done + 1}")
         lam = self.prices.lam.copy()
@@ -314,11 +318,21 @@ class Coordinator:
         search = self.cfg.energy_search and len(self.windows) > 0
         if self.master is not None:  # column generation: the round's pass optima are the master's new columns
             self.centre.observe(lam, total)
-            self.master.add(self.round_paths)
-            duals = self.master.duals(deadline)
-            self.prices.lam = self.centre.lam.copy() if duals is None else self.centre.towards(duals)
-            if not search:
-                self.prices.step_towards(count, total, self.best.value, pass_wh, scale, tasks=False)
+            added = self.master.add(self.round_paths)
+            # no new column and L at the master's value: lam minimises L, later rounds would repeat this one
+            self.converged = added == 0 and proven and total <= self.master.value + 1e-9 * max(1.0, total)
+            duals = self.master.duals(deadline, max(MASTER_MIN_S, t_solves))
+            if duals is not None:
+                self.prices.lam = self.centre.towards(duals)
+                if not search:
+                    self.prices.step_towards(count, total, self.best.value, pass_wh, scale, tasks=False)
+            elif deadline is None or time.perf_counter() < deadline:
+                # the master outgrew the round (a 200-satellite day: 69 s for its second solve against 5 s of
+                # pass solves): subgradient steps (weighted) from the centre from now on
+                self.master, self.converged = None, False
+                self.prices.lam = self.centre.lam.copy()
+                self.prices.step_towards(count, total, self.best.value, None if search else pass_wh,
+                                         self.prob.weight)
         else:
             self.prices.step_towards(count, total, self.best.value, None if search else pass_wh, scale)
         if search and proven:
@@ -432,6 +446,9 @@ class Coordinator:
         if got is None:
             return None
         self._bound_from(got[0], got[1], "ceiling prices")
+        if self.master is not None:  # the lowest L so far may be this one (at 200 satellites, by far)
+            self.centre.observe(np.minimum(self.ceiling_prices(), self.prob.weight), got[0])
+            self.master.add(got[4])
         return got[0]
 
     def empty(self) -> Primal:
@@ -633,7 +650,7 @@ class Coordinator:
                 if self.ceiling_round(deadline) is None:
                     break
                 self.record()
-            if cfg.pass_solver == "exact" or rounds == 0:
+            if (cfg.pass_solver == "exact" or rounds == 0) and not self.converged:
                 before = self.best_bound
                 t_round = time.perf_counter()
                 if self.price_round(deadline) is None:

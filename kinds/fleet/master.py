@@ -35,6 +35,27 @@ from eosp.kinds.fleet.problem import Problem, path_tasks
 SMOOTHING = 0.5  # Wentges' a: the share of the centre in the prices of the next round
 
 
+def quiet_highs():
+    """A HiGHS instance that prints nothing: its constructor writes a banner to the process's standard output
+    (file descriptor 1, below Python's sys.stdout), which would land in the middle of a command's output."""
+    import os
+    import sys
+
+    import highspy
+
+    sys.stdout.flush()
+    saved, null = os.dup(1), os.open(os.devnull, os.O_WRONLY)
+    try:
+        os.dup2(null, 1)
+        h = highspy.Highs()
+        h.setOptionValue("output_flag", False)
+    finally:
+        os.dup2(saved, 1)
+        os.close(saved)
+        os.close(null)
+    return h
+
+
 @dataclass
 class Centre:
     """The prices of the lowest L seen (the stability centre of the smoothed prices)."""
@@ -65,8 +86,7 @@ class Master:
 
         self._hs = highspy
         n, P = len(self.prob.weight), len(self.prob.passes)
-        h = highspy.Highs()
-        h.setOptionValue("output_flag", False)
+        h = quiet_highs()
         h.setOptionValue("threads", 1)
         h.changeObjectiveSense(highspy.ObjSense.kMaximize)
         inf = highspy.kHighsInf
@@ -100,11 +120,12 @@ class Master:
                             np.asarray(starts, np.int32), np.asarray(index, np.int32), np.ones(len(index)))
         return len(cost)
 
-    def duals(self, deadline: float | None) -> np.ndarray | None:
+    def duals(self, deadline: float | None, limit: float) -> np.ndarray | None:
         """The task prices of the master's optimum (its task rows' duals), or None when it was not solved to
-        optimality before `deadline`."""
+        optimality within `limit` seconds and before `deadline`."""
         if deadline is not None:
-            self._h.setOptionValue("time_limit", max(0.01, deadline - time.perf_counter()))
+            limit = min(limit, deadline - time.perf_counter())
+        self._h.setOptionValue("time_limit", max(0.01, limit))
         self._h.run()
         if self._h.getModelStatus() != self._hs.HighsModelStatus.kOptimal:
             return None
