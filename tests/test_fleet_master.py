@@ -83,3 +83,25 @@ def test_the_smoothed_prices_are_between_the_centre_and_the_duals():
     assert np.allclose(c.lam, [1.0, 2.0, 3.0])
     got = c.towards(np.array([3.0, 2.0, 1.0]))
     assert np.allclose(got, SMOOTHING * np.array([1.0, 2.0, 3.0]) + (1 - SMOOTHING) * np.array([3.0, 2.0, 1.0]))
+
+
+def test_a_master_slower_than_its_round_gives_way_to_weighted_steps_from_the_start(monkeypatch):
+    """When the master's LP is not solved within its time (a 200-satellite day), the solver drops it and goes on
+    with weighted subgradient steps from the prices it started with; the bound stays a bound."""
+    from eosp.kinds.fleet.config import FleetConfig
+    from eosp.kinds.fleet.coordinator import Coordinator
+    from eosp.kinds.fleet.master import Master
+    from eosp.kinds.fleet.problem import Problem
+
+    fleet = narrow_fleet(12, 0)
+    prob = Problem.build(fleet, compute(fleet, Geometry(fleet)))
+    coord = Coordinator(prob, FleetConfig(rounds=1, time_limit=None))
+    start = prob.weight * 0.3
+    coord.prices.lam = start.copy()
+    monkeypatch.setattr(Master, "duals", lambda self, deadline, limit: None)  # as if out of time
+    coord.price_round(None)
+    assert coord.master is None and not coord.converged
+    assert np.array_equal(coord.prices.lam, start)
+    coord.price_round(None)  # a weighted step now
+    assert not np.array_equal(coord.prices.lam, start)
+    assert coord.best_bound >= full_lp(prob) / 1.0 - 1e-9
