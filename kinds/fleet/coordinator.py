@@ -463,13 +463,17 @@ class Coordinator:
 
     def recover(self, rng: np.random.Generator, deadline: float | None) -> Primal:
         """A schedule from the last price round's pass schedules: passes in random order keep the tasks no
-        earlier pass took (the rest of their path re-walked along the graph's arcs), then coordinate descent."""
+        earlier pass took (the rest of their path re-walked along the graph's arcs), then coordinate descent.
+        With the master (``--price-step lp``) the columns of its last solution come first, by decreasing share."""
         n_pass = len(self.prob.passes)
         primal = self.empty()
-        for p in rng.permutation(n_pass).tolist():
-            if self.frozen[p]:
+        done = self.frozen.copy()
+        ranked = self.master.ranked() if self.master is not None else []
+        # --price-step lp: the master's solution first (its columns by decreasing share), then the round's paths
+        for p, path in ranked + [(p, self.round_paths[p]) for p in rng.permutation(n_pass).tolist()]:
+            if done[p]:
                 continue
-            path = self.round_paths[p]
+            done[p] = True
             if len(path) == 0:
                 continue
             free = self._available(primal, p)[self.prob.passes[p].graph.node_acq[path]]

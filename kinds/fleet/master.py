@@ -80,6 +80,9 @@ class Master:
     prob: Problem
     seen: set = field(default_factory=set)
     value: float = 0.0  # the master's last optimum (the weight the columns serve, fractionally)
+    solved: bool = False  # whether the last solve reached the optimum (its solution is then :meth:`ranked`)
+    col_pass: list = field(default_factory=list)  # each column's pass
+    col_path: list = field(default_factory=list)  # and its path in the pass graph
 
     def __post_init__(self) -> None:
         import highspy
@@ -110,6 +113,8 @@ class Master:
             if key in self.seen:
                 continue
             self.seen.add(key)
+            self.col_pass.append(p)
+            self.col_path.append(path)
             cost.append(float(w[tasks].sum()))
             starts.append(len(index))
             index.extend(tasks.tolist())
@@ -127,8 +132,20 @@ class Master:
             limit = min(limit, deadline - time.perf_counter())
         self._h.setOptionValue("time_limit", max(0.01, limit))
         self._h.run()
-        if self._h.getModelStatus() != self._hs.HighsModelStatus.kOptimal:
+        self.solved = self._h.getModelStatus() == self._hs.HighsModelStatus.kOptimal
+        if not self.solved:
             return None
         self.value = float(self._h.getInfo().objective_function_value)
         d = np.abs(np.asarray(self._h.getSolution().row_dual[:len(self.prob.weight)], dtype=np.float64))
         return d  # prices above a weight are kept here (the smoothing needs them); the rounds clip them
+
+    def ranked(self) -> list[tuple[int, np.ndarray]]:
+        """The columns the master's last optimum uses, (pass, path), by decreasing share (ties by column order):
+        where the LP is close to integral, as on the aeossp cases (0.8250 against schedules of 0.8228), taking them
+        in this order is close to its optimum."""
+        if not self.solved:
+            return []
+        x = np.asarray(self._h.getSolution().col_value, dtype=np.float64)
+        used = np.flatnonzero(x > 1e-9)
+        used = used[np.argsort(-x[used], kind="stable")]
+        return [(self.col_pass[i], self.col_path[i]) for i in used.tolist()]
