@@ -37,18 +37,18 @@ from pathlib import Path
 
 # the fleet solver at 120 s (docs/results.md, "Fleets: the astro-reason aeossp_standard benchmark"): the better WCR
 # and the lowest bound (rounded up) of its 120 s tables (2026-12-03, prices from 0; 2026-12-05, the anytime curves
-# with the ceiling prices, with the uniform and the weighted price step, with the small-pass sweep): every one is
-# valid, so is the lowest
+# with the ceiling prices, with the uniform and the weighted price step, with the small-pass sweep; 2026-12-05, the
+# prices by column generation, two runs): every one is valid, so is the lowest
 FLEET_120S = {
-    "test/case_0001": (0.7109, 0.7126), "test/case_0002": (0.7873, 0.7897), "test/case_0003": (0.7944, 0.7954),
-    "test/case_0004": (0.7446, 0.7465), "test/case_0005": (0.7962, 0.7985), "test_easy/case_0001": (0.8812, 0.8908),
-    "test_easy/case_0002": (0.8463, 0.8533), "test_easy/case_0003": (0.8228, 0.8272),
-    "test_easy/case_0004": (0.8336, 0.8368), "test_easy/case_0005": (0.8028, 0.8080),
-    "test_hard/case_0001": (0.8457, 0.8627), "test_hard/case_0002": (0.8234, 0.8395),
-    "test_hard/case_0003": (0.8754, 0.8874), "test_hard/case_0004": (0.8774, 0.8894),
-    "test_hard/case_0005": (0.8425, 0.8644), "test_horizon_2022/case_0001": (0.7272, 0.7285),
-    "test_horizon_2022/case_0002": (0.7708, 0.7753), "test_horizon_2022/case_0003": (0.7842, 0.7852),
-    "test_horizon_2022/case_0004": (0.7851, 0.7875), "test_horizon_2022/case_0005": (0.8034, 0.8077),
+    "test/case_0001": (0.7120, 0.7121), "test/case_0002": (0.7879, 0.7889), "test/case_0003": (0.7946, 0.7953),
+    "test/case_0004": (0.7446, 0.7453), "test/case_0005": (0.7967, 0.7981), "test_easy/case_0001": (0.8831, 0.8855),
+    "test_easy/case_0002": (0.8477, 0.8508), "test_easy/case_0003": (0.8234, 0.8251),
+    "test_easy/case_0004": (0.8336, 0.8345), "test_easy/case_0005": (0.8028, 0.8050),
+    "test_hard/case_0001": (0.8499, 0.8624), "test_hard/case_0002": (0.8277, 0.8387),
+    "test_hard/case_0003": (0.8786, 0.8844), "test_hard/case_0004": (0.8830, 0.8876),
+    "test_hard/case_0005": (0.8474, 0.8642), "test_horizon_2022/case_0001": (0.7274, 0.7275),
+    "test_horizon_2022/case_0002": (0.7719, 0.7748), "test_horizon_2022/case_0003": (0.7842, 0.7848),
+    "test_horizon_2022/case_0004": (0.7853, 0.7862), "test_horizon_2022/case_0005": (0.8052, 0.8061),
 }
 
 
