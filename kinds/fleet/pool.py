@@ -124,30 +124,27 @@ class ForkPool:
     def solve_priced(self, passes: list[int], prices: np.ndarray, pass_prices: np.ndarray,
                      deadline: float | None) -> dict[int, PassResult] | None:
         """Every pass of `passes` (in chunks, about four per worker; the children share this machine's clock)."""
-        import multiprocessing
-
         n = max(1, len(passes) // (4 * self.workers))
         chunks = [(passes[i:i + n], prices, pass_prices, deadline) for i in range(0, len(passes), n)]
-        job = self.pool.map_async(_solve_chunk, chunks)
-        timeout = None if deadline is None else max(0.0, deadline - time.perf_counter())
-        try:
-            results = job.get(timeout)
-        except multiprocessing.TimeoutError:
-            return None
-        return {p: r for chunk, res in zip(chunks, results) for p, r in zip(chunk[0], res)}
+        return self._map(_solve_chunk, chunks, deadline)
 
     def solve_utilities(self, passes: list[int], util: np.ndarray, offsets: np.ndarray,
                         deadline: float | None) -> dict[int, PassResult] | None:
         """Every pass of `passes` under its utilities (in chunks, about four per worker, each with its slice of
         the flat utilities)."""
-        import multiprocessing
-
         n = max(1, len(passes) // (4 * self.workers))
         chunks = []
         for i in range(0, len(passes), n):
             j = min(i + n, len(passes))
             chunks.append((passes[i:j], util[offsets[i]:offsets[j]], offsets[i:j + 1] - offsets[i], deadline))
-        job = self.pool.map_async(_solve_utility_chunk, chunks)
+        return self._map(_solve_utility_chunk, chunks, deadline)
+
+    def _map(self, fn, chunks: list[tuple], deadline: float | None) -> dict[int, PassResult] | None:
+        """`fn` over the chunks on the workers (each chunk's first item its pass ids): the results by pass, or
+        None when the deadline came first."""
+        import multiprocessing
+
+        job = self.pool.map_async(fn, chunks)
         timeout = None if deadline is None else max(0.0, deadline - time.perf_counter())
         try:
             results = job.get(timeout)
