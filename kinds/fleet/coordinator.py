@@ -317,7 +317,7 @@ class Coordinator:
         total, proven, count, pass_wh, self.round_paths = got
         self._bound_from(total, proven, f"round {self.rounds_done + 1}")
         lam = self.prices.lam.copy()
-        scale = self.prob.weight if self.cfg.price_step == "weighted" else None
+        scale = None if self.cfg.price_step == "uniform" else self.prob.weight  # lp's fallback: weighted steps
         search = self.cfg.energy_search and len(self.windows) > 0
         if self.master is not None:  # column generation: the round's pass optima are the master's new columns
             self.centre.observe(lam, total)
