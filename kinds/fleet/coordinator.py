@@ -445,12 +445,13 @@ class Coordinator:
         rounds are expensive it is the best bound for a long time: on a generated 200-satellite day (seed 7) L is
         0.6680 of the weight here against 0.8816 for the heuristic start and 0.6717 conflict-free, which 63 price
         rounds from any start never got below."""
-        got = self._dual_round(self.ceiling_prices(), deadline)
+        ceiling = self.ceiling_prices()
+        got = self._dual_round(ceiling, deadline)
         if got is None:
             return None
         self._bound_from(got[0], got[1], "ceiling prices")
         if self.master is not None:  # the lowest L so far may be this one (at 200 satellites, by far)
-            self.centre.observe(np.minimum(self.ceiling_prices(), self.prob.weight), got[0])
+            self.centre.observe(ceiling, got[0])
             self.master.add(got[4])
         return got[0]
 
