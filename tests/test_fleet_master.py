@@ -86,10 +86,11 @@ def test_the_smoothed_prices_are_between_the_centre_and_the_duals():
 
 
 def test_a_master_slower_than_its_round_gives_way_to_weighted_steps_from_the_start(monkeypatch):
-    """When the master's LP is not solved within its time (a 200-satellite day), the solver drops it and goes on
-    with weighted subgradient steps from the prices it started with; the bound stays a bound."""
+    """When the master's LP is not solved within its time (a 200-satellite day) MASTER_PATIENCE rounds in a row,
+    the solver drops it and goes on with weighted subgradient steps from the prices it started with; before that
+    each such round takes a weighted step and keeps the master; the bound stays a bound."""
     from eosp.kinds.fleet.config import FleetConfig
-    from eosp.kinds.fleet.coordinator import Coordinator
+    from eosp.kinds.fleet.coordinator import MASTER_PATIENCE, Coordinator
     from eosp.kinds.fleet.master import Master
     from eosp.kinds.fleet.problem import Problem
 
@@ -99,9 +100,77 @@ def test_a_master_slower_than_its_round_gives_way_to_weighted_steps_from_the_sta
     start = prob.weight * 0.3
     coord.prices.lam = start.copy()
     monkeypatch.setattr(Master, "duals", lambda self, deadline, limit: None)  # as if out of time
+    for _ in range(MASTER_PATIENCE - 1):
+        before = coord.prices.lam.copy()
+        coord.price_round(None)
+        assert coord.master is not None  # one slow solve: kept
+        assert not np.array_equal(coord.prices.lam, before)  # a weighted step for the round
     coord.price_round(None)
     assert coord.master is None and not coord.converged
     assert np.array_equal(coord.prices.lam, start)
     coord.price_round(None)  # a weighted step now
     assert not np.array_equal(coord.prices.lam, start)
     assert coord.best_bound >= full_lp(prob) / 1.0 - 1e-9
+
+
+def test_the_master_time_limit_counts_from_the_time_already_run():
+    """HiGHS compares its time limit with the run time of every solve of the instance: a master whose solves added
+    up past one round's time must still solve the next LP within that time."""
+    from eosp.kinds.fleet.coordinator import Coordinator
+    from eosp.kinds.fleet.config import FleetConfig
+    from eosp.kinds.fleet.master import Master
+    from eosp.kinds.fleet.problem import Problem
+
+    fleet = narrow_fleet(16, 1)
+    prob = Problem.build(fleet, compute(fleet, Geometry(fleet)))
+    coord = Coordinator(prob, FleetConfig(rounds=1, time_limit=None))
+    master = Master(prob)
+    rng = np.random.default_rng(0)
+    for _ in range(5):  # columns from rounds at random prices, a solve after each
+        got = coord._dual_round(rng.uniform(0.0, 1.0, len(prob.weight)) * prob.weight, None)
+        master.add(got[4])
+        before = float(master._h.getRunTime())
+        assert master.duals(None, 0.5) is not None
+        # the limit HiGHS got is this solve's time on top of all the solves before it
+        assert float(master._h.getOptionValue("time_limit")[1]) >= before + 0.5 - 1e-9
+    assert float(master._h.getRunTime()) > 0.0
+
+
+@pytest.mark.parametrize("n_tasks,seed", [(12, 0), (16, 1), (20, 2)])
+def test_the_integer_master_is_a_schedule_of_its_columns_at_least_the_start(n_tasks, seed):
+    """The master's integer solution over its columns: one column per pass at most, every task at most once, worth
+    at least the schedule it starts from and at most the LP; the best of all packings of the columns (brute force
+    over the passes' columns where they are few)."""
+    import itertools
+
+    from eosp.kinds.fleet.config import FleetConfig
+    from eosp.kinds.fleet.coordinator import Coordinator
+    from eosp.kinds.fleet.problem import Problem, path_tasks
+
+    fleet = narrow_fleet(n_tasks, seed)
+    prob = Problem.build(fleet, compute(fleet, Geometry(fleet)))
+    coord = Coordinator(prob, FleetConfig(rounds=12, time_limit=None, price_step="lp", seed=seed))
+    coord.run()
+    master = coord.master
+    assert master is not None and master.columns > 0
+    sel = master.integer(coord.best.paths, 30.0)
+    w = prob.weight
+    passes = [master.col_pass[i] for i in sel]
+    assert len(passes) == len(set(passes))
+    tasks = np.concatenate([path_tasks(prob, master.col_pass[i], master.col_path[i]) for i in sel] or [[]])
+    assert len(tasks) == len(np.unique(tasks))
+    value = float(w[tasks.astype(np.int64)].sum())
+    assert value >= coord.best.value - 1e-9
+    master.duals(None, 10.0)
+    assert value <= master.value + 1e-9
+    by_pass: dict[int, list[set]] = {}
+    for p, path in zip(master.col_pass, master.col_path):
+        by_pass.setdefault(p, []).append(set(path_tasks(prob, p, path).tolist()))
+    choices = [[set()] + cs for cs in by_pass.values()]
+    if np.prod([len(c) for c in choices]) <= 200_000:
+        best = 0.0
+        for combo in itertools.product(*choices):
+            union = set().union(*combo)
+            if sum(len(c) for c in combo) == len(union):
+                best = max(best, float(w[list(union)].sum()) if union else 0.0)
+        assert value == pytest.approx(best, abs=1e-9)
