@@ -605,8 +605,8 @@ class Coordinator:
         """A schedule from the master's best integer solution over its columns (:meth:`Master.integer`, started
         from the best schedule), filled by coordinate descent and offered (battery repair, kept when better).
         Once, when the prices have converged: given half of the time left, at most :data:`INTEGER_MAX_S`
-        seconds, and with no time limit (``--rounds``) :data:`INTEGER_NODES` nodes, so that the schedule is the
-        same on any machine.
+        seconds, and with no time limit (``--rounds``) :data:`INTEGER_NODES` nodes as well, so that the schedule is
+        the same on any machine (where those nodes take less than the seconds).
 
         The master knows nothing of the battery, and its columns may hold tasks the battery repair barred from
         their satellite: they are kept, and the repair of :meth:`offer` takes out what the batteries cannot

@@ -79,7 +79,7 @@ class Master:
     row per task and per pass, one column per distinct schedule of a pass (its pass and its set of tasks)."""
 
     prob: Problem
-    seen: set = field(default_factory=set)
+    seen: dict = field(default_factory=dict)  # (pass, its tasks as bytes) -> the column's index
     value: float = 0.0  # the master's last optimum (the weight the columns serve, fractionally)
     solved: bool = False  # whether the last solve reached the optimum (its solution is then :meth:`ranked`)
     col_pass: list = field(default_factory=list)  # each column's pass
@@ -113,7 +113,7 @@ class Master:
             key = (p, tasks.tobytes())
             if key in self.seen:
                 continue
-            self.seen.add(key)
+            self.seen[key] = len(self.col_pass)
             self.col_pass.append(p)
             self.col_path.append(path)
             cost.append(float(w[tasks].sum()))
@@ -157,7 +157,7 @@ class Master:
     def integer(self, start: list[np.ndarray], limit: float, nodes: int | None = None) -> list[int]:
         """The best integer solution of the master over the columns held (each pass one of its columns or none,
         each task at most once: a schedule apart from the battery) that HiGHS finds within `limit` seconds (and
-        `nodes` branch-and-bound nodes when given: a budget that is the same on any machine), started from the
+        `nodes` branch-and-bound nodes when given: the same result on any machine when they end first), started from the
         schedule `start` (one path per pass; those of its paths the master holds, :meth:`add`).  The LP of the
         price rounds is left as it is (a copy is solved).  Returns the indices of its columns (:attr:`col_pass`,
         :attr:`col_path`); empty when none is found.
@@ -178,16 +178,10 @@ class Master:
         if nodes is not None:
             h.setOptionValue("mip_max_nodes", int(nodes))
         x0 = np.zeros(m)
-        index = {}
-        for i, (p, path) in enumerate(zip(self.col_pass, self.col_path)):
-            index.setdefault(p, []).append(i)
         for p, path in enumerate(start):
-            if len(path) == 0:
-                continue
-            for i in index.get(p, []):
-                if np.array_equal(self.col_path[i], path):
-                    x0[i] = 1.0
-                    break
+            i = self.seen.get((p, np.unique(path_tasks(self.prob, p, path)).tobytes())) if len(path) else None
+            if i is not None:
+                x0[i] = 1.0
         sol = hs.HighsSolution()
         sol.col_value = x0.tolist()
         sol.value_valid = True
