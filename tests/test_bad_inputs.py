@@ -1516,10 +1516,14 @@ if __name__ == "__main__":
 def test_ctrl_c_at_any_moment_of_the_onera_search_leaves_a_whole_plan(tmp_path):
     """The plan is edited in place (insert, propagate the start times, journal the edit): a Ctrl-C that lands
     inside an edit must wait for its end (eosp.interrupt.HeldInterrupt).  SIGINT at many moments of the greedy and
-    the search (raised from a SIGALRM handler, so that it lands between two bytecodes of this very thread, as a
-    Ctrl-C does): every interrupted plan is accepted by the checker, with the value the solver reports."""
+    the search, raised by a trace function at the n-th line the solver runs (n drawn log-uniformly up to a few
+    seconds of search), so that it lands between two lines of this very thread, as a Ctrl-C does, at a moment
+    that does not depend on timers or the scheduler (a process timer's signal was once not answered within the
+    5 s of a solve on a loaded machine): every interrupted plan is accepted by the checker, with the value the
+    solver reports."""
     import random
     import signal
+    import sys
 
     from eosp.kinds.onera.search import OneraConfig, solve
     from eosp.onera.check import validate
@@ -1527,21 +1531,31 @@ def test_ctrl_c_at_any_moment_of_the_onera_search_leaves_a_whole_plan(tmp_path):
 
     (tmp_path / "i.pb").write_text(_onera_instance(400))
     f = read_pb(tmp_path / "i.pb")
-    solve(f, OneraConfig(time_limit=None, moves=20))  # warm, so that the moments below fall in the search
     rng = random.Random(0)
     assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
-    alarm = signal.signal(signal.SIGALRM, lambda *_: signal.raise_signal(signal.SIGINT))
-    try:
-        for _ in range(40):
-            signal.setitimer(signal.ITIMER_REAL, rng.uniform(0.001, 0.3))
-            try:
-                sol = solve(f, OneraConfig(time_limit=5.0, bound="conflict-free"))
-            finally:
-                signal.setitimer(signal.ITIMER_REAL, 0)
-            assert sol.info["status"] == "interrupted", sol.info["status"]
-            res = validate(f, sol.schedule)
-            assert res.valid, res.first
-            assert abs(res.value - sol.value) < 1e-6
-    finally:
-        signal.signal(signal.SIGALRM, alarm)
+    for _ in range(40):
+        left = [int(10 ** rng.uniform(0, 6.5))]  # lines of the search until the Ctrl-C
+        started = [False]
+
+        def tracer(frame, event, arg):  # noqa: ARG001 - sys.settrace's shape
+            if left[0] <= 0:
+                return None
+            started[0] = started[0] or (event == "call" and frame.f_code.co_name == "greedy")
+            if event == "line" and started[0]:
+                left[0] -= 1
+                if left[0] == 0:
+                    sys.settrace(None)
+                    signal.raise_signal(signal.SIGINT)
+                    return None
+            return tracer
+
+        sys.settrace(tracer)
+        try:
+            sol = solve(f, OneraConfig(time_limit=30.0, bound="conflict-free"))
+        finally:
+            sys.settrace(None)
+        assert left[0] == 0 and sol.info["status"] == "interrupted", (left, sol.info["status"])
+        res = validate(f, sol.schedule)
+        assert res.valid, res.first
+        assert abs(res.value - sol.value) < 1e-6
     assert signal.getsignal(signal.SIGINT) is signal.default_int_handler  # the handler is given back
