@@ -1516,11 +1516,10 @@ if __name__ == "__main__":
 def test_ctrl_c_at_any_moment_of_the_onera_search_leaves_a_whole_plan(tmp_path):
     """The plan is edited in place (insert, propagate the start times, journal the edit): a Ctrl-C that lands
     inside an edit must wait for its end (eosp.interrupt.HeldInterrupt).  SIGINT at many moments of the greedy and
-    the search, raised by a trace function at the n-th line the solver runs (n drawn log-uniformly up to a few
-    seconds of search), so that it lands between two lines of this very thread, as a Ctrl-C does, at a moment
-    that does not depend on timers or the scheduler (a process timer's signal was once not answered within the
-    5 s of a solve on a loaded machine): every interrupted plan is accepted by the checker, with the value the
-    solver reports."""
+    the search, raised by a trace function at the n-th line the solver runs from the greedy's start (n drawn
+    log-uniformly up to a few seconds of search), so that it lands between two lines of this very thread, as a
+    Ctrl-C does, at a moment that depends on no timer, thread or scheduler (the search keeps the GIL for seconds):
+    every interrupted plan is accepted by the checker, with the value the solver reports."""
     import random
     import signal
     import sys
