@@ -44,7 +44,7 @@ FEATURE_RULES: dict[str, dict[str, float]] = {
     "earliest_share": {"earliest_start": -1.0, "weight_share": 1.0, **SKIP_LAST},
 }
 
-DEFAULT_RULE = "earliest_scarce"  # the best rule on the training fleets (experiments/fleet_rules.py)
+DEFAULT_RULE = "earliest_scarce"  # the best rule on the first training fleets (experiments/fleet_rules.py)
 
 
 @dataclass
