@@ -1548,11 +1548,12 @@ def test_ctrl_c_at_any_moment_of_the_onera_search_leaves_a_whole_plan(tmp_path):
                     return None
             return tracer
 
+        outer = sys.gettrace()  # a debugger's or coverage's tracer, given back after each solve
         sys.settrace(tracer)
         try:
             sol = solve(f, OneraConfig(time_limit=30.0, bound="conflict-free"))
         finally:
-            sys.settrace(None)
+            sys.settrace(outer)
         assert left[0] == 0 and sol.info["status"] == "interrupted", (left, sol.info["status"])
         res = validate(f, sol.schedule)
         assert res.valid, res.first
