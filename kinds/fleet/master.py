@@ -166,13 +166,13 @@ class Master:
         (0.8213 of the weight on a generated test_hard-like case, where the moves stayed at 0.8070 for 90 s);
         picking the best integral combination of them is a set packing that the MIP solver settles where random
         recoveries and local moves do not."""
+        m = len(self.col_pass)
+        if m == 0:
+            return []
         hs = self._hs
         h = quiet_highs()
         h.setOptionValue("threads", 1)
         h.passModel(self._h.getLp())
-        m = len(self.col_pass)
-        if m == 0:
-            return []
         h.changeColsIntegrality(m, np.arange(m, dtype=np.int32), np.full(m, hs.HighsVarType.kInteger))
         h.setOptionValue("time_limit", max(0.01, float(limit)))
         if nodes is not None:
@@ -191,4 +191,3 @@ class Master:
         if len(x) != m:
             return []
         return np.flatnonzero(x > 0.5).tolist()
-
