@@ -49,7 +49,7 @@ def run_case(case: Path, split: str, args: argparse.Namespace) -> dict:
     t_build = time.perf_counter() - t0
     cfg = FleetConfig(pass_solver=args.pass_solver, time_limit=args.time_limit, seed=args.seed,
                       warm_start=args.warm_start, price_step=args.price_step,
-                      energy_bound=args.energy_bound)
+                      energy_bound=args.energy_bound, integer_energy=not args.no_integer_energy)
     sol = solve(fleet, opps, cfg, problem=prob, t0=t_read)
     solve_s = time.perf_counter() - t_read
     wall = time.perf_counter() - t0
@@ -126,6 +126,8 @@ def main() -> None:
     p.add_argument("--price-step", default="lp", choices=["uniform", "weighted", "lp"],
                    help="the fleet solver's --price-step")
     p.add_argument("--energy-bound", action="store_true", help="the fleet solver's --energy-bound")
+    p.add_argument("--no-integer-energy", action="store_true",
+                   help="the fleet solver's --integer-energy false (the integer round without energy rows)")
     p.add_argument("--at", type=float, nargs="*", default=[5.0, 10.0, 30.0, 120.0],
                    help="seconds after reading at which the anytime curve is sampled")
     p.add_argument("--out", default="runs/bench-fleet")

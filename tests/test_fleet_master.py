@@ -174,3 +174,74 @@ def test_the_integer_master_is_a_schedule_of_its_columns_at_least_the_start(n_ta
             if sum(len(c) for c in combo) == len(union):
                 best = max(best, float(w[list(union)].sum()) if union else 0.0)
         assert value == pytest.approx(best, abs=1e-9)
+
+
+@pytest.mark.parametrize("n_tasks,seed,initial", [(12, 0, 3.0), (16, 1, 2.5), (20, 2, 3.0)])
+def test_the_integer_master_with_energy_rows_keeps_every_window_with_the_checkers_slews(n_tasks, seed, initial):
+    """With the battery's energy windows as rows (:meth:`Master.integer` with ``windows``), on fleets whose battery
+    binds: each column's energy (:meth:`Master.energy_rows`) is its observations' least energy plus the slews
+    between them as the checker's timelines derive them (maneuver windows of :func:`eosp.fleet.timeline.intervals`,
+    settling left out after the first); the solution keeps every row; it is the best packing of the columns that
+    keeps them (brute force), and at most the packing without rows."""
+    import itertools
+
+    from eosp.fleet.timeline import intervals, timelines
+    from eosp.kinds.fleet.config import FleetConfig
+    from eosp.kinds.fleet.coordinator import Coordinator
+    from eosp.kinds.fleet.problem import Problem, path_tasks, path_wh, schedule_windows
+    from tests.test_fleet_energy import weak_battery
+
+    fleet = weak_battery(n_tasks, seed, initial)
+    prob = Problem.build(fleet, compute(fleet, Geometry(fleet)))
+    coord = Coordinator(prob, FleetConfig(rounds=12, time_limit=None, price_step="lp", seed=seed,
+                                          integer_energy=False))
+    coord.run()
+    master = coord.master
+    for p, path in enumerate(coord.round_paths):  # more columns: the last round's optima, battery or not
+        master.add([path if q == p else np.zeros(0, np.int64) for q in range(len(prob.passes))])
+    windows = schedule_windows(prob)
+    assert len(windows) > 0
+    starts, idx, val = master.energy_rows(windows)
+    b = fleet.satellites.battery
+    settle = fleet.satellites.attitude.settling_s
+    for i, (p, path) in enumerate(zip(master.col_pass, master.col_path)):  # each column's energy, from the checker
+        pg = prob.passes[p]
+        rows = pg.rows[path - 1]
+        task = prob.opps.task[rows]
+        st = prob.opps.start[rows].astype(np.float64) * fleet.horizon.action_step_s
+        tl = timelines(fleet, prob.los, prob.opps.satellite[rows], task, st, st + fleet.tasks.duration_s[task])
+        obs, man = intervals(prob.los, tl[pg.satellite], pg.satellite)
+        slew_s = ((obs.start - man.start) / 1e6 - settle[pg.satellite])[1:]
+        want = path_wh(pg, path) + float(b.slew_w[pg.satellite]) * float(slew_s.sum()) / 3600.0
+        assert master.col_wh[i] == pytest.approx(want, rel=1e-6, abs=1e-9)
+    sel = master.integer(coord.best.paths, 30.0, windows=windows)
+    x = np.zeros(master.columns)
+    x[sel] = 1.0
+    ends = np.r_[starts, len(idx)]
+    used = np.array([float((val[a:z] * x[idx[a:z]]).sum()) for a, z in zip(ends[:-1], ends[1:])])
+    assert (used <= windows.rhs_wh + 1e-7).all()
+    w = prob.weight
+
+    def value(cols) -> float:
+        tasks = [t for i in cols for t in path_tasks(prob, master.col_pass[i], master.col_path[i]).tolist()]
+        return float(w[tasks].sum())
+
+    got = value(sel)
+    assert got <= value(master.integer(coord.best.paths, 30.0)) + 1e-9
+    by_pass: dict[int, list[int]] = {}
+    for i, p in enumerate(master.col_pass):
+        by_pass.setdefault(p, []).append(i)
+    choices = [[None] + cs for cs in by_pass.values()]
+    if np.prod([len(c) for c in choices]) <= 100_000:
+        best = 0.0
+        for combo in itertools.product(*choices):
+            cols = [i for i in combo if i is not None]
+            tasks = [t for i in cols for t in path_tasks(prob, master.col_pass[i], master.col_path[i]).tolist()]
+            if len(tasks) != len(set(tasks)):
+                continue
+            y = np.zeros(master.columns)
+            y[cols] = 1.0
+            if all(float((val[a:z] * y[idx[a:z]]).sum()) <= r + 1e-9
+                   for a, z, r in zip(ends[:-1], ends[1:], windows.rhs_wh)):
+                best = max(best, value(cols))
+        assert got == pytest.approx(best, abs=1e-9)

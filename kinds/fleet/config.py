@@ -51,6 +51,10 @@ class FleetConfig(UtilityConfig):
     """With --energy-bound, the share of the bound's energy prices (what a Wh is worth in each pass, from the
     battery's energy windows) that the schedules' pass problems pay (construction, coordinate descent, moves):
     0 leaves energy to the battery repair alone."""
+    integer_energy: bool = True
+    """The battery's energy windows as rows of the master's integer solution (--price-step lp): each pass
+    schedule's energy with the slews between its observations, so that the packing is one the batteries nearly
+    hold and the battery repair takes little out of it.  Schedules only; the bound is unchanged."""
     workers: int = ranged(1, 1, 256)
     """Processes solving the passes of a price round (forked from this one, the pass graphs shared)."""
     warm_start: str = choice("heuristic", "none", "heuristic", "learned")

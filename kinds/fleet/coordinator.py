@@ -47,7 +47,7 @@ from eosp.kinds.fleet.master import Centre, Master
 from eosp.kinds.fleet.pool import InProcessPool, PassPool
 from eosp.kinds.fleet.prices import Prices
 from eosp.kinds.fleet.problem import (PassResult, Primal, Problem, path_tasks, path_wh, priced, rewalk,
-                                      solve_pass)
+                                      schedule_windows, solve_pass)
 
 CHECK_MARGIN = 1.5  # the final check's estimate times this (a better schedule has more actions, a loaded machine)
 MASTER_MIN_S = 1.0  # seconds a master LP solve may always take (else at most the round's pass solves' time)
@@ -616,13 +616,14 @@ class Coordinator:
         columns of the stretch from the last full charge to the failure) were tried and not kept: the re-solves
         cost the time the first solve needed and the repair still took out most of what they saved."""
         self.integer_done = True
+        windows = schedule_windows(self.prob) if self.cfg.integer_energy else None
         if deadline is None:
-            sel = self.master.integer(self.best.paths, INTEGER_MAX_S, INTEGER_NODES)
+            sel = self.master.integer(self.best.paths, INTEGER_MAX_S, INTEGER_NODES, windows)
         else:
             left = deadline - time.perf_counter()
             if left <= 0:
                 return
-            sel = self.master.integer(self.best.paths, min(INTEGER_MAX_S, 0.5 * left))
+            sel = self.master.integer(self.best.paths, min(INTEGER_MAX_S, 0.5 * left), windows=windows)
         if not sel:
             return
         primal = self.empty()

@@ -31,7 +31,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from eosp.kinds.fleet.problem import Problem, path_tasks
+from eosp.fleet.energy import EnergyWindows
+from eosp.kinds.fleet.problem import Problem, path_slew_wh, path_tasks, path_wh
 
 SMOOTHING = 0.5  # Wentges' a: the share of the centre in the prices of the next round
 
@@ -84,6 +85,7 @@ class Master:
     solved: bool = False  # whether the last solve reached the optimum (its solution is then :meth:`ranked`)
     col_pass: list = field(default_factory=list)  # each column's pass
     col_path: list = field(default_factory=list)  # and its path in the pass graph
+    col_wh: list = field(default_factory=list)  # its energy with its slews (energy_rows), computed when first needed
 
     def __post_init__(self) -> None:
         import highspy
@@ -154,12 +156,34 @@ class Master:
         used = used[np.argsort(-x[used], kind="stable")]
         return [(self.col_pass[i], self.col_path[i]) for i in used.tolist()]
 
-    def integer(self, start: list[np.ndarray], limit: float, nodes: int | None = None) -> list[int]:
+    def energy_rows(self, windows: EnergyWindows) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The rows ``sum over the columns c of a window's passes of E_c x_c <= rhs`` of the battery's energy
+        `windows`, E_c a column's energy with its slews (:func:`path_wh` + :func:`path_slew_wh`), as CSR over the
+        windows (starts, column indices, values)."""
+        prob = self.prob
+        for i in range(len(self.col_wh), len(self.col_pass)):
+            p, path = self.col_pass[i], self.col_path[i]
+            self.col_wh.append(path_wh(prob.passes[p], path) + path_slew_wh(prob, p, path))
+        col_pass = np.asarray(self.col_pass, dtype=np.int64)
+        by_pass = np.argsort(col_pass, kind="stable")
+        ptr = np.searchsorted(col_pass[by_pass], np.arange(len(prob.passes) + 1))
+        wh = np.asarray(self.col_wh)
+        starts, index = [0], []
+        for lo, hi in zip(windows.lo.tolist(), windows.hi.tolist()):
+            index.append(by_pass[ptr[lo]:ptr[hi + 1]])
+            starts.append(starts[-1] + len(index[-1]))
+        idx = np.concatenate(index) if index else np.zeros(0, np.int64)
+        return np.asarray(starts[:-1], np.int32), idx.astype(np.int32), wh[idx]
+
+    def integer(self, start: list[np.ndarray], limit: float, nodes: int | None = None,
+                windows: EnergyWindows | None = None) -> list[int]:
         """The best integer solution of the master over the columns held (each pass one of its columns or none,
         each task at most once: a schedule apart from the battery) that HiGHS finds within `limit` seconds (and
         `nodes` branch-and-bound nodes when given: the same result on any machine when they end first), started from the
-        schedule `start` (one path per pass; those of its paths the master holds, :meth:`add`).  The LP of the
-        price rounds is left as it is (a copy is solved).  Returns the indices of its columns (:attr:`col_pass`,
+        schedule `start` (one path per pass; those of its paths the master holds, :meth:`add`).  With `windows`
+        the battery's energy windows are rows as well (:meth:`energy_rows`: each column's energy with the slews
+        between its observations), so that the packing is one the batteries nearly hold.  The LP of the price
+        rounds is left as it is (a copy is solved).  Returns the indices of its columns (:attr:`col_pass`,
         :attr:`col_path`); empty when none is found.
 
         Why: once the prices minimise L, the columns the rounds found hold schedules close to the LP's value
@@ -174,6 +198,9 @@ class Master:
         h.setOptionValue("threads", 1)
         h.passModel(self._h.getLp())
         h.changeColsIntegrality(m, np.arange(m, dtype=np.int32), np.full(m, hs.HighsVarType.kInteger))
+        if windows is not None and len(windows):
+            starts, idx, val = self.energy_rows(windows)
+            h.addRows(len(windows), np.full(len(windows), -hs.kHighsInf), windows.rhs_wh, len(idx), starts, idx, val)
         h.setOptionValue("time_limit", max(0.01, float(limit)))
         if nodes is not None:
             h.setOptionValue("mip_max_nodes", int(nodes))

@@ -158,6 +158,37 @@ def path_wh(pg: PassGraph, path: np.ndarray) -> float:
     return float(pg.energy_wh[pg.graph.node_acq[path]].sum())
 
 
+def path_slew_wh(prob: Problem, p: int, path: np.ndarray) -> float:
+    """The slew energy (Wh, slew power times slew time) of the maneuvers between consecutive observations of a path
+    of pass `p`, at their nodes' times, as the checker derives them (settling left out: :func:`path_wh` counts it).
+    The maneuver into the path's first observation (from the pass before) is not counted.  Exact for the path as
+    the pass graph places it; what the battery repair will find for it, where :func:`path_wh` counts the least
+    energy any observation takes."""
+    if len(path) < 2:
+        return 0.0
+    pg, fleet = prob.passes[p], prob.fleet
+    sat = pg.satellite
+    rows = pg.rows[np.asarray(path, dtype=np.int64) - 1]
+    task = prob.opps.task[rows]
+    st = prob.opps.start[rows].astype(np.float64) * fleet.horizon.action_step_s
+    en = st + fleet.tasks.duration_s[task]
+    need = prob.los.need_s(sat, prob.los.los(sat, task[:-1], en[:-1]), prob.los.los(sat, task[1:], st[1:]))
+    slew_s = np.maximum(0.0, need - float(fleet.satellites.attitude.settling_s[sat]))
+    return float(fleet.satellites.battery.slew_w[sat]) * float(slew_s.sum()) / 3600.0
+
+
+def schedule_windows(prob: Problem) -> EnergyWindows:
+    """The battery's energy windows (:func:`eosp.fleet.energy.energy_windows`) that a path's energy with its slews
+    (:func:`path_wh` + :func:`path_slew_wh`) could overspend: a pass may spend its observations' energy plus slewing
+    throughout it.  For schedules only (the integer round's rows): slews between observations are not part of
+    the bound's accounting."""
+    fleet, b = prob.fleet, prob.fleet.satellites.battery
+    most = np.array([float(pg.energy_wh.sum()) + float(b.slew_w[pg.satellite]) * float(prob.pass_time[p, 1] - prob.pass_time[p, 0]) / 3600.0
+                     for p, pg in enumerate(prob.passes)])
+    sats = np.array([pg.satellite for pg in prob.passes], dtype=np.int64)
+    return energy_windows(fleet, prob.sun or SunCache(prob.geo), sats, prob.pass_time, most)
+
+
 def rewalk(pg: PassGraph, path: np.ndarray) -> np.ndarray:
     """The acquisitions of `path` (pass-graph nodes, in order) followed along the graph's arcs from the source:
     each at its earliest node after the previous one; one that cannot follow is skipped."""
