@@ -608,32 +608,43 @@ class Coordinator:
         seconds, and with no time limit (``--rounds``) :data:`INTEGER_NODES` nodes as well, so that the schedule is
         the same on any machine (where those nodes take less than the seconds).
 
-        The master knows nothing of the battery, and its columns may hold tasks the battery repair barred from
-        their satellite: they are kept, and the repair of :meth:`offer` takes out what the batteries cannot
-        hold.  On a generated test_hard-like case (hardgen/case_0001, 60 s) the integer solution served 0.8186 of
-        the weight, 0.8096 after the repair, where the schedules of the moves had stayed at 0.8069 (left out
-        of the barred tasks it served 0.8067).  Rows for the batteries the solution runs dry (the energy of the
-        columns of the stretch from the last full charge to the failure) were tried and not kept: the re-solves
-        cost the time the first solve needed and the repair still took out most of what they saved."""
+        With ``integer_energy`` (the default) the battery's energy windows are rows of the integer program, each
+        column's energy its observations' least energy plus the slews between them (:func:`schedule_windows`,
+        :meth:`Master.energy_rows`).  Why: on test_hard/case_0005 the first schedule runs five batteries dry, each
+        from the horizon start without a full charge again (6-10 h), and there the windows' accounting without
+        the slews left about 230 Wh a battery of slack, what the slews between observations spent (83% of all
+        slew energy, the rest the first maneuver of each pass); counted, the packing is one the batteries nearly
+        hold: WCR at 120 s 0.8498 -> 0.8576 (docs/results.md).  The columns may hold tasks the battery repair
+        barred from their satellite: they are kept, and the repair of :meth:`offer` takes out what the batteries
+        still cannot hold (first maneuvers of passes, the windows' sunlight over-estimate).  When that schedule is
+        not better than the best, the integer solution without the rows is tried as well (with half of the time
+        then left): a repaired schedule is not always a packing of columns (the repair keeps part of a column), so
+        the rows can cut off a packing that the repair turns into a better schedule (test_hard/case_0004: 0.8847
+        without the rows, nothing better than 0.8836 with them).  Rows only for the
+        batteries a solution runs dry, added after each solve and without the slews, were tried before and not
+        kept: the re-solves cost the time the first solve needed and the repair still took out most of what they
+        saved."""
         self.integer_done = True
-        windows = schedule_windows(self.prob) if self.cfg.integer_energy else None
-        if deadline is None:
-            sel = self.master.integer(self.best.paths, INTEGER_MAX_S, INTEGER_NODES, windows)
-        else:
-            left = deadline - time.perf_counter()
-            if left <= 0:
-                return
-            sel = self.master.integer(self.best.paths, min(INTEGER_MAX_S, 0.5 * left), windows=windows)
-        if not sel:
-            return
-        primal = self.empty()
-        for i in sel:
-            p, path = self.master.col_pass[i], self.master.col_path[i]
-            if self.frozen[p]:
+        tries = ([schedule_windows(self.prob)] if self.cfg.integer_energy else []) + [None]
+        for windows in tries:
+            if deadline is None:
+                sel = self.master.integer(self.best.paths, INTEGER_MAX_S, INTEGER_NODES, windows)
+            else:
+                left = deadline - time.perf_counter()
+                if left <= 0:
+                    return
+                sel = self.master.integer(self.best.paths, min(INTEGER_MAX_S, 0.5 * left), windows=windows)
+            if not sel:
                 continue
-            self._assign(primal, p, path)  # barred tasks too: the battery repair says what the battery allows
-        self.descend(primal, list(range(len(self.prob.passes))), deadline)
-        self.offer(primal, deadline)
+            primal = self.empty()
+            for i in sel:
+                p, path = self.master.col_pass[i], self.master.col_path[i]
+                if self.frozen[p]:
+                    continue
+                self._assign(primal, p, path)  # barred tasks too: the battery repair says what the battery allows
+            self.descend(primal, list(range(len(self.prob.passes))), deadline)
+            if self.offer(primal, deadline):
+                return
 
     def run(self) -> Primal:
         cfg, prob = self.cfg, self.prob
