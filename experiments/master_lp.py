@@ -4,10 +4,11 @@ what the battery's energy windows weigh at that minimum when they are rows of th
 The fleet solver (``--price-step lp``, :mod:`eosp.kinds.fleet.master`) interleaves this loop with schedules; here
 it runs by itself from the first schedule and the heuristic prices: each round solves every pass under the
 smoothed prices (the solver's own :meth:`Coordinator._dual_round`), adds the passes' schedules as columns of a
-HiGHS LP (task rows, pass rows and, with ``--energy-rows``, one row per energy window with each column's energy),
-and prints L, the lowest L so far, the LP's value and how many windows have a dual above 0.
+HiGHS LP (task rows, pass rows and, with ``--energy-rows``, one row per energy window with each column's energy:
+its observations' least energy, plus with ``--slews`` the slews between them, :func:`path_slew_wh`), and prints L,
+the lowest L so far, the LP's value and how many windows have a dual above 0.
 
-    python experiments/master_lp.py CASE_OR_FLEET_DIR --time 60 [--energy-rows]
+    python experiments/master_lp.py CASE_OR_FLEET_DIR --time 60 [--energy-rows [--slews]]
 """
 
 from __future__ import annotations
@@ -24,6 +25,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("fleet", help="an aeossp case directory or a fleet directory")
     ap.add_argument("--time", type=float, default=60.0, help="seconds of rounds after the first schedule")
     ap.add_argument("--energy-rows", action="store_true", help="the energy windows as rows of the LP")
+    ap.add_argument("--slews", action="store_true", help="with --energy-rows: each column's energy with its slews")
     args = ap.parse_args(argv)
 
     import highspy
@@ -32,7 +34,7 @@ def main(argv: list[str] | None = None) -> int:
     from eosp.kinds.fleet.config import FleetConfig
     from eosp.kinds.fleet.coordinator import Coordinator
     from eosp.kinds.fleet.master import SMOOTHING, quiet_highs
-    from eosp.kinds.fleet.problem import path_tasks, path_wh
+    from eosp.kinds.fleet.problem import path_slew_wh, path_tasks, path_wh
     from eosp.kinds.fleet.warmstart import heuristic_prices
 
     prob = read_problem(args.fleet)
@@ -62,7 +64,7 @@ def main(argv: list[str] | None = None) -> int:
             if len(tasks) == 0 or key in seen:
                 continue
             seen.add(key)
-            e = path_wh(prob.passes[p], paths[p])
+            e = path_wh(prob.passes[p], paths[p]) + (path_slew_wh(prob, p, paths[p]) if args.slews else 0.0)
             cost.append(float(w[tasks].sum()))
             starts.append(len(index))
             index += tasks.tolist() + [n + p] + [n + P + k for k in holders[p]]

@@ -188,7 +188,7 @@ def test_the_integer_master_with_energy_rows_keeps_every_window_with_the_checker
     from eosp.fleet.timeline import intervals, timelines
     from eosp.kinds.fleet.config import FleetConfig
     from eosp.kinds.fleet.coordinator import Coordinator
-    from eosp.kinds.fleet.problem import Problem, path_tasks, path_wh, schedule_windows
+    from eosp.kinds.fleet.problem import Problem, path_slew_wh, path_tasks, path_wh, schedule_windows
     from tests.test_fleet_energy import weak_battery
 
     fleet = weak_battery(n_tasks, seed, initial)
@@ -201,7 +201,8 @@ def test_the_integer_master_with_energy_rows_keeps_every_window_with_the_checker
         master.add([path if q == p else np.zeros(0, np.int64) for q in range(len(prob.passes))])
     windows = schedule_windows(prob)
     assert len(windows) > 0
-    starts, idx, val = master.energy_rows(windows)
+    keep, starts, idx, val = master.energy_rows(windows, coord.best.paths)
+    assert np.array_equal(keep, np.arange(len(windows)))
     b = fleet.satellites.battery
     settle = fleet.satellites.attitude.settling_s
     for i, (p, path) in enumerate(zip(master.col_pass, master.col_path)):  # each column's energy, from the checker
@@ -220,6 +221,14 @@ def test_the_integer_master_with_energy_rows_keeps_every_window_with_the_checker
     ends = np.r_[starts, len(idx)]
     used = np.array([float((val[a:z] * x[idx[a:z]]).sum()) for a, z in zip(ends[:-1], ends[1:])])
     assert (used <= windows.rhs_wh + 1e-7).all()
+    # under a budget of entries, the windows with the least slack under the schedule given are the rows kept
+    pass_wh = np.array([path_wh(prob.passes[p], path) + path_slew_wh(prob, p, path) if len(path) else 0.0
+                        for p, path in enumerate(coord.best.paths)])
+    order = np.argsort(windows.rhs_wh - windows.used(pass_wh), kind="stable")
+    budget = int(np.diff(ends).max())
+    few, _, f_idx, _ = master.energy_rows(windows, coord.best.paths, max_nonzeros=budget)
+    assert 1 <= len(few) < len(windows) and len(f_idx) <= budget
+    assert np.array_equal(few, np.sort(order[:len(few)]))
     w = prob.weight
 
     def value(cols) -> float:

@@ -36,6 +36,7 @@ from eosp.fleet.energy import EnergyWindows
 from eosp.kinds.fleet.problem import Problem, path_slew_wh, path_tasks, path_wh
 
 SMOOTHING = 0.5  # Wentges' a: the share of the centre in the prices of the next round
+ENERGY_ROW_NONZEROS = 2_000_000  # entries of the integer program's energy rows at most (Master.energy_rows)
 
 
 def quiet_highs():
@@ -157,10 +158,13 @@ class Master:
         used = used[np.argsort(-x[used], kind="stable")]
         return [(self.col_pass[i], self.col_path[i]) for i in used.tolist()]
 
-    def energy_rows(self, windows: EnergyWindows) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def energy_rows(self, windows: EnergyWindows, start: list[np.ndarray],
+                    max_nonzeros: int = ENERGY_ROW_NONZEROS) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """The rows ``sum over the columns c of a window's passes of E_c x_c <= rhs`` of the battery's energy
-        `windows`, E_c a column's energy with its slews (:func:`path_wh` + :func:`path_slew_wh`), as CSR over the
-        windows (starts, column indices, values)."""
+        `windows`, E_c a column's energy with its slews (:func:`path_wh` + :func:`path_slew_wh`): the windows kept
+        (indices), and the rows as CSR over them (starts, column indices, values).  At most `max_nonzeros`
+        entries: beyond them the windows with the least slack under the schedule `start` (one path per pass) are
+        kept first (a 200-satellite day has 258,185 windows of 33 passes each on average)."""
         prob = self.prob
         for i in range(len(self.col_wh), len(self.col_pass)):
             p, path = self.col_pass[i], self.col_path[i]
@@ -168,13 +172,19 @@ class Master:
         col_pass = np.asarray(self.col_pass, dtype=np.int64)
         by_pass = np.argsort(col_pass, kind="stable")
         ptr = np.searchsorted(col_pass[by_pass], np.arange(len(prob.passes) + 1))
+        count = ptr[windows.hi + 1] - ptr[windows.lo]
+        keep = np.arange(len(windows))
+        if int(count.sum()) > max_nonzeros:
+            pass_wh = np.array([path_wh(prob.passes[p], path) + path_slew_wh(prob, p, path) if len(path) else 0.0
+                                for p, path in enumerate(start)])
+            slack = windows.rhs_wh - windows.used(pass_wh)
+            keep = np.argsort(slack, kind="stable")
+            keep = np.sort(keep[np.cumsum(count[keep]) <= max_nonzeros])
         wh = np.asarray(self.col_wh)
-        starts, index = [0], []
-        for lo, hi in zip(windows.lo.tolist(), windows.hi.tolist()):
-            index.append(by_pass[ptr[lo]:ptr[hi + 1]])
-            starts.append(starts[-1] + len(index[-1]))
+        starts = np.r_[0, np.cumsum(count[keep])[:-1]].astype(np.int32) if len(keep) else np.zeros(0, np.int32)
+        index = [by_pass[ptr[lo]:ptr[hi + 1]] for lo, hi in zip(windows.lo[keep].tolist(), windows.hi[keep].tolist())]
         idx = np.concatenate(index) if index else np.zeros(0, np.int64)
-        return np.asarray(starts[:-1], np.int32), idx.astype(np.int32), wh[idx]
+        return keep, starts, idx.astype(np.int32), wh[idx]
 
     def integer(self, start: list[np.ndarray], limit: float, nodes: int | None = None,
                 windows: EnergyWindows | None = None) -> list[int]:
@@ -200,8 +210,8 @@ class Master:
         h.passModel(self._h.getLp())
         h.changeColsIntegrality(m, np.arange(m, dtype=np.int32), np.full(m, hs.HighsVarType.kInteger))
         if windows is not None and len(windows):
-            starts, idx, val = self.energy_rows(windows)
-            h.addRows(len(windows), np.full(len(windows), -hs.kHighsInf), windows.rhs_wh, len(idx), starts, idx, val)
+            keep, starts, idx, val = self.energy_rows(windows, start)
+            h.addRows(len(keep), np.full(len(keep), -hs.kHighsInf), windows.rhs_wh[keep], len(idx), starts, idx, val)
         h.setOptionValue("time_limit", max(0.01, float(limit)))
         if nodes is not None:
             h.setOptionValue("mip_max_nodes", int(nodes))
