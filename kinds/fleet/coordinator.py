@@ -612,9 +612,9 @@ class Coordinator:
         column's energy its observations' least energy plus the slews between them (:func:`schedule_windows`,
         :meth:`Master.energy_rows`).  Why: on test_hard/case_0005 the first schedule runs five batteries dry, each
         from the horizon start without a full charge again (6-10 h), and there the windows' accounting without
-        the slews left about 230 Wh a battery of slack, what the slews between observations spent (83% of all
-        slew energy, the rest the first maneuver of each pass); counted, the packing is one the batteries nearly
-        hold: WCR at 120 s 0.8498 -> 0.8576 (docs/results.md).  The columns may hold tasks the battery repair
+        the slews left 202-248 Wh a battery of slack, what the slews spent beyond the settling (82-87% of it between
+        observations of one pass, the rest the first maneuver of each pass; experiments/battery_stretches.py);
+        counted, the packing is one the batteries nearly hold: WCR at 120 s 0.8498 -> 0.8576 (docs/results.md).  The columns may hold tasks the battery repair
         barred from their satellite: they are kept, and the repair of :meth:`offer` takes out what the batteries
         still cannot hold (first maneuvers of passes, the windows' sunlight over-estimate).  When that schedule is
         not better than the best, the integer solution without the rows is tried as well (with half of the time
