@@ -62,7 +62,8 @@ def main(argv: list[str] | None = None) -> int:
         print(f"satellite {fleet.satellites.ids[sat]}: dry at {end[kf] / 6e7:.0f} min after a stretch of "
               f"{(end[kf] - a_us) / 6e7:.0f} min from {start_wh:.0f} Wh (capacity {float(b.capacity_wh[sat]):.0f}); "
               f"{n_obs} observations; imaging {wh(b.imaging_w[sat], d[in_obs].sum()):.1f} Wh, slewing "
-              f"{wh(b.slew_w[sat], d[in_man].sum()):.1f} (settling {wh(b.slew_w[sat], att.settling_s[sat] * n_obs):.1f}), "
+              f"{wh(b.slew_w[sat], d[in_man].sum()):.1f} "
+              f"(settling {wh(b.slew_w[sat], att.settling_s[sat] * n_obs):.1f}), "
               f"idle {wh(b.idle_w[sat], d.sum()):.1f}; charged {float((seg.charge[k0:kf + 1] * d).sum()) / 3600:.1f} "
               f"(the windows count {wh(b.sunlit_w[sat], S[g1] - S[g0]):.1f})")
         slew_s = (obs.start - man.start) / 1e6 - float(att.settling_s[sat])

@@ -201,6 +201,7 @@ def test_the_integer_master_with_energy_rows_keeps_every_window_with_the_checker
         master.add([path if q == p else np.zeros(0, np.int64) for q in range(len(prob.passes))])
     windows = schedule_windows(prob)
     assert len(windows) > 0
+    assert master.energy_rows(windows, coord.best.paths, deadline=0.0) is None  # past its deadline: no rows
     keep, starts, idx, val = master.energy_rows(windows, coord.best.paths)
     assert np.array_equal(keep, np.arange(len(windows)))
     b = fleet.satellites.battery

@@ -611,19 +611,19 @@ class Coordinator:
         With ``integer_energy`` (the default) the battery's energy windows are rows of the integer program, each
         column's energy its observations' least energy plus the slews between them (:func:`schedule_windows`,
         :meth:`Master.energy_rows`).  Why: on test_hard/case_0005 the first schedule runs five batteries dry, each
-        from the horizon start without a full charge again (6-10 h), and there the windows' accounting without
-        the slews left 202-248 Wh a battery of slack, what the slews spent beyond the settling (82-87% of it between
+        from the horizon start without a full charge again (6-10 h), and there the windows' accounting without the
+        slews left 202-248 Wh a battery of slack, what the slews spent beyond the settling (82-87% of it between
         observations of one pass, the rest the first maneuver of each pass; experiments/battery_stretches.py);
-        counted, the packing is one the batteries nearly hold: WCR at 120 s 0.8498 -> 0.8576 (docs/results.md).  The columns may hold tasks the battery repair
-        barred from their satellite: they are kept, and the repair of :meth:`offer` takes out what the batteries
-        still cannot hold (first maneuvers of passes, the windows' sunlight over-estimate).  When that schedule is
-        not better than the best, the integer solution without the rows is tried as well (with half of the time
-        then left): a repaired schedule is not always a packing of columns (the repair keeps part of a column), so
-        the rows can cut off a packing that the repair turns into a better schedule (test_hard/case_0004: 0.8847
-        without the rows, nothing better than 0.8836 with them).  Rows only for the
-        batteries a solution runs dry, added after each solve and without the slews, were tried before and not
-        kept: the re-solves cost the time the first solve needed and the repair still took out most of what they
-        saved."""
+        counted, the packing is one the batteries nearly hold: WCR at 120 s 0.8498 -> 0.8576 (docs/results.md).  The
+        columns may hold tasks the battery repair barred from their satellite: they are kept, and the repair of
+        :meth:`offer` takes out what the batteries still cannot hold (first maneuvers of passes, the windows'
+        sunlight over-estimate).  When that schedule is not better than the best, the integer solution without the
+        rows is tried as well (with half of the time then left): a repaired schedule is not always a packing of
+        columns (the repair keeps part of a column), so the rows can cut off a packing that the repair turns into a
+        better schedule (test_hard/case_0004: 0.8847 without the rows, nothing better than 0.8836 with them).  Rows
+        only for the batteries a solution runs dry, added after each solve and without the slews, were tried before
+        and not kept: the re-solves cost the time the first solve needed and the repair still took out most of what
+        they saved."""
         self.integer_done = True
         tries = ([schedule_windows(self.prob)] if self.cfg.integer_energy else []) + [None]
         for windows in tries:

@@ -158,15 +158,18 @@ class Master:
         used = used[np.argsort(-x[used], kind="stable")]
         return [(self.col_pass[i], self.col_path[i]) for i in used.tolist()]
 
-    def energy_rows(self, windows: EnergyWindows, start: list[np.ndarray],
-                    max_nonzeros: int = ENERGY_ROW_NONZEROS) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    def energy_rows(self, windows: EnergyWindows, start: list[np.ndarray], max_nonzeros: int = ENERGY_ROW_NONZEROS,
+                    deadline: float | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None:
         """The rows ``sum over the columns c of a window's passes of E_c x_c <= rhs`` of the battery's energy
         `windows`, E_c a column's energy with its slews (:func:`path_wh` + :func:`path_slew_wh`): the windows kept
         (indices), and the rows as CSR over them (starts, column indices, values).  At most `max_nonzeros`
         entries: beyond them the windows with the least slack under the schedule `start` (one path per pass) are
-        kept first (a 200-satellite day has 258,185 windows of 33 passes each on average)."""
+        kept first (a 200-satellite day has 258,185 windows of 33 passes each on average).  None when the columns'
+        energies are not all computed by `deadline` (a ``time.perf_counter()`` instant; those computed are kept)."""
         prob = self.prob
         for i in range(len(self.col_wh), len(self.col_pass)):
+            if deadline is not None and i % 256 == 0 and time.perf_counter() > deadline:
+                return None
             p, path = self.col_pass[i], self.col_path[i]
             self.col_wh.append(path_wh(prob.passes[p], path) + path_slew_wh(prob, p, path))
         col_pass = np.asarray(self.col_pass, dtype=np.int64)
@@ -193,7 +196,8 @@ class Master:
         `nodes` branch-and-bound nodes when given: the same result on any machine when they end first), started from the
         schedule `start` (one path per pass; those of its paths the master holds, :meth:`add`).  With `windows`
         the battery's energy windows are rows as well (:meth:`energy_rows`: each column's energy with the slews
-        between its observations), so that the packing is one the batteries nearly hold.  The LP of the price
+        between its observations; left out when computing them takes more than half of `limit`), so that the
+        packing is one the batteries nearly hold.  The LP of the price
         rounds is left as it is (a copy is solved).  Returns the indices of its columns (:attr:`col_pass`,
         :attr:`col_path`); empty when none is found.
 
@@ -209,10 +213,14 @@ class Master:
         h.setOptionValue("threads", 1)
         h.passModel(self._h.getLp())
         h.changeColsIntegrality(m, np.arange(m, dtype=np.int32), np.full(m, hs.HighsVarType.kInteger))
+        t0 = time.perf_counter()
+        rows = None
         if windows is not None and len(windows):
-            keep, starts, idx, val = self.energy_rows(windows, start)
+            rows = self.energy_rows(windows, start, deadline=t0 + 0.5 * limit)
+        if rows is not None:  # without them when their energies take more than half the time
+            keep, starts, idx, val = rows
             h.addRows(len(keep), np.full(len(keep), -hs.kHighsInf), windows.rhs_wh[keep], len(idx), starts, idx, val)
-        h.setOptionValue("time_limit", max(0.01, float(limit)))
+        h.setOptionValue("time_limit", max(0.01, float(limit) - (time.perf_counter() - t0)))
         if nodes is not None:
             h.setOptionValue("mip_max_nodes", int(nodes))
         x0 = np.zeros(m)

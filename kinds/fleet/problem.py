@@ -183,7 +183,8 @@ def schedule_windows(prob: Problem) -> EnergyWindows:
     throughout it.  For schedules only (the integer round's rows): slews between observations are not part of
     the bound's accounting."""
     fleet, b = prob.fleet, prob.fleet.satellites.battery
-    most = np.array([float(pg.energy_wh.sum()) + float(b.slew_w[pg.satellite]) * float(prob.pass_time[p, 1] - prob.pass_time[p, 0]) / 3600.0
+    span = prob.pass_time[:, 1] - prob.pass_time[:, 0]
+    most = np.array([float(pg.energy_wh.sum()) + float(b.slew_w[pg.satellite]) * float(span[p]) / 3600.0
                      for p, pg in enumerate(prob.passes)])
     sats = np.array([pg.satellite for pg in prob.passes], dtype=np.int64)
     return energy_windows(fleet, prob.sun or SunCache(prob.geo), sats, prob.pass_time, most)
