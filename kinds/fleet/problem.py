@@ -160,10 +160,8 @@ def path_wh(pg: PassGraph, path: np.ndarray) -> float:
 
 def path_slew_wh(prob: Problem, p: int, path: np.ndarray) -> float:
     """The slew energy (Wh, slew power times slew time) of the maneuvers between consecutive observations of a path
-    of pass `p`, at their nodes' times, as the checker derives them (settling left out: :func:`path_wh` counts it).
-    The maneuver into the path's first observation (from the pass before) is not counted.  Exact for the path as
-    the pass graph places it; what the battery repair will find for it, where :func:`path_wh` counts the least
-    energy any observation takes."""
+    of pass `p` at their nodes' times (:meth:`LineOfSight.between`, the settling left out: :func:`path_wh` counts
+    it).  The maneuver into the path's first observation, from the pass before, is not counted."""
     if len(path) < 2:
         return 0.0
     pg, fleet = prob.passes[p], prob.fleet
@@ -172,7 +170,7 @@ def path_slew_wh(prob: Problem, p: int, path: np.ndarray) -> float:
     task = prob.opps.task[rows]
     st = prob.opps.start[rows].astype(np.float64) * fleet.horizon.action_step_s
     en = st + fleet.tasks.duration_s[task]
-    need = prob.los.need_s(sat, prob.los.los(sat, task[:-1], en[:-1]), prob.los.los(sat, task[1:], st[1:]))
+    need = prob.los.between(sat, task[:-1], en[:-1], task[1:], st[1:])
     slew_s = np.maximum(0.0, need - float(fleet.satellites.attitude.settling_s[sat]))
     return float(fleet.satellites.battery.slew_w[sat]) * float(slew_s.sum()) / 3600.0
 
