@@ -13,8 +13,10 @@ too (small sweeps and the large-neighbourhood moves solve passes one at a time t
 cost more than the solve).
 
 Faults: an actor that dies mid-round costs nothing but time: the driver solves that actor's passes of the round
-itself (the same deterministic solver, so the round's result is the same), and Ray restarts the actor, which
-builds its graphs again.  After every round the driver writes its state to the run dir (prices, step, bound,
+itself (the same deterministic solver, so the round's result is the same), and Ray restarts the actor where a CPU
+is free, which builds its graphs again; while it is away the driver solves its passes, and one not back within a
+minute (its node lost on a full cluster) is given up: its satellites go to the live actors (``RayPassPool``).
+After every round the driver writes its state to the run dir (prices, step, bound,
 rounds done, and the best schedule, each file replaced atomically); a driver killed and started again with the
 same run dir resumes from there.  A run dir of another fleet is refused.  (Tests kill an actor in round R with
 the environment variable ``EOSP_FAULT_KILL_ACTOR_ROUND=R``, in the S-th descent sweep sent to the actors with
@@ -45,6 +47,7 @@ RUN_KIND = "fleet-run"
 STATE = "state.npz"
 BEST = "best.parquet"
 META = "run.json"
+REVIVE_S = 60.0  # seconds a lost actor may take to come back (restarted by Ray, its graphs built) before its passes move
 
 
 @dataclass
@@ -67,22 +70,34 @@ class SolveFleetJob:
 class PassWorker:
     """A Ray actor holding the pass graphs of some passes (built here, once) and solving them on demand."""
 
-    def __init__(self, fleet_opps, passes: list[int], cfg: FleetConfig):
+    def __init__(self, fleet_ref: list, passes: list[int], cfg: FleetConfig):
+        """`fleet_ref`: [the object-store reference of (fleet, opportunities)], fetched here (inside a list Ray
+        passes the reference as it is, and the pool holds it: a restart fetches it again)."""
+        import ray
+
         from eosp.fleet.geometry import Geometry
         from eosp.fleet.passgraph import build_pass
         from eosp.fleet.slew import LineOfSight
 
-        fleet, opps = fleet_opps
+        fleet, opps = ray.get(fleet_ref[0])
         los = LineOfSight(fleet, Geometry(fleet))
         off = opps.pass_offsets()
         self.cfg = cfg
         self.weight = fleet.tasks.weight.astype(np.float64)
-        self.graphs = {p: build_pass(fleet, opps, los, p, off) for p in passes}
+        self._build = lambda p: build_pass(fleet, opps, los, p, off)
+        self.graphs = {p: self._build(p) for p in passes}
         if self.graphs:  # compile the solver's kernels now, not in the first round (numba, per process)
             from eosp.kinds.fleet.problem import solve_pass_graph
 
             pg = max(self.graphs.values(), key=lambda g: len(g.rows))
             solve_pass_graph(pg, self.weight[pg.tasks], cfg)
+
+    def adopt(self, passes: list[int]) -> int:
+        """Build the graphs of more passes (those of a lost actor); returns how many this actor holds."""
+        for p in passes:
+            if p not in self.graphs:
+                self.graphs[p] = self._build(p)
+        return len(self.graphs)
 
     def ready(self) -> str:
         """The Ray node this actor runs on (once its graphs are built)."""
@@ -154,29 +169,131 @@ def assign(prob, workers: int) -> np.ndarray:
 
 
 class RayPassPool:
-    """The passes of a price round solved by Ray actors: a :class:`eosp.kinds.fleet.pool.PassPool`."""
+    """The passes of a price round solved by Ray actors: a :class:`eosp.kinds.fleet.pool.PassPool`.
+
+    Faults: a call an actor fails (it died: killed, or its node lost) is solved by the driver, the same
+    deterministic solver, so the round's result is the same.  Ray restarts the actor where a CPU is free (its
+    graphs built again from the fleet in the object store); until it answers, the driver solves its passes beside
+    the other actors.  An actor not back within :data:`REVIVE_S` seconds (``EOSP_REVIVE_S``: no CPU left for it, as
+    when its node is lost on a full cluster) is given up and its passes go to the live actors, which build their
+    graphs (by opportunities, least loaded first); with none left the driver solves everything."""
 
     def __init__(self, prob, cfg: FleetConfig):
         import ray
 
         self.prob, self.cfg = prob, cfg
-        self.owner = assign(prob, cfg.workers)
-        ref = ray.put((prob.fleet, prob.opps))
+        self.owner = assign(prob, cfg.workers)  # actor of every pass (-1: the driver, when no actor is left)
+        # held as long as the pool: a restarted actor is built again from it (dropped, Ray deletes the object
+        # once the actors are made, and a restart fails for want of its argument)
+        self.fleet_ref = ray.put((prob.fleet, prob.opps))
         actor = ray.remote(num_cpus=1, max_restarts=2, max_task_retries=0)(PassWorker)
-        self.actors = [actor.remote(ref, np.flatnonzero(self.owner == k).tolist(), cfg) for k in range(cfg.workers)]
+        self.actors = [actor.remote([self.fleet_ref], np.flatnonzero(self.owner == k).tolist(), cfg)
+                       for k in range(cfg.workers)]
         self.nodes = ray.get([a.ready.remote() for a in self.actors])  # node of each actor
+        self.adopted: list[list[int]] = [[] for _ in self.actors]  # passes each actor took over from lost ones
+        self.reviving: dict[int, tuple] = {}  # lost actor -> (its ready() call, when it was lost)
+        self.revive_s = float(os.environ.get("EOSP_REVIVE_S", "") or REVIVE_S)
+        self.given_up = 0  # actors whose passes went to the others
         self.calls = 0
         self.faults = 0  # actor calls lost to a dead actor (their passes solved by the driver)
         self.times: list[tuple[int, float, int]] = []  # (pass, seconds, worker): price-round passes actors solved
         self.kill_round = int(os.environ.get("EOSP_FAULT_KILL_ACTOR_ROUND", "0") or 0)
         self.sweeps = 0  # calls of solve_utilities (coordinate-descent sweeps sent to the actors)
         self.kill_sweep = int(os.environ.get("EOSP_FAULT_KILL_ACTOR_SWEEP", "0") or 0)
+        self.on_sent = None  # tests: called with ("round" or "sweep", its count) once a call's work is sent
 
+    # ------------------------------------------------------------------ faults
+    def _lost(self, k: int) -> None:
+        """Actor k failed a call: wait for it (Ray restarts it) without blocking the rounds."""
+        self.faults += 1
+        if k not in self.reviving:
+            self.reviving[k] = (self.actors[k].ready.remote(), time.perf_counter())
+
+    def live(self) -> list[int]:
+        """The actors that take calls now: those never lost, and those back from a restart (given again the passes
+        they had adopted: a restart builds only its first ones); the ones lost for longer than :attr:`revive_s`, or
+        dead for good, are given up."""
+        import ray
+        from ray.exceptions import ActorUnavailableError, RayActorError
+
+        live, gone = [], []
+        for k, a in enumerate(self.actors):
+            if a is None:
+                continue
+            if k not in self.reviving:
+                live.append(k)
+                continue
+            ref, since = self.reviving[k]
+            if ray.wait([ref], timeout=0)[0]:
+                try:
+                    self.nodes[k] = ray.get(ref)
+                except ActorUnavailableError:  # still restarting: asked again
+                    self.reviving[k] = (a.ready.remote(), since)
+                except RayActorError:  # dead for good (its restarts spent)
+                    gone.append(k)
+                    continue
+                else:
+                    del self.reviving[k]
+                    if self.adopted[k]:
+                        a.adopt.remote(self.adopted[k])
+                    live.append(k)
+                    continue
+            if time.perf_counter() - since > self.revive_s:
+                gone.append(k)
+        for k in gone:
+            self._give_up(k, live)
+        return live
+
+    def _give_up(self, k: int, live: list[int]) -> None:
+        """Actor k's passes to the live actors, whole satellites onto the least loaded (opportunities), or to the
+        driver when none is left."""
+        import ray
+
+        ray.kill(self.actors[k], no_restart=True)
+        self.actors[k] = None
+        self.reviving.pop(k, None)
+        self.given_up += 1
+        mine = np.flatnonzero(self.owner == k)
+        if not live:
+            self.owner[mine] = -1
+            return
+        sat_of = np.array([self.prob.passes[p].satellite for p in mine.tolist()], dtype=np.int64)
+        size = np.array([len(self.prob.passes[p].rows) for p in mine.tolist()], dtype=np.float64)
+        all_size = np.array([len(pg.rows) for pg in self.prob.passes], dtype=np.float64)
+        load = np.array([all_size[self.owner == j].sum() for j in live])
+        sats, inv = np.unique(sat_of, return_inverse=True)
+        sat_load = np.bincount(inv, weights=size, minlength=len(sats))
+        for s in np.argsort(-sat_load, kind="stable").tolist():
+            i = int(np.argmin(load))
+            load[i] += sat_load[s]
+            self.owner[mine[inv == s]] = live[i]
+        for j in live:
+            got = mine[self.owner[mine] == j].tolist()
+            if got:
+                self.adopted[j] += got
+                self.actors[j].adopt.remote(got)
+
+    def _spread(self, ids: np.ndarray) -> tuple[list[tuple[int, np.ndarray]], np.ndarray]:
+        """Positions in `ids` of each live actor's passes, and of those the driver solves (its actor lost)."""
+        live = self.live()
+        owner = self.owner[ids]
+        parts = [(k, np.flatnonzero(owner == k)) for k in live]
+        return [(k, idx) for k, idx in parts if len(idx)], np.flatnonzero(~np.isin(owner, live))
+
+    def _test_faults(self, kind: str, count: int) -> None:
+        import ray
+
+        if count == (self.kill_round if kind == "round" else self.kill_sweep) and self.actors[0] is not None:
+            ray.kill(self.actors[0], no_restart=False)  # a worker lost mid-round or mid-sweep (tests)
+        if self.on_sent is not None:
+            self.on_sent(kind, count)
+
+    # ------------------------------------------------------------------ calls
     def solve_priced(self, passes: list[int], lam: np.ndarray, pass_prices: np.ndarray,
                      deadline: float | None) -> dict | None:
         """Every pass of `passes` under task prices `lam` and energy prices `pass_prices`: the prices go to the
         object store once, each actor solves its own passes and sends them back packed
-        (:meth:`PassWorker.solve_priced`)."""
+        (:meth:`PassWorker.solve_priced`); the passes of a lost actor are solved here meanwhile."""
         import ray
         from ray.exceptions import RayActorError
 
@@ -185,30 +302,34 @@ class RayPassPool:
 
         self.calls += 1
         ids = np.asarray(passes, dtype=np.int64)
-        owner = self.owner[ids]
+        parts, here = self._spread(ids)
         lam_ref = ray.put(np.asarray(lam, dtype=np.float64))
         pi_ref = ray.put(np.asarray(pass_prices, dtype=np.float64))
         left = None if deadline is None else max(0.0, deadline - time.perf_counter())
-        refs, parts = [], []
-        for k in range(len(self.actors)):
-            mine = ids[owner == k]
-            if len(mine):
-                refs.append(self.actors[k].solve_priced.remote(mine, lam_ref, pi_ref, left))
-                parts.append((k, mine))
-        if self.calls == self.kill_round and self.actors:
-            ray.kill(self.actors[0], no_restart=False)  # a worker lost mid-round (tests)
+        refs = [self.actors[k].solve_priced.remote(ids[idx], lam_ref, pi_ref, left) for k, idx in parts]
+        self._test_faults("round", self.calls)
+        out = {}
+
+        def locally(idx: np.ndarray) -> bool:
+            for p in ids[idx].tolist():
+                if deadline is not None and time.perf_counter() > deadline:
+                    return False
+                out[p] = solve_priced_pass(self.prob, p, lam, pass_prices, self.cfg, deadline)
+            return True
+
+        if not locally(here):
+            return None
         timeout = None if deadline is None else max(0.0, deadline - time.perf_counter())
         ready, _ = ray.wait(refs, num_returns=len(refs), timeout=timeout)
         if len(ready) < len(refs):
             return None  # the deadline came first
-        out = {}
-        for ref, (k, mine) in zip(refs, parts):
+        for ref, (k, idx) in zip(refs, parts):
             try:
                 got, value, bound, offsets, nodes, secs = ray.get(ref)
             except RayActorError:
-                self.faults += 1
-                for p in mine.tolist():
-                    out[p] = solve_priced_pass(self.prob, p, lam, pass_prices, self.cfg, deadline)
+                self._lost(k)
+                if not locally(idx):
+                    return None
                 continue
             for i, p in enumerate(got.tolist()):
                 b = float(bound[i])
@@ -219,8 +340,8 @@ class RayPassPool:
     def solve_utilities(self, passes: list[int], util: np.ndarray, offsets: np.ndarray,
                         deadline: float | None) -> dict | None:
         """A sweep of the coordinate descent (:meth:`eosp.kinds.fleet.pool.PassPool.solve_utilities`): each actor
-        gets its own passes' utilities as one flat vector and offsets; an actor that died has its passes solved
-        here (the same deterministic solver); None when the deadline came first."""
+        gets its own passes' utilities as one flat vector and offsets; the passes of a lost actor are solved here
+        (the same deterministic solver); None when the deadline came first."""
         import ray
         from ray.exceptions import RayActorError
 
@@ -230,31 +351,36 @@ class RayPassPool:
         self.sweeps += 1
         ids = np.asarray(passes, dtype=np.int64)
         offsets = np.asarray(offsets, dtype=np.int64)
-        owner = self.owner[ids]
+        parts, here = self._spread(ids)
         left = None if deadline is None else max(0.0, deadline - time.perf_counter())
-        refs, parts = [], []
-        for k in range(len(self.actors)):
-            idx = np.flatnonzero(owner == k)
-            if not len(idx):
-                continue
+
+        def pick(idx: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
             lo, hi = offsets[idx], offsets[idx + 1]
-            mine_util = np.concatenate([util[a:b] for a, b in zip(lo.tolist(), hi.tolist())])
-            mine_off = np.r_[0, np.cumsum(hi - lo)].astype(np.int64)
+            mine = np.concatenate([util[a:b] for a, b in zip(lo.tolist(), hi.tolist())]) if len(idx) else util[:0]
+            return mine, np.r_[0, np.cumsum(hi - lo)].astype(np.int64)
+
+        refs, sent = [], []
+        for k, idx in parts:
+            mine_util, mine_off = pick(idx)
             refs.append(self.actors[k].solve_utilities.remote(ids[idx], mine_util, mine_off, left))
-            parts.append((k, ids[idx], mine_util, mine_off))
-        if self.sweeps == self.kill_sweep and self.actors:
-            ray.kill(self.actors[0], no_restart=False)  # a worker lost mid-sweep (tests)
+            sent.append((mine_util, mine_off))
+        self._test_faults("sweep", self.sweeps)
+        out = {}
+        if len(here):
+            done = solve_utility_passes(self.prob, self.cfg, ids[here].tolist(), *pick(here), deadline)
+            if done is None:
+                return None
+            out.update(done)
         timeout = None if deadline is None else max(0.0, deadline - time.perf_counter())
         ready, _ = ray.wait(refs, num_returns=len(refs), timeout=timeout)
         if len(ready) < len(refs):
             return None  # the deadline came first
-        out = {}
-        for ref, (k, mine, mine_util, mine_off) in zip(refs, parts):
+        for ref, (k, idx), (mine_util, mine_off) in zip(refs, parts, sent):
             try:
                 got, value, _, offs, nodes, secs = ray.get(ref)
             except RayActorError:
-                self.faults += 1
-                done = solve_utility_passes(self.prob, self.cfg, mine.tolist(), mine_util, mine_off, deadline)
+                self._lost(k)
+                done = solve_utility_passes(self.prob, self.cfg, ids[idx].tolist(), mine_util, mine_off, deadline)
                 if done is None:
                     return None
                 out.update(done)
@@ -267,7 +393,8 @@ class RayPassPool:
         import ray
 
         for a in self.actors:
-            ray.kill(a)
+            if a is not None:
+                ray.kill(a)
 
 
 def _load_state(run: Path, fleet, fp: str):

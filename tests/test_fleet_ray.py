@@ -192,3 +192,64 @@ def test_generated_fleet_sets_resume_and_refuse_other_settings(two_nodes, tmp_pa
     rc = generate_fleets.main([*small[:-2], "--gen.seed", "7", "--out", str(out), "--count", "3"])
     err = capsys.readouterr().err.strip().splitlines()
     assert rc == 2 and len(err) == 1 and "a fleet of other settings" in err[0]
+
+
+@pytest.mark.parametrize("workers", [2, 3])
+def test_a_lost_node_costs_at_most_time(fleet_dir, two_nodes, monkeypatch, workers):
+    """A third node joins, the pool spreads its actors, and the node of one of them (not the driver's) is removed as
+    the first price round is sent.  With 2 workers a CPU is left: Ray restarts the actor there and it builds its
+    graphs again; with 3 none is: the actor is given up (at once: ``EOSP_REVIVE_S=0``) and its passes go to the
+    live ones, which build their graphs and solve them for the rest of the solve.  Either way the
+    schedule, value, bound and solve count are those of one process, and afterwards the pool's actors answer a
+    round of every pass as one process does."""
+    import time
+    from dataclasses import replace
+
+    import ray
+
+    from eosp.jobs.solve_fleet import RayPassPool
+    from eosp.kinds.fleet.pool import solve_priced_pass
+    from eosp.kinds.fleet.problem import Problem
+    from eosp.kinds.fleet.solve import solve
+
+    if not ray.is_initialized():
+        ray.init(address=two_nodes.address)
+    fleet, opps = read_fleet(fleet_dir)
+    prob = Problem.build(fleet, opps)
+    cfg = FleetConfig(pass_solver="exact", rounds=ROUNDS, time_limit=None, workers=workers, seed=4)
+
+    def result(sol):
+        rows = sorted(zip(sol.schedule.satellite.tolist(), sol.schedule.task.tolist(), sol.schedule.start_us.tolist()))
+        return rows, sol.value, sol.bound, sol.info["pass_solves"]
+
+    alone = result(solve(fleet, opps, replace(cfg, workers=1), problem=prob))  # this process alone (never forked)
+    two_nodes.add_node(num_cpus=1)
+    two_nodes.wait_for_nodes()
+    monkeypatch.setenv("EOSP_REVIVE_S", "60" if workers == 2 else "0")
+    pool = RayPassPool(prob, cfg)
+    try:
+        head = two_nodes.head_node.node_id
+        victim = next(n for n in two_nodes.list_all_nodes() if n.node_id != head and n.node_id in pool.nodes)
+        lost = pool.nodes.index(victim.node_id)
+        pool.on_sent = lambda kind, count: two_nodes.remove_node(victim) if (kind, count) == ("round", 1) else None
+        assert result(solve(fleet, opps, cfg, problem=prob, pool=pool)) == alone
+        assert pool.faults >= 1
+        if workers == 2:  # restarted on the CPU left, its graphs built again
+            until = time.monotonic() + 120
+            while lost not in pool.live() and time.monotonic() < until:
+                time.sleep(0.5)
+            assert lost in pool.live() and pool.nodes[lost] != victim.node_id
+            assert pool.given_up == 0
+        else:  # no CPU left: its passes moved to the others
+            assert pool.given_up == 1 and pool.actors[lost] is None and lost not in pool.owner
+        faults = pool.faults
+        every = list(range(len(prob.passes)))
+        rng = np.random.default_rng(0)
+        lam, pi = rng.uniform(0, 1, len(fleet.tasks)) * prob.weight, np.zeros(len(prob.passes))
+        got = pool.solve_priced(every, lam, pi, None)
+        for p in every:
+            want = solve_priced_pass(prob, p, lam, pi, cfg, None)
+            assert np.array_equal(got[p].nodes, want.nodes) and got[p].value == want.value
+        assert pool.faults == faults
+    finally:
+        pool.close()
