@@ -99,7 +99,7 @@ def test_a_master_slower_than_its_round_gives_way_to_weighted_steps_from_the_sta
     coord = Coordinator(prob, FleetConfig(rounds=1, time_limit=None))
     start = prob.weight * 0.3
     coord.prices.lam = start.copy()
-    monkeypatch.setattr(Master, "duals", lambda self, deadline, limit: None)  # as if out of time
+    monkeypatch.setattr(Master, "duals", lambda self, deadline, limit, iterations=None: None)  # out of time
     for _ in range(MASTER_PATIENCE - 1):
         before = coord.prices.lam.copy()
         coord.price_round(None)
@@ -134,6 +134,33 @@ def test_the_master_time_limit_counts_from_the_time_already_run():
         # the limit HiGHS got is this solve's time on top of all the solves before it
         assert float(master._h.getOptionValue("time_limit")[1]) >= before + 0.5 - 1e-9
     assert float(master._h.getRunTime()) > 0.0
+
+
+def test_with_fixed_rounds_the_master_is_limited_in_iterations_not_seconds():
+    """Without a deadline (a fixed number of rounds) a master LP solve stops at a number of simplex iterations
+    (whatever the time: the same schedule on any machine and for any number of workers): the same LP from the same
+    columns is cut at 1 iteration and solved with enough of them, and the duals are those of an unlimited solve."""
+    from eosp.kinds.fleet.coordinator import Coordinator
+    from eosp.kinds.fleet.config import FleetConfig
+    from eosp.kinds.fleet.master import Master
+    from eosp.kinds.fleet.problem import Problem
+
+    fleet = narrow_fleet(16, 1)
+    prob = Problem.build(fleet, compute(fleet, Geometry(fleet)))
+    coord = Coordinator(prob, FleetConfig(rounds=1, time_limit=None))
+    rng = np.random.default_rng(0)
+    rounds = [coord._dual_round(rng.uniform(0.0, 1.0, len(prob.weight)) * prob.weight, None)[4] for _ in range(4)]
+
+    def master():
+        m = Master(prob)
+        for paths in rounds:
+            m.add(paths)
+        return m
+
+    assert master().duals(None, 0.0, iterations=1) is None
+    free = master().duals(None, 60.0)
+    got = master().duals(None, 0.0, iterations=100_000)  # no time at all, enough iterations
+    assert got is not None and np.allclose(got, free)
 
 
 @pytest.mark.parametrize("n_tasks,seed", [(12, 0), (16, 1), (20, 2)])

@@ -130,15 +130,22 @@ class Master:
                             np.asarray(starts, np.int32), np.asarray(index, np.int32), np.ones(len(index)))
         return len(cost)
 
-    def duals(self, deadline: float | None, limit: float) -> np.ndarray | None:
+    def duals(self, deadline: float | None, limit: float, iterations: int | None = None) -> np.ndarray | None:
         """The task prices of the master's optimum (its task rows' duals), or None when it was not solved to
-        optimality within `limit` seconds and before `deadline`."""
-        if deadline is not None:
-            limit = min(limit, deadline - time.perf_counter())
-        # HiGHS compares its time limit with the run time of all the solves of this instance together: the
-        # limit of this solve is counted from the time already run (else the master seemed to outgrow the rounds
-        # once its solves added up to a round's time: at round 25 on a test_hard-like case)
-        self._h.setOptionValue("time_limit", float(self._h.getRunTime()) + max(0.01, limit))
+        optimality within `limit` seconds and before `deadline`, or, with `iterations`, within that many simplex
+        iterations instead of any time (the same on every machine and for any number of workers: a solve with
+        a fixed number of rounds)."""
+        if iterations is not None:
+            self._h.setOptionValue("time_limit", self._hs.kHighsInf)
+            self._h.setOptionValue("simplex_iteration_limit", int(iterations))
+        else:
+            if deadline is not None:
+                limit = min(limit, deadline - time.perf_counter())
+            # HiGHS compares its time limit with the run time of all the solves of this instance together: the
+            # limit of this solve is counted from the time already run (else the master seemed to outgrow the
+            # rounds once its solves added up to a round's time: at round 25 on a test_hard-like case)
+            self._h.setOptionValue("time_limit", float(self._h.getRunTime()) + max(0.01, limit))
+            self._h.setOptionValue("simplex_iteration_limit", 2**31 - 1)
         self._h.run()
         self.solved = self._h.getModelStatus() == self._hs.HighsModelStatus.kOptimal
         if not self.solved:
