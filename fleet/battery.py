@@ -10,6 +10,8 @@ resolution of UTC timestamps, so cut points and midpoints are the benchmark's ex
 
 from __future__ import annotations
 
+import functools
+
 from typing import NamedTuple
 
 import numba
@@ -46,11 +48,22 @@ def half_even_div2(d: np.ndarray) -> np.ndarray:
 
 
 def cut_points(fleet: Fleet, obs: Intervals, man: Intervals) -> np.ndarray:
+    """The resource grid, the horizon's end and every action bound, sorted and unique (µs).  The few action
+    bounds are merged into the grid (thousands of points, sorted already) instead of sorting them all together."""
     h = fleet.horizon
     total = h.seconds * US
-    grid = np.arange(0, total, h.resource_step_s * US, dtype=np.int64)
-    pts = np.concatenate([grid, [0, total], obs.start, obs.end, man.start, man.end]).astype(np.int64)
-    return np.unique(pts)
+    grid = _grid(total, h.resource_step_s * US)
+    extra = np.unique(np.concatenate([[0, total], obs.start, obs.end, man.start, man.end]).astype(np.int64))
+    at = np.searchsorted(grid, extra)
+    new = extra[(at == len(grid)) | (grid[np.minimum(at, len(grid) - 1)] != extra)]
+    return np.insert(grid, np.searchsorted(grid, new), new)
+
+
+@functools.lru_cache(maxsize=8)
+def _grid(total_us: int, step_us: int) -> np.ndarray:
+    g = np.arange(0, total_us, step_us, dtype=np.int64)
+    g.flags.writeable = False
+    return g
 
 
 def active(intervals: Intervals, t: np.ndarray) -> np.ndarray:
@@ -76,6 +89,7 @@ class SunCache:
         self._sun: dict[int, np.ndarray] = {}
         self._grid: dict[int, tuple[np.ndarray, np.ndarray]] = {}
         self._sun_grid: np.ndarray | None = None
+        self._exact: dict[int, dict[int, bool]] = {}  # satellite -> {instant (µs): sunlit} near the shadow boundary
 
     def grid(self, sat: int) -> tuple[np.ndarray, np.ndarray]:
         """(sunlit, metres to the shadow boundary) of satellite `sat` at every base-grid instant, once."""
@@ -128,7 +142,14 @@ class SunCache:
         safe = (lit[i] == lit[j]) & (margin[i] > self.SAFE_M) & (margin[j] > self.SAFE_M)
         out = lit[i].copy()
         if not safe.all():
-            out[~safe] = self.sunlit_exact(sat, t_us[~safe])
+            # near the boundary, each instant computed once: a repair simulates a satellite again and again, and
+            # most of its segments' midpoints (between resource-grid points) come back
+            memo = self._exact.setdefault(sat, {})
+            near = t_us[~safe].tolist()
+            new = np.array(sorted({t for t in near if t not in memo}), dtype=np.int64)
+            if len(new):
+                memo.update(zip(new.tolist(), self.sunlit_exact(sat, new).tolist()))
+            out[~safe] = [memo[t] for t in near]
         return out
 
     def sunlit_exact(self, sat: int, t_us: np.ndarray) -> np.ndarray:

@@ -120,12 +120,15 @@ def intervals(los: LineOfSight, tl: Timeline, sat: int) -> tuple[Intervals, Inte
     """The observations and the maneuver windows before them (µs), as the battery simulation takes them."""
     st = np.round(np.asarray(tl.start, dtype=np.float64) * US).astype(np.int64)
     en = np.round(np.asarray(tl.end, dtype=np.float64) * US).astype(np.int64)
-    w0 = []
-    for k in range(len(st)):
-        frm = tl.los1[k - 1] if k else los.nadir(sat, tl.start[k])
-        need = float(los.need_s(sat, np.asarray(frm), np.asarray(tl.los0[k])))
-        w0.append(st[k] - timedelta_us(need))
-    return Intervals(st, en), Intervals(np.asarray(w0, dtype=np.int64), st.copy())
+    w0 = np.zeros(len(st), dtype=np.int64)
+    if len(st):
+        to = np.asarray(tl.los0, dtype=np.float64).reshape(-1, 3)
+        frm = np.empty_like(to)
+        frm[0] = los.nadir(sat, tl.start[0])
+        frm[1:] = np.asarray(tl.los1[:-1], dtype=np.float64).reshape(-1, 3)
+        need = los.need_s(sat, frm, to)  # the angles of all the maneuvers at once
+        w0 = st - np.array([timedelta_us(s) for s in need.tolist()], dtype=np.int64)
+    return Intervals(st, en), Intervals(w0, st.copy())
 
 
 def repair_battery(fleet: Fleet, los: LineOfSight, tls: list[Timeline], sats=None, sun: SunCache | None = None,
