@@ -157,13 +157,14 @@ def repair_battery(fleet: Fleet, los: LineOfSight, tls: list[Timeline], sats=Non
 
 
 def to_schedule(fleet: Fleet, tls: list[Timeline]) -> Schedule:
-    sat, task, st, en = [], [], [], []
+    sat, k_of, task, st, en = [], [], [], [], []
     for k, tl in enumerate(tls):
         sat += [fleet.satellites.ids[k]] * len(tl.start)
+        k_of += [k] * len(tl.start)
         task += [fleet.tasks.ids[t] for t in tl.task]
         st += tl.start
         en += tl.end
     st_us = np.round(np.asarray(st, dtype=np.float64) * US).astype(np.int64)
-    order = np.lexsort((np.asarray([fleet.satellite_index()[s] for s in sat], dtype=np.int64), st_us))
+    order = np.lexsort((np.asarray(k_of, dtype=np.int64), st_us))
     return Schedule(strings(sat)[order], strings(task)[order], st_us[order],
                     np.round(np.asarray(en, dtype=np.float64) * US).astype(np.int64)[order])

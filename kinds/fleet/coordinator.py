@@ -57,7 +57,8 @@ ENERGY_STEPS = 12  # bisection steps of an energy window's multiplier (Coordinat
 CHECK_SLACK_S = 0.2  # seconds added to it (the time the first steps after the deadline take)
 INTEGER_MAX_S = 30.0  # seconds the master's integer solution may take at most (Coordinator.integer_round)
 INTEGER_NODES = 200  # its branch-and-bound nodes when the solve has no time limit (--rounds): machine-independent
-SWEEP_IN_PROCESS = 8  # a descent sweep of fewer passes is solved on the driver, not sent to the pool
+SWEEP_IN_PROCESS = 32  # a descent sweep of fewer passes is solved on the driver, not sent to the pool (a Ray
+# round trip costs milliseconds, a small pass under true weights 0.02-0.6 ms: docs/results.md)
 
 
 @numba.njit(cache=True)
@@ -130,6 +131,8 @@ class Coordinator:
         self._task_ptr = np.r_[0, np.cumsum(lens)].astype(np.int64)  # the passes' tasks, CSR (disjoint batches)
         self._task_idx = (np.concatenate([pg.tasks for pg in self.prob.passes]).astype(np.int64) if len(lens)
                           else np.zeros(0, np.int64))
+        self._task_wh = (np.concatenate([pg.energy_wh for pg in self.prob.passes]).astype(np.float64) if len(lens)
+                         else np.zeros(0))  # each pass task's least energy, as _task_idx
         self._claimed = np.zeros(n, dtype=np.bool_)
         self.spend = np.zeros(len(self.prob.passes))  # price of a Wh in each pass for the schedules (energy_price)
         self.pool = self.pool or InProcessPool(self.prob, self.cfg)
@@ -211,8 +214,7 @@ class Coordinator:
             if deadline is not None and time.perf_counter() > deadline:
                 return
             batch = queued[disjoint(queued, self._task_ptr, self._task_idx, self._claimed)].tolist()
-            utils = [self._utility(primal, p) for p in batch]
-            solved = self._solve_batch(batch, utils, deadline)
+            solved = self._solve_batch(batch, *self._batch_utilities(primal, batch), deadline)
             if solved is None:
                 return  # cut by the deadline: the schedule is as the last batch left it (every edit whole)
             todo[batch] = False
@@ -240,18 +242,33 @@ class Coordinator:
                 todo[self.prob.task_passes[t]] = True
         todo[p] = again  # not for the tasks p freed itself: it just chose without them
 
-    def _solve_batch(self, batch: list[int], utils: list[np.ndarray],
+    def _batch_utilities(self, primal: Primal, batch: list[int]) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`_utility` (no shift) of every pass of `batch` at once: one flat float64 vector and CSR offsets
+        (the same numbers: weight less the pass's price of the tasks' energy, 0 where another pass serves the task
+        or the repair barred it), gathered from the passes' tasks as CSR instead of pass by pass."""
+        b = np.asarray(batch, dtype=np.int64)
+        lens = self._task_ptr[b + 1] - self._task_ptr[b]
+        offsets = np.zeros(len(b) + 1, dtype=np.int64)
+        np.cumsum(lens, out=offsets[1:])
+        pos = np.repeat(self._task_ptr[b] - offsets[:-1], lens) + np.arange(offsets[-1])
+        tasks, owner = self._task_idx[pos], np.repeat(b, lens)
+        spend = self.spend[owner]
+        util = self.prob.weight[tasks] - self._no_shift[tasks]
+        util = np.where(spend != 0, util - spend * self._task_wh[pos], util)
+        s = primal.served[tasks]
+        free = ((s < 0) | (s == owner)) & ~self.barred[self._pass_sat[owner], tasks]
+        return np.where(free, util, 0.0), offsets
+
+    def _solve_batch(self, batch: list[int], util: np.ndarray, offsets: np.ndarray,
                      deadline: float | None) -> dict[int, PassResult] | None:
-        """The passes of a sweep under their utilities: on the pool (flat utilities and CSR offsets), or here when
-        the batch is small (a round trip would cost more than the solves; the exact solver gives the same paths
-        anywhere)."""
+        """The passes of a sweep under their utilities (flat, CSR `offsets`): on the pool, or here when the batch is
+        small (:data:`SWEEP_IN_PROCESS`: a round trip would cost more than the solves; the exact solver gives the
+        same paths anywhere)."""
         self.pass_solves += len(batch)
         if len(batch) < SWEEP_IN_PROCESS:
-            return {p: solve_pass(self.prob, p, u, self.cfg, deadline) for p, u in zip(batch, utils)}
-        offsets = np.zeros(len(batch) + 1, dtype=np.int64)
-        np.cumsum([len(u) for u in utils], out=offsets[1:])
-        flat = np.concatenate(utils).astype(np.float64, copy=False)
-        return self.pool.solve_utilities(batch, flat, offsets, deadline)
+            return {p: solve_pass(self.prob, p, util[offsets[i]:offsets[i + 1]], self.cfg, deadline)
+                    for i, p in enumerate(batch)}
+        return self.pool.solve_utilities(batch, util, offsets, deadline)
 
     def construct(self, order: np.ndarray, util_shift: np.ndarray | None = None,
                   primal: Primal | None = None, deadline: float | None = None, whole: bool = False) -> Primal:
