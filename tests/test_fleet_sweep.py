@@ -182,3 +182,22 @@ def test_after_the_sweep_no_pass_alone_is_worth_more(kind, seed):
         assert best_alone(prob, p, allowed) <= float(prob.weight[mine].sum()) + 1e-9, p
         checked += 1
     assert checked >= 2 and primal.value > 0
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_a_sweeps_utilities_are_each_pass_utility(crowded, seed):
+    """The utilities a sweep sends (gathered for the whole batch at once) are, pass by pass and bit for bit, those of
+    Coordinator._utility: 0 for a task another pass serves or the repair barred from the satellite, weight less the
+    pass's price of the task's energy otherwise."""
+    rng = np.random.default_rng(seed)
+    for prob in crowded:
+        coord = Coordinator(prob, FleetConfig(rounds=1, time_limit=None))
+        primal = start(coord, seed)
+        n_pass = len(prob.passes)
+        coord.spend = np.where(rng.uniform(size=n_pass) < 0.5, rng.uniform(0.0, 0.01, n_pass), 0.0)
+        coord.barred[rng.integers(0, len(prob.fleet.satellites), 30), rng.integers(0, len(prob.weight), 30)] = True
+        batch = np.sort(rng.choice(n_pass, size=n_pass // 2, replace=False)).tolist()
+        util, offsets = coord._batch_utilities(primal, batch)
+        assert len(offsets) == len(batch) + 1 and offsets[-1] == len(util)
+        for i, p in enumerate(batch):
+            assert np.array_equal(util[offsets[i]:offsets[i + 1]], coord._utility(primal, p))
