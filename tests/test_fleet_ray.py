@@ -89,12 +89,15 @@ def test_two_nodes_give_the_single_process_schedule_and_a_killed_actor_costs_not
 def test_ray_sweeps_with_one_and_two_actors_give_the_in_process_schedule(fleet_dir, two_nodes, monkeypatch):
     """The coordinate descent's sweeps on Ray actors (one actor, then one on each node, then with actor 0 killed in
     the first sweep sent to them): for fixed rounds and seed the schedule, value, bound and solve count of this
-    process alone."""
+    process alone.  Every sweep of 2 passes or more goes to the pool (this fleet's are smaller than the default
+    threshold)."""
     import ray
 
+    from eosp.kinds.fleet import coordinator as coord_mod
     from eosp.kinds.fleet.problem import Problem
     from eosp.kinds.fleet.solve import solve
 
+    monkeypatch.setattr(coord_mod, "SWEEP_IN_PROCESS", 2)
     fleet, opps = read_fleet(fleet_dir)
     prob = Problem.build(fleet, opps)
 
