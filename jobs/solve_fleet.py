@@ -47,7 +47,7 @@ RUN_KIND = "fleet-run"
 STATE = "state.npz"
 BEST = "best.parquet"
 META = "run.json"
-REVIVE_S = 60.0  # seconds a lost actor may take to come back (restarted by Ray, its graphs built) before its passes move
+REVIVE_S = 60.0  # seconds a lost actor may take to come back (restarted by Ray, graphs built) before its passes move
 
 
 @dataclass
@@ -575,6 +575,7 @@ def run(job: SolveFleetJob) -> dict:
                   "pass_solves": sol.info["pass_solves"], "passes": len(prob.passes), "build_s": round(t_build, 2),
                   "pool_s": round(t_pool - t_build, 2), "first_schedule_s": None if first_t is None else
                   round(first_t + t_read - t0, 2), "wall_s": round(wall, 2), "faults": 0 if pool is None else pool.faults,
+                  "actors_given_up": 0 if pool is None else pool.given_up,
                   "workers": job.fleet.workers, "nodes": 0 if pool is None else len(set(pool.nodes)),
                   "resumed_from_round": 0 if resume is None else resume.rounds_done,
                   "price_round_s": sol.info["price_round_s"], "interrupted": sol.info["interrupted"],
