@@ -294,6 +294,13 @@ class RayPassPool:
         """Every pass of `passes` under task prices `lam` and energy prices `pass_prices`: the prices go to the
         object store once, each actor solves its own passes and sends them back packed
         (:meth:`PassWorker.solve_priced`); the passes of a lost actor are solved here meanwhile."""
+        return self.submit_priced(passes, lam, pass_prices, deadline)()
+
+    def submit_priced(self, passes: list[int], lam: np.ndarray, pass_prices: np.ndarray,
+                      deadline: float | None):
+        """:meth:`solve_priced` sent to the actors now, its result waited for when the returned function is called
+        (:meth:`eosp.kinds.fleet.pool.PassPool.submit_priced`: the next price round solved while the driver
+        recovers a schedule from this one)."""
         import ray
         from ray.exceptions import RayActorError
 
@@ -317,25 +324,28 @@ class RayPassPool:
                 out[p] = solve_priced_pass(self.prob, p, lam, pass_prices, self.cfg, deadline)
             return True
 
-        if not locally(here):
-            return None
-        timeout = None if deadline is None else max(0.0, deadline - time.perf_counter())
-        ready, _ = ray.wait(refs, num_returns=len(refs), timeout=timeout)
-        if len(ready) < len(refs):
-            return None  # the deadline came first
-        for ref, (k, idx) in zip(refs, parts):
-            try:
-                got, value, bound, offsets, nodes, secs = ray.get(ref)
-            except RayActorError:
-                self._lost(k)
-                if not locally(idx):
-                    return None
-                continue
-            for i, p in enumerate(got.tolist()):
-                b = float(bound[i])
-                out[p] = PassResult(nodes[offsets[i]:offsets[i + 1]], float(value[i]), None if b != b else b)
-            self.times += list(zip(got.tolist(), secs.tolist(), [k] * len(got)))
-        return out
+        def collect() -> dict | None:
+            if not locally(here):
+                return None
+            timeout = None if deadline is None else max(0.0, deadline - time.perf_counter())
+            ready, _ = ray.wait(refs, num_returns=len(refs), timeout=timeout)
+            if len(ready) < len(refs):
+                return None  # the deadline came first
+            for ref, (k, idx) in zip(refs, parts):
+                try:
+                    got, value, bound, offsets, nodes, secs = ray.get(ref)
+                except RayActorError:
+                    self._lost(k)
+                    if not locally(idx):
+                        return None
+                    continue
+                for i, p in enumerate(got.tolist()):
+                    b = float(bound[i])
+                    out[p] = PassResult(nodes[offsets[i]:offsets[i + 1]], float(value[i]), None if b != b else b)
+                self.times += list(zip(got.tolist(), secs.tolist(), [k] * len(got)))
+            return out
+
+        return collect
 
     def solve_utilities(self, passes: list[int], util: np.ndarray, offsets: np.ndarray,
                         deadline: float | None) -> dict | None:

@@ -86,10 +86,11 @@ def test_two_nodes_give_the_single_process_schedule_and_a_killed_actor_costs_not
         schedule_rows(fleet_dir, tmp_path / "alone/schedule.parquet")
 
 
-def test_ray_sweeps_with_one_and_two_actors_give_the_in_process_schedule(fleet_dir, two_nodes, monkeypatch):
+def test_ray_sweeps_with_one_and_two_actors_give_the_in_process_schedule(clustered_fleet_dir, two_nodes,
+                                                                         monkeypatch):
     """The coordinate descent's sweeps on Ray actors (one actor, then one on each node, then with actor 0 killed in
     the first sweep sent to them): for fixed rounds and seed the schedule, value, bound and solve count of this
-    process alone.  Every sweep of 2 passes or more goes to the pool (this fleet's are smaller than the default
+    process alone, the second price round sent to the actors before the first round's recovery.  Every sweep of 2 passes or more goes to the pool (this fleet's are smaller than the default
     threshold)."""
     import ray
 
@@ -98,7 +99,7 @@ def test_ray_sweeps_with_one_and_two_actors_give_the_in_process_schedule(fleet_d
     from eosp.kinds.fleet.solve import solve
 
     monkeypatch.setattr(coord_mod, "SWEEP_IN_PROCESS", 2)
-    fleet, opps = read_fleet(fleet_dir)
+    fleet, opps = read_fleet(clustered_fleet_dir)
     prob = Problem.build(fleet, opps)
 
     def run(workers, pool=True):
@@ -110,6 +111,7 @@ def test_ray_sweeps_with_one_and_two_actors_give_the_in_process_schedule(fleet_d
             if ray_pool is not None:
                 ray_pool.close()
         rows = sorted(zip(sol.schedule.satellite.tolist(), sol.schedule.task.tolist(), sol.schedule.start_us.tolist()))
+        run.prefetched = sol.info["prefetched_rounds"]
         return (rows, sol.value, sol.bound, sol.info["pass_solves"]), ray_pool
 
     if not ray.is_initialized():
@@ -119,6 +121,7 @@ def test_ray_sweeps_with_one_and_two_actors_give_the_in_process_schedule(fleet_d
         got, pool = run(workers)
         assert pool.sweeps >= 1 and pool.faults == 0
         assert got == alone, workers
+        assert run.prefetched >= 1  # round 2 was sent to the actors before round 1's recovery, and taken
     monkeypatch.setenv("EOSP_FAULT_KILL_ACTOR_SWEEP", "1")
     hurt, pool = run(2)
     assert pool.faults >= 1

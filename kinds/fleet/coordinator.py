@@ -98,6 +98,7 @@ class Coordinator:
     history: list[tuple[float, float, float]] = field(default_factory=list)  # (seconds, value, bound)
     t0: float = field(default_factory=time.perf_counter)  # when the problem was read: the time limit counts from it
     pass_solves: int = 0
+    prefetched: int = 0  # price rounds whose passes were sent before the recovery of the round before (prefetch)
     repair_drops: int = 0  # observations the battery repair took out, over the whole run
     first_repair_drops: int | None = None  # those it took out of the first schedule
     rounds_done: int = 0
@@ -124,6 +125,7 @@ class Coordinator:
         self.converged = False  # --price-step lp: the bound is L's minimum; rounds are moves only from then on
         self._lp_misses = 0  # master solves in a row that did not finish in their time (MASTER_PATIENCE)
         self.integer_done = False  # whether the master's integer solution was tried (once, when converged)
+        self._pending = None  # (prices, pass prices, result, when sent) of a price round sent ahead (prefetch)
         self._pass_sat = np.array([pg.satellite for pg in self.prob.passes], dtype=np.int64)
         self._terms = np.zeros(len(self.prob.passes))  # the pass terms of the last price round
         self._no_shift = np.zeros(n)  # zero task prices, made once (a descent sweep prices every pass twice)
@@ -265,7 +267,7 @@ class Coordinator:
         small (:data:`SWEEP_IN_PROCESS`: a round trip would cost more than the solves; the exact solver gives the
         same paths anywhere)."""
         self.pass_solves += len(batch)
-        if len(batch) < SWEEP_IN_PROCESS:
+        if len(batch) < SWEEP_IN_PROCESS or self._pending is not None:  # (a prefetched round holds the pool)
             return {p: solve_pass(self.prob, p, util[offsets[i]:offsets[i + 1]], self.cfg, deadline)
                     for i, p in enumerate(batch)}
         return self.pool.solve_utilities(batch, util, offsets, deadline)
@@ -295,7 +297,12 @@ class Coordinator:
         lam = np.minimum(lam, w)
         pi = self.prices.pass_price()
         todo = np.flatnonzero(~self.frozen).tolist()
-        solved = self.pool.solve_priced(todo, lam, pi, deadline)
+        pending, self._pending = self._pending, None
+        if pending is not None and np.array_equal(pending[0], lam) and np.array_equal(pending[1], pi):
+            solved = pending[2]()  # sent before the last recovery (prefetch): the same prices, the same passes
+            self.prefetched += 1
+        else:
+            solved = self.pool.solve_priced(todo, lam, pi, deadline)
         if solved is None:
             return None  # cut by the deadline
         self.pass_solves += len(todo)
@@ -320,6 +327,22 @@ class Coordinator:
         self._terms = np.asarray(terms, dtype=np.float64)  # the round's pass terms (the energy search starts there)
         return total, proven, count, pass_wh, paths
 
+    def prefetch(self, deadline: float | None) -> None:
+        """Send the next price round's passes to the pool now, at the prices the last round set, when the pool
+        can work while the driver does (its ``submit_priced``: Ray actors); :meth:`_dual_round` takes the
+        result when its prices are these.  Why: the next round's prices never depend on the recovery that
+        follows a round (the master's duals and the subgradient step are taken before it, from the round's own
+        results), so the actors solve round k + 1 while the driver recovers and repairs a schedule from round k
+        (its descent sweeps then solved here, not queued behind the round): the same results as one after the
+        other, in less time."""
+        submit = getattr(self.pool, "submit_priced", None)
+        if submit is None:
+            return
+        lam = np.minimum(self.prices.lam, self.prob.weight)
+        pi = self.prices.pass_price()
+        self._pending = (lam, pi, submit(np.flatnonzero(~self.frozen).tolist(), lam, pi, deadline),
+                         time.perf_counter())
+
     def _bound_from(self, total: float, proven: bool, what: str) -> None:
         """Keep L = `total` as the bound when it is proven and lower (never below a schedule found: refused and
         said, see :meth:`keep`)."""
@@ -335,11 +358,11 @@ class Coordinator:
         keeps the bound when it is proven and lower, and moves the prices."""
         if self._start_lam is None:
             self._start_lam = self.prices.lam.copy()
-        t_solves = time.perf_counter()
+        t_solves = time.perf_counter() if self._pending is None else self._pending[3]
         got = self._dual_round(self.prices.lam, deadline)
         if got is None:
             return None
-        t_solves = time.perf_counter() - t_solves
+        t_solves = time.perf_counter() - t_solves  # prefetched: from its sending (the master's limit)
         total, proven, count, pass_wh, self.round_paths = got
         self._bound_from(total, proven, f"round {self.rounds_done + 1}")
         lam = self.prices.lam.copy()
@@ -749,6 +772,9 @@ class Coordinator:
                 self.round_s.append(time.perf_counter() - t_round)
                 self.prices.stalled(self.best_bound < before - 1e-9)
                 self.record()
+                if cfg.pass_solver == "exact" and not self.converged and (cfg.rounds is None
+                                                                          or rounds + 1 < cfg.rounds):
+                    self.prefetch(deadline)
                 if not self.offer(self.recover(rng, deadline), deadline):
                     self.neighbourhood(rng, deadline)
             elif self.converged and not self.integer_done and self.master is not None:

@@ -23,7 +23,10 @@ from eosp.kinds.fleet.problem import PassResult, Problem, priced, solve_pass, so
 
 
 class PassPool(Protocol):
-    """Solves passes under task prices and energy prices."""
+    """Solves passes under task prices and energy prices.  A pool whose workers run beside the driver may also
+    offer ``submit_priced(passes, prices, pass_prices, deadline)``: :meth:`solve_priced` sent now, returning a
+    function that waits for its result (Ray's actors; the coordinator then solves the next price round while it
+    recovers a schedule, :meth:`eosp.kinds.fleet.coordinator.Coordinator.prefetch`)."""
 
     def solve_priced(self, passes: list[int], prices: np.ndarray, pass_prices: np.ndarray,
                      deadline: float | None) -> dict[int, PassResult] | None:
