@@ -254,9 +254,7 @@ class Coordinator:
         np.cumsum(lens, out=offsets[1:])
         pos = np.repeat(self._task_ptr[b] - offsets[:-1], lens) + np.arange(offsets[-1])
         tasks, owner = self._task_idx[pos], np.repeat(b, lens)
-        spend = self.spend[owner]
-        util = self.prob.weight[tasks] - self._no_shift[tasks]
-        util = np.where(spend != 0, util - spend * self._task_wh[pos], util)
+        util = priced(self.prob.weight, self._no_shift, tasks, self._task_wh[pos], self.spend[owner])
         s = primal.served[tasks]
         free = ((s < 0) | (s == owner)) & ~self.barred[self._pass_sat[owner], tasks]
         return np.where(free, util, 0.0), offsets

@@ -93,12 +93,15 @@ def most_wh(fleet: Fleet, pg: PassGraph) -> float:
 
 
 def priced(weight: np.ndarray, prices: np.ndarray, tasks: np.ndarray, energy_wh: np.ndarray | None = None,
-           pass_price: float = 0.0) -> np.ndarray:
+           pass_price: float | np.ndarray = 0.0) -> np.ndarray:
     """The utilities of `tasks` under task prices and the pass's price of a Wh: weight - price - pass_price *
     energy (`energy_wh` the tasks' least energy on the pass's satellite, :attr:`PassGraph.energy_wh`; none: task
-    prices only); the one place utilities are computed, on the driver and on the workers alike."""
+    prices only); the one place utilities are computed, on the driver and on the workers alike.  `pass_price` may
+    be one per task (the tasks of several passes at once, each with its pass's price)."""
     util = weight[tasks] - prices[tasks]
-    return util if energy_wh is None or pass_price == 0 else util - pass_price * energy_wh
+    if energy_wh is None or (np.ndim(pass_price) == 0 and pass_price == 0):
+        return util
+    return util - pass_price * energy_wh
 
 
 def pass_limit(cfg: FleetConfig, deadline: float | None) -> float:
