@@ -6,8 +6,9 @@ Generates the fleet (``eosp generate --fleet`` settings below, seed 0) unless ``
 each worker count runs ``jobs/solve_fleet.py`` in a child process (Ray actors when workers > 1) and reads its
 result.json: time to the first schedule, value and gap at 60 s and at the time limit (from the run's history,
 seconds counted from the job's start, the pass-graph build included), price-round times and their speed-up,
-the driver's peak memory, and per-pass solve times by pass size (from the actors' pass_times.csv).  Prints
-Markdown tables and writes ``scale.json``.
+the memory of the job's processes (driver, Ray's actors and the rest of Ray: PSS summed, sampled every 2 s,
+its peak in each step; the series in ``RUN-memory.csv``), and per-pass solve times by pass size (from the actors'
+pass_times.csv).  Prints Markdown tables and writes ``scale.json``.
 """
 
 from __future__ import annotations
@@ -18,6 +19,7 @@ import json
 import resource
 import subprocess
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -66,6 +68,52 @@ def size_table(path: Path) -> list[dict]:
     return out
 
 
+class TreeMemory:
+    """The job's memory while it runs: every `every` seconds the proportional set size of its process tree (the
+    driver; under it, with workers > 1, Ray's raylet, GCS, object store and actors), summed (each shared page once)
+    and split into driver, actors (``ray::`` processes) and the rest of Ray; kept as a time series (seconds from
+    the job's start) for the step-by-step peaks."""
+
+    def __init__(self, pid: int, every: float = 2.0):
+        from eosp.memory import tree_pss
+
+        self.samples: list[tuple[float, float, float, float]] = []  # (s, driver GB, actors GB, other GB)
+        self._stop = threading.Event()
+        t0 = time.perf_counter()
+
+        def loop() -> None:
+            while not self._stop.is_set():
+                by = tree_pss(pid)
+                driver = by.pop(_comm(pid), 0) if by else 0
+                actors = sum(v for k, v in by.items() if k.startswith("ray::"))
+                other = sum(v for k, v in by.items() if not k.startswith("ray::"))
+                self.samples.append((time.perf_counter() - t0, driver / 1e9, actors / 1e9, other / 1e9))
+                self._stop.wait(every)
+
+        self._thread = threading.Thread(target=loop, daemon=True)
+        self._thread.start()
+
+    def stop(self) -> None:
+        self._stop.set()
+        self._thread.join()
+
+    def peak(self, t_from: float = 0.0, t_to: float = 1e18) -> dict | None:
+        """The sample of the largest total between two instants (seconds from the start), GB."""
+        inside = [s for s in self.samples if t_from <= s[0] <= t_to]
+        if not inside:
+            return None
+        s = max(inside, key=lambda x: x[1] + x[2] + x[3])
+        return {"at_s": round(s[0], 1), "total": round(s[1] + s[2] + s[3], 2), "driver": round(s[1], 2),
+                "actors": round(s[2], 2), "ray_other": round(s[3], 2)}
+
+
+def _comm(pid: int) -> str:
+    try:
+        return Path(f"/proc/{pid}/comm").read_text().strip()
+    except OSError:
+        return ""
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", type=Path, default=Path("runs/scale"))
@@ -100,11 +148,18 @@ def main() -> None:
                "--mlflow-uri", f"sqlite:///{(args.out / 'mlflow.db').resolve()}"]
         before = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss
         t0 = time.perf_counter()
-        r = subprocess.run(cmd, capture_output=True, text=True)
+        with open(args.out / f"{run_dir.name}.log", "w") as log:
+            child = subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT, text=True)
+            mem = TreeMemory(child.pid)
+            rc = child.wait()
+            mem.stop()
         wall = time.perf_counter() - t0
-        if r.returncode != 0:
-            print(r.stderr[-2000:])
-            raise SystemExit(f"workers {w}: exit {r.returncode}")
+        with open(args.out / f"{run_dir.name}-memory.csv", "w") as fh:
+            fh.write("seconds,driver_gb,actors_gb,ray_other_gb\n")
+            fh.writelines(f"{s:.1f},{d:.3f},{a:.3f},{o:.3f}\n" for s, d, a, o in mem.samples)
+        if rc != 0:
+            print((args.out / f"{run_dir.name}.log").read_text()[-2000:])
+            raise SystemExit(f"workers {w}: exit {rc}")
         res = json.loads((run_dir / "result.json").read_text())
         hist = res["history"]
         v60, v_end = at(hist, 60.0), at(hist, 1e18)
@@ -115,7 +170,12 @@ def main() -> None:
                "price_round_median_s": sorted(rounds)[len(rounds) // 2] if rounds else None,
                "wall_s": round(wall, 1), "driver_peak_gb": round(max(before, resource.getrusage(
                    resource.RUSAGE_CHILDREN).ru_maxrss) / 1e6, 2), "faults": res["faults"],
-               "pass_sizes": size_table(run_dir / "pass_times.csv"), "end": v_end}
+               "pass_sizes": size_table(run_dir / "pass_times.csv"), "end": v_end,
+               # the tree's memory (driver + Ray's processes, PSS) at its peak in each step, seconds from the start
+               "memory_gb": {"graphs": mem.peak(0, res["build_s"]),
+                             "actors started": mem.peak(res["build_s"], res["build_s"] + res["pool_s"]),
+                             "first schedule": mem.peak(res["build_s"] + res["pool_s"], res["first_schedule_s"] or 0),
+                             "rounds": mem.peak(res["first_schedule_s"] or 0), "whole run": mem.peak()}}
         results["runs"].append(row)
         print(json.dumps({k: v for k, v in row.items() if k != "pass_sizes"}), flush=True)
     base = next((r for r in results["runs"] if r["workers"] == 1), None)
@@ -133,6 +193,13 @@ def main() -> None:
         print(f"| {r['workers']} | {r['first_schedule_s']} | {f(r['value_60s'])} | {f(r['gap_60s'])} | "
               f"{f(r['value'])} | {f(r['bound'])} | {f(r['gap'])} | {r['rounds']} | {f(r['price_round_median_s'], 2)} | "
               f"{r.get('price_round_speedup', '-')} | {r['driver_peak_gb']} |")
+    print("\nMemory of the job's processes at the peak of each step (GB, PSS summed: total = driver + actors + "
+          "rest of Ray):\n")
+    print("| workers | step | total | driver | actors | rest of Ray |\n|---|---|---|---|---|---|")
+    for r in results["runs"]:
+        for step, m in r["memory_gb"].items():
+            if m is not None:
+                print(f"| {r['workers']} | {step} | {m['total']} | {m['driver']} | {m['actors']} | {m['ray_other']} |")
     for r in results["runs"]:
         if r["pass_sizes"]:
             print(f"\nPass solve times on the actors ({r['workers']} workers):\n")

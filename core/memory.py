@@ -100,3 +100,40 @@ def peak_rss_gb() -> float | None:
     except (OSError, ValueError, IndexError):
         pass
     return None
+
+
+def _children(pid: int) -> list[int]:
+    """`pid` and every process below it (from /proc's parent links; Ray's raylet, GCS and actors are under the
+    driver that started the local cluster)."""
+    kids: dict[int, list[int]] = {}
+    for d in Path("/proc").iterdir():
+        if not d.name.isdigit():
+            continue
+        try:
+            ppid = int((d / "stat").read_text().rsplit(")", 1)[1].split()[1])
+        except (OSError, ValueError, IndexError):
+            continue
+        kids.setdefault(ppid, []).append(int(d.name))
+    out, todo = [], [pid]
+    while todo:
+        p = todo.pop()
+        out.append(p)
+        todo += kids.get(p, [])
+    return out
+
+
+def tree_pss(pid: int) -> dict[str, int]:
+    """Proportional set size (bytes) of `pid` and its descendants, by process name: each shared page (the object
+    store's shared memory, forked copies) counted once over the processes that map it, so the sum is the memory the
+    tree takes.  Names as /proc/PID/comm says (Ray's actors are ``ray::PassWorker``)."""
+    out: dict[str, int] = {}
+    for p in _children(pid):
+        try:
+            name = Path(f"/proc/{p}/comm").read_text().strip()
+            for line in Path(f"/proc/{p}/smaps_rollup").read_text().splitlines():
+                if line.startswith("Pss:"):
+                    out[name] = out.get(name, 0) + int(line.split()[1]) * 1024
+                    break
+        except (OSError, ValueError, IndexError):
+            continue
+    return out

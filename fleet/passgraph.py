@@ -95,6 +95,9 @@ def require_solvable(fleet: Fleet, opps: Opportunities, where: object, geo=None,
     return geo
 
 
+COMPACT_NODES = 65_536  # a pass graph of at most this many nodes keeps its arcs' destinations as uint16
+
+
 @dataclass(frozen=True, eq=False)
 class PassGraph:
     """One pass as a discrete graph over its opportunities.
@@ -239,6 +242,8 @@ def build_pass(fleet: Fleet, opps: Opportunities, los: LineOfSight, p: int, offs
     node_acq = np.r_[-1, local].astype(np.int32)
     ip_s, dst_s, ip_l, dst_l, same = _arcs(acq_ptr, node_time, node_end, los_start, los_end, nadir, slew,
                                            MARGIN_S + NUMERICAL_EPS)
+    if len(node_time) <= COMPACT_NODES:  # half the memory of the arcs, most of a dense fleet's graphs
+        dst_s, dst_l = dst_s.astype(np.uint16), dst_l.astype(np.uint16)
     graph = DiscreteGraph(node_acq, node_time, ip_s, dst_s, acq_ptr)
     loose = DiscreteGraph(node_acq, node_time, ip_l, dst_l, acq_ptr)
     fifo = fifo_violations(loose) == 0

@@ -27,7 +27,7 @@ class DiscreteGraph:
     node_acq: np.ndarray  # int32 [N]; -1 for the source (node 0)
     node_time: np.ndarray  # float64 [N]
     indptr: np.ndarray  # int64 [N+1]
-    dst: np.ndarray  # int32 [E]
+    dst: np.ndarray  # int32 [E] (uint16 in a fleet's pass graphs of at most 65,536 nodes: their arcs' memory)
     acq_ptr: np.ndarray  # int64 [n+1]
 
     @property
