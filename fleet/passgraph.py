@@ -70,12 +70,13 @@ def graph_bytes(opps: Opportunities, n_tasks: int) -> int:
 def require_solve_memory(fleet: Fleet, opps: Opportunities, where: object, processes: int = 1) -> None:
     """Refuse (one line with the estimate) a fleet whose pass graphs cannot fit in memory, before building them.
     `processes`: processes on this machine that each build the geometry of the whole horizon and a share of the
-    graphs (the driver and local Ray actors; forked workers share the driver's)."""
+    graphs (the driver and local Ray actors; forked workers share the driver's).  With more than one the driver is
+    lean (:func:`lean_pass`): the graphs are held once, by the actors, and the nodes and the solver's state twice."""
     from eosp.fleet.opportunities import horizon_bytes
     from eosp.memory import require_memory
 
     geometry, n = horizon_bytes(fleet, processes)
-    need = geometry + graph_bytes(opps, len(fleet.tasks)) * (2 if processes > 1 else 1)
+    need = geometry + graph_bytes(opps, len(fleet.tasks)) + (len(opps) * NODE_BYTES if processes > 1 else 0)
     on = f" in {processes} processes" if processes > 1 else ""
     require_memory(where, int(need), f"the pass graphs of {len(opps):,} opportunities of "
                                      f"{len(fleet.satellites)} satellites over {fleet.horizon.seconds:,} s "
@@ -114,6 +115,7 @@ class PassGraph:
     energy_wh: np.ndarray  # float64 [k]: the least energy above idle an observation of each task takes (energy.py)
     bound_graph: DiscreteGraph | None = None  # see bound_problem(); None: `graph` serves the bound as it is
     bound_provable: bool = True  # False: the bound graph is not FIFO, no pass bound can be proven on it
+    lean: bool = False  # built without arcs (lean_pass): solved elsewhere, its paths re-walked by walk()
 
     @property
     def n_tasks(self) -> int:
@@ -127,6 +129,12 @@ class PassGraph:
         if self.bound_graph is not None:
             arrays += [self.bound_graph.indptr, self.bound_graph.dst]
         return sum(a.nbytes for a in arrays)
+
+
+def _slew(fleet: Fleet, sat: int) -> np.ndarray:
+    """Max rate, max acceleration and settling time of satellite `sat` (what :func:`_need` takes)."""
+    att = fleet.satellites.attitude
+    return np.array([att.max_rate_deg_s[sat], att.max_acc_deg_s2[sat], att.settling_s[sat]], dtype=np.float64)
 
 
 @numba.njit(cache=True, inline="always")
@@ -219,28 +227,61 @@ def _arcs(acq_ptr, node_time, node_end, los_start, los_end, nadir, slew, margin)
     return ip_s, dst_s[:cs].copy(), ip_l, dst_l[:cl].copy(), same
 
 
+@dataclass(frozen=True, eq=False)
+class PassNodes:
+    """A pass's opportunities as its graph's nodes, before any arc (node 0 the source; the canonical order: by
+    acquisition, then start), with what the slew rule reads of each: what :func:`build_pass` scans for arcs and
+    :func:`walk` for one path."""
+
+    sat: int
+    rows: np.ndarray  # int64 [N - 1]: the opportunity of node i + 1
+    tasks: np.ndarray  # int64 [k]: the fleet task of local acquisition a
+    duration: np.ndarray  # float64 [k]
+    node_acq: np.ndarray  # int32 [N], -1 for the source
+    node_time: np.ndarray  # float64 [N]
+    node_end: np.ndarray  # float64 [N]
+    acq_ptr: np.ndarray  # int64 [k + 1]
+    slew: np.ndarray  # float64 [3]: max rate, max acceleration, settling
+
+    @classmethod
+    def of(cls, fleet: Fleet, opps: Opportunities, p: int, offsets: np.ndarray) -> PassNodes:
+        """Pass `p`'s nodes (``offsets``: :meth:`Opportunities.pass_offsets`)."""
+        rows = np.arange(offsets[p], offsets[p + 1])
+        sat = int(opps.satellite[rows[0]])
+        tasks, local = np.unique(opps.task[rows], return_inverse=True)
+        start = opps.start[rows].astype(np.float64) * fleet.horizon.action_step_s
+        order = np.lexsort((start, local))  # canonical: by acquisition, then start
+        rows, local, start = rows[order], local[order], start[order]
+        duration = fleet.tasks.duration_s[tasks].astype(np.float64)
+        acq_ptr = np.r_[0, np.cumsum(np.bincount(local, minlength=len(tasks)))].astype(np.int64) + 1
+        # node 0 is the source: its slots in the per-node arrays are never read as a destination
+        return cls(sat, rows.astype(np.int64), tasks, duration, np.r_[-1, local].astype(np.int32), np.r_[0.0, start],
+                   np.r_[0.0, start + duration[local]], acq_ptr, _slew(fleet, sat))
+
+    @classmethod
+    def of_pass(cls, fleet: Fleet, pg: PassGraph) -> PassNodes:
+        """The nodes of a built pass (lean or not): the same numbers as :meth:`of` gave when it was built."""
+        g = pg.graph
+        return cls(pg.satellite, pg.rows, pg.tasks, pg.duration, g.node_acq, g.node_time,
+                   np.r_[0.0, g.node_time[1:] + pg.duration[g.node_acq[1:]]], g.acq_ptr, _slew(fleet, pg.satellite))
+
+    def sight(self, opps: Opportunities, los: LineOfSight) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Lines of sight at every node's start and end, and nadir at its start ([N, 3] each, zeros at the source),
+        computed for the whole pass at once: the same numbers wherever they are needed (:func:`build_pass`'s arcs,
+        :func:`walk` on a driver without them)."""
+        task = opps.task[self.rows]
+        start, end = self.node_time[1:], self.node_end[1:]
+        zero = np.zeros((1, 3))
+        return (np.vstack([zero, los.los(self.sat, task, start)]), np.vstack([zero, los.los(self.sat, task, end)]),
+                np.vstack([zero, los.nadir(self.sat, start)]))
+
+
 def build_pass(fleet: Fleet, opps: Opportunities, los: LineOfSight, p: int, offsets: np.ndarray) -> PassGraph:
     """The discrete graph of pass `p` (``offsets``: :meth:`Opportunities.pass_offsets`)."""
-    rows = np.arange(offsets[p], offsets[p + 1])
-    sat = int(opps.satellite[rows[0]])
-    tasks, local = np.unique(opps.task[rows], return_inverse=True)
-    start = opps.start[rows].astype(np.float64) * fleet.horizon.action_step_s
-    order = np.lexsort((start, local))  # canonical: by acquisition, then start
-    rows, local, start = rows[order], local[order], start[order]
-    task = opps.task[rows]
-    duration = fleet.tasks.duration_s[tasks].astype(np.float64)
-    end = start + duration[local]
-    acq_ptr = np.r_[0, np.cumsum(np.bincount(local, minlength=len(tasks)))].astype(np.int64) + 1
-    # node 0 is the source: its slots in the per-node arrays are never read as a destination
-    node_time = np.r_[0.0, start]
-    node_end = np.r_[0.0, end]
-    los_start = np.vstack([np.zeros((1, 3)), los.los(sat, task, start)])
-    los_end = np.vstack([np.zeros((1, 3)), los.los(sat, task, end)])
-    nadir = np.vstack([np.zeros((1, 3)), los.nadir(sat, start)])
-    att = fleet.satellites.attitude
-    slew = np.array([att.max_rate_deg_s[sat], att.max_acc_deg_s2[sat], att.settling_s[sat]], dtype=np.float64)
-    node_acq = np.r_[-1, local].astype(np.int32)
-    ip_s, dst_s, ip_l, dst_l, same = _arcs(acq_ptr, node_time, node_end, los_start, los_end, nadir, slew,
+    nd = PassNodes.of(fleet, opps, p, offsets)
+    los_start, los_end, nadir = nd.sight(opps, los)
+    node_acq, node_time, node_end, acq_ptr = nd.node_acq, nd.node_time, nd.node_end, nd.acq_ptr
+    ip_s, dst_s, ip_l, dst_l, same = _arcs(acq_ptr, node_time, node_end, los_start, los_end, nadir, nd.slew,
                                            MARGIN_S + NUMERICAL_EPS)
     if len(node_time) <= COMPACT_NODES:  # half the memory of the arcs, most of a dense fleet's graphs
         dst_s, dst_l = dst_s.astype(np.uint16), dst_l.astype(np.uint16)
@@ -248,11 +289,74 @@ def build_pass(fleet: Fleet, opps: Opportunities, los: LineOfSight, p: int, offs
     loose = DiscreteGraph(node_acq, node_time, ip_l, dst_l, acq_ptr)
     fifo = fifo_violations(loose) == 0
     if fifo and same and not has_bridge_triple(
-            loose, _tracking_fits(los_start, los_end, node_time, node_end, slew, MARGIN_S + NUMERICAL_EPS,
-                                  tracking_slack(slew))):
+            loose, _tracking_fits(los_start, los_end, node_time, node_end, nd.slew, MARGIN_S + NUMERICAL_EPS,
+                                  tracking_slack(nd.slew))):
         loose = None  # the pass graph serves the bound (bound_problem)
-    return PassGraph(p, sat, tasks.astype(np.int32), rows.astype(np.int64), duration, graph,
-                     observation_wh(fleet, sat, tasks), loose, fifo)
+    return PassGraph(p, nd.sat, nd.tasks.astype(np.int32), nd.rows, nd.duration, graph,
+                     observation_wh(fleet, nd.sat, nd.tasks), loose, fifo)
+
+
+NO_ARCS = (np.zeros(1, dtype=np.int64), np.zeros(0, dtype=np.uint16))
+
+
+def lean_pass(fleet: Fleet, opps: Opportunities, p: int, offsets: np.ndarray) -> PassGraph:
+    """Pass `p` without its arcs (:attr:`PassGraph.lean`): what a driver whose passes are solved elsewhere keeps
+    of it (its nodes, tasks and energy: a tenth of the graph's memory at 1,000 satellites), built without the
+    geometry's scan of every pair of nodes."""
+    nd = PassNodes.of(fleet, opps, p, offsets)
+    graph = DiscreteGraph(nd.node_acq, nd.node_time, np.zeros(len(nd.node_time) + 1, dtype=np.int64), NO_ARCS[1],
+                          nd.acq_ptr)
+    return PassGraph(p, nd.sat, nd.tasks.astype(np.int32), nd.rows, nd.duration, graph,
+                     observation_wh(fleet, nd.sat, nd.tasks), None, True, lean=True)
+
+
+@numba.njit(cache=True)
+def _walk(acq_ptr, node_acq, node_time, node_end, los_start, los_end, nadir, slew, margin, acqs):
+    """The acquisitions `acqs` followed from the source, each at the node :func:`_arcs` would make the schedule
+    graph's arc to (the same scan, the same numbers); one that cannot follow is skipped."""
+    rate, acc, settle = slew[0], slew[1], slew[2]
+    out = np.empty(acqs.shape[0], dtype=np.int64)
+    m = 0
+    u = 0
+    for i in range(acqs.shape[0]):
+        b = acqs[i]
+        found = -1
+        if u == 0:
+            for v in range(acq_ptr[b], acq_ptr[b + 1]):
+                if node_time[v] >= _need(nadir[v], los_start[v], rate, acc, settle) + margin:
+                    found = v
+                    break
+        elif b != node_acq[u]:
+            lo, hi = acq_ptr[b], acq_ptr[b + 1]
+            while lo < hi:  # first node of b starting after u ends
+                mid = (lo + hi) >> 1
+                if node_time[mid] < node_end[u]:
+                    lo = mid + 1
+                else:
+                    hi = mid
+            for v in range(lo, acq_ptr[b + 1]):
+                if node_time[v] - node_end[u] >= _need(los_end[u], los_start[v], rate, acc, settle) + margin:
+                    found = v
+                    break
+        if found >= 0:
+            out[m] = found
+            m += 1
+            u = found
+    return out[:m]
+
+
+def walk(fleet: Fleet, opps: Opportunities, los: LineOfSight, pg: PassGraph, path: np.ndarray) -> np.ndarray:
+    """:func:`eosp.kinds.fleet.problem.rewalk` without the arcs: the acquisitions of `path` (nodes of `pg`, in
+    order) followed from the source, each at its earliest node that can follow the one before under the schedule
+    graph's rule, found from the geometry; the same nodes as along the arcs (tested): the lines of sight are those
+    :func:`build_pass` computed (:meth:`PassNodes.sight`, the whole pass at once) and the scan is its scan."""
+    path = np.asarray(path, dtype=np.int64)
+    if len(path) == 0:
+        return path
+    nd = PassNodes.of_pass(fleet, pg)
+    los_start, los_end, nadir = nd.sight(opps, los)
+    return _walk(nd.acq_ptr, nd.node_acq, nd.node_time, nd.node_end, los_start, los_end, nadir, nd.slew,
+                 MARGIN_S + NUMERICAL_EPS, nd.node_acq[path].astype(np.int64))
 
 
 @numba.njit(cache=True)

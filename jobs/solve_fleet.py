@@ -105,6 +105,17 @@ class PassWorker:
 
         return ray.get_runtime_context().get_node_id()
 
+    def summary(self) -> dict:
+        """What the driver of a lean problem cannot count itself: of the graphs held here, their bytes, the passes
+        whose bound needs a bound problem, those with none provable, and the FIFO violations."""
+        from eosp.graphs.prune import fifo_violations
+
+        g = list(self.graphs.values())
+        return {"passes": len(g), "bytes": sum(pg.nbytes for pg in g),
+                "bound_graphs": sum(pg.bound_graph is not None for pg in g),
+                "unprovable": sum(not pg.bound_provable for pg in g),
+                "fifo_violations": sum(fifo_violations(pg.graph) for pg in g)}
+
     def solve_priced(self, passes: np.ndarray, lam: np.ndarray, pass_prices: np.ndarray, left_s: float | None) -> tuple:
         """Every pass of `passes` under task prices `lam` and the passes' energy prices `pass_prices` (utility
         weight - price - pass price * energy), each solve stopped `left_s` seconds from now (this machine's
@@ -399,6 +410,26 @@ class RayPassPool:
                 out[p] = PassResult(nodes[offs[i]:offs[i + 1]], float(value[i]), None)
         return out
 
+    def summary(self) -> list[dict]:
+        """:meth:`PassWorker.summary` of every live actor (and, alike, of the graphs the driver built for lost
+        actors' passes)."""
+        import ray
+        from ray.exceptions import RayActorError
+
+        out = []
+        for a in self.actors:
+            if a is not None:
+                try:
+                    out.append(ray.get(a.summary.remote()))
+                except RayActorError:
+                    continue
+        built = list(getattr(self.prob, "built", {}).values())
+        if built:
+            out.append({"passes": len(built), "bytes": sum(pg.nbytes for pg in built),
+                        "bound_graphs": sum(pg.bound_graph is not None for pg in built),
+                        "unprovable": sum(not pg.bound_provable for pg in built), "fifo_violations": None})
+        return out
+
     def close(self) -> None:
         import ray
 
@@ -545,7 +576,9 @@ def run(job: SolveFleetJob) -> dict:
     make_run_dir(run_dir, replace=False, kind=RUN_KIND)
     (run_dir / META).write_text(json.dumps({"fingerprint": fp, "case_id": fleet.case_id,
                                             "fleet_dir": str(Path(job.fleet_dir).resolve())}, indent=1))
-    prob = Problem.build(fleet, opps, geo)  # the Geometry the feasibility check built (not built twice)
+    # the Geometry the feasibility check built (not built twice); with Ray's actors the driver is lean: the actors
+    # build and hold the pass graphs, the driver their nodes (Problem)
+    prob = Problem.build(fleet, opps, geo, lean=job.fleet.workers > 1)
     t_build = time.perf_counter() - t0
     peak["graphs"] = peak_rss_gb()
     pool = None
@@ -560,6 +593,7 @@ def run(job: SolveFleetJob) -> dict:
         try:
             sol = solve(fleet, opps, job.fleet, problem=prob, initial=initial, pool=pool, on_round=ckpt, resume=resume,
                         t0=t_read)
+            graphs = [] if pool is None else pool.summary()
         finally:
             if pool is not None:
                 pool.close()
@@ -591,7 +625,9 @@ def run(job: SolveFleetJob) -> dict:
                   "price_round_s": sol.info["price_round_s"], "interrupted": sol.info["interrupted"],
                   "check_reserve_s": sol.info["check_reserve_s"], "final_check_s": sol.info["final_check_s"],
                   "driver_peak_gb": {k: None if v is None else round(v, 3) for k, v in peak.items()},
-                  "graph_mb": round(sum(pg.nbytes for pg in prob.passes) / 1e6, 1),
+                  "graph_mb": round(sum(pg.nbytes for pg in prob.passes) / 1e6, 1),  # the driver's (lean: nodes)
+                  "actor_graph_mb": None if pool is None else round(sum(x["bytes"] for x in graphs) / 1e6, 1),
+                  "bound_graphs": sol.info["bound_graphs"] if pool is None else sum(x["bound_graphs"] for x in graphs),
                   "read_s": round(t_read - t0, 2),  # the solve's history counts from the read (the graphs in it)
                   "history": [(round(t + t_read - t0, 3), v, b) for t, v, b in sol.history]}
         (run_dir / "result.json").write_text(json.dumps(result, indent=1))

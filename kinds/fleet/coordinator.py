@@ -11,7 +11,8 @@ Before the first round the bound is also taken at the ceiling prices (every cont
 
 Schedules come from the same pass solver with true weights:
 
-* construction: passes in time order, each solved with the tasks not yet served;
+* construction: passes in time order, each solved with the tasks not yet served (in waves of passes that share
+  no task with a pass before them, solved together on the pass pool: the same schedule, :meth:`Coordinator.construct`);
 * coordinate descent: a pass is solved again with every task not served by another pass; its new schedule is
   never worse, and the tasks it frees make the passes that hold them worth solving again.  It runs as sweeps
   on the pass pool (:meth:`Coordinator.descend`): the passes waiting are solved together from one schedule,
@@ -46,7 +47,7 @@ from eosp.interrupt import HeldInterrupt
 from eosp.kinds.fleet.master import Centre, Master
 from eosp.kinds.fleet.pool import InProcessPool, PassPool
 from eosp.kinds.fleet.prices import Prices
-from eosp.kinds.fleet.problem import (PassResult, Primal, Problem, path_tasks, path_wh, priced, rewalk,
+from eosp.kinds.fleet.problem import (PassResult, Primal, Problem, path_tasks, path_wh, priced,
                                       schedule_windows, solve_pass)
 
 CHECK_MARGIN = 1.5  # the final check's estimate times this (a better schedule has more actions, a loaded machine)
@@ -82,6 +83,29 @@ def disjoint(queued, ptr, idx, claimed):
             p = queued[i]
             for j in range(ptr[p], ptr[p + 1]):
                 claimed[idx[j]] = False
+    return take
+
+
+@numba.njit(cache=True)
+def wave(order, ptr, idx, claimed):
+    """Mask of `order` (pass ids): each pass taken when it shares no task with any pass before it in `order`,
+    taken or not (the passes a one-by-one construction in that order would solve from the same state);
+    `claimed` (bool per task) is left all False.  The first pass is always taken."""
+    take = np.zeros(len(order), dtype=np.bool_)
+    for i in range(len(order)):
+        p = order[i]
+        free = True
+        for j in range(ptr[p], ptr[p + 1]):
+            if claimed[idx[j]]:
+                free = False
+                break
+        take[i] = free
+        for j in range(ptr[p], ptr[p + 1]):
+            claimed[idx[j]] = True
+    for i in range(len(order)):
+        p = order[i]
+        for j in range(ptr[p], ptr[p + 1]):
+            claimed[idx[j]] = False
     return take
 
 
@@ -148,10 +172,6 @@ class Coordinator:
         self.best_bound = self.conflict_free()
 
     # ------------------------------------------------------------------ pass solves
-    def _solve(self, p: int, util: np.ndarray, deadline: float | None) -> PassResult:
-        self.pass_solves += 1
-        return solve_pass(self.prob, p, util, self.cfg, deadline)
-
     def _utility(self, primal: Primal, p: int, shift: np.ndarray | None = None) -> np.ndarray:
         """The utilities of pass p's tasks for a schedule: weight, less `shift` (kept below the weight), less the
         pass's price of the energy they take (:attr:`spend`); 0 (left out) for a task another pass serves or the
@@ -237,16 +257,17 @@ class Coordinator:
         if len(path):
             free = self._available(primal, p)[pg.graph.node_acq[path]]
             if not free.all():
-                path = rewalk(pg, path[free])
+                path = self.prob.rewalk(p, path[free])
                 again = True
         if self._path_utility(p, path) > self._path_utility(p, primal.paths[p]) + 1e-9:
             for t in self._assign(primal, p, path):
                 todo[self.prob.task_passes[t]] = True
         todo[p] = again  # not for the tasks p freed itself: it just chose without them
 
-    def _batch_utilities(self, primal: Primal, batch: list[int]) -> tuple[np.ndarray, np.ndarray]:
-        """:meth:`_utility` (no shift) of every pass of `batch` at once: one flat float64 vector and CSR offsets
-        (the same numbers: weight less the pass's price of the tasks' energy, 0 where another pass serves the task
+    def _batch_utilities(self, primal: Primal, batch: list[int],
+                         shift: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`_utility` of every pass of `batch` at once: one flat float64 vector and CSR offsets (the same
+        numbers: weight less `shift` and the pass's price of the tasks' energy, 0 where another pass serves the task
         or the repair barred it), gathered from the passes' tasks as CSR instead of pass by pass."""
         b = np.asarray(batch, dtype=np.int64)
         lens = self._task_ptr[b + 1] - self._task_ptr[b]
@@ -254,7 +275,9 @@ class Coordinator:
         np.cumsum(lens, out=offsets[1:])
         pos = np.repeat(self._task_ptr[b] - offsets[:-1], lens) + np.arange(offsets[-1])
         tasks, owner = self._task_idx[pos], np.repeat(b, lens)
-        util = priced(self.prob.weight, self._no_shift, tasks, self._task_wh[pos], self.spend[owner])
+        w = self.prob.weight
+        shift = self._no_shift if shift is None else np.minimum(shift, 0.999 * w)
+        util = priced(w, shift, tasks, self._task_wh[pos], self.spend[owner])
         s = primal.served[tasks]
         free = ((s < 0) | (s == owner)) & ~self.barred[self._pass_sat[owner], tasks]
         return np.where(free, util, 0.0), offsets
@@ -263,9 +286,10 @@ class Coordinator:
                      deadline: float | None) -> dict[int, PassResult] | None:
         """The passes of a sweep under their utilities (flat, CSR `offsets`): on the pool, or here when the batch is
         small (:data:`SWEEP_IN_PROCESS`: a round trip would cost more than the solves; the exact solver gives the
-        same paths anywhere)."""
+        same paths anywhere) or a prefetched round holds the pool; always on the pool when the problem is lean (the
+        driver holds no arcs)."""
         self.pass_solves += len(batch)
-        if len(batch) < SWEEP_IN_PROCESS or self._pending is not None:  # (a prefetched round holds the pool)
+        if not self.prob.lean and (len(batch) < SWEEP_IN_PROCESS or self._pending is not None):
             return {p: solve_pass(self.prob, p, util[offsets[i]:offsets[i + 1]], self.cfg, deadline)
                     for i, p in enumerate(batch)}
         return self.pool.solve_utilities(batch, util, offsets, deadline)
@@ -274,16 +298,39 @@ class Coordinator:
                   primal: Primal | None = None, deadline: float | None = None, whole: bool = False) -> Primal:
         """Passes in `order`, each solved with the tasks still free (utilities :meth:`_utility`, `util_shift`
         taken off the weights); stops at `deadline` unless `whole` (the first schedule: every pass, each solve
-        then cut short past the deadline)."""
+        then cut short past the deadline).
+
+        Solved in waves (:func:`wave`): each wave the passes that share no task with a pass before them in `order`
+        still waiting, solved together (on the pool when large) and assigned in order: a pass's utilities depend
+        only on its own tasks, which nothing before it in the wave touches, so the schedule is the one-by-one
+        construction's, whoever solves each pass."""
         primal = primal or Primal.empty(len(self.prob.passes), len(self.prob.weight))
-        for p in order.tolist():
+        left = order[~self.frozen[order]]
+        while len(left):
             if not whole and deadline is not None and time.perf_counter() > deadline:
                 break
-            if self.frozen[p]:
-                continue
-            res = self._solve(p, self._utility(primal, p, util_shift), deadline)
-            self._assign(primal, p, res.nodes)
+            take = wave(left, self._task_ptr, self._task_idx, self._claimed)
+            batch = left[take].tolist()
+            left = left[~take]
+            util, offsets = self._batch_utilities(primal, batch, util_shift)
+            solved = self._solve_batch(batch, util, offsets, deadline)
+            if solved is None:
+                if not whole:
+                    break
+                solved = self._solve_late(batch, util, offsets, deadline)
+            for p in batch:
+                self._assign(primal, p, solved[p].nodes)
         return primal
+
+    def _solve_late(self, batch: list[int], util: np.ndarray, offsets: np.ndarray,
+                    deadline: float) -> dict[int, PassResult]:
+        """The passes of a wave of the first schedule that the deadline cut: every one solved all the same, here,
+        each cut short (:func:`eosp.kinds.fleet.problem.pass_limit`: 10 ms past the deadline), or on the pool with
+        no deadline (each within the pass time limit) when the problem is lean."""
+        if self.prob.lean:
+            return self.pool.solve_utilities(batch, util, offsets, None)
+        return {p: solve_pass(self.prob, p, util[offsets[i]:offsets[i + 1]], self.cfg, deadline)
+                for i, p in enumerate(batch)}
 
     # ------------------------------------------------------------------ prices and bound
     def _dual_round(self, lam: np.ndarray, deadline: float | None) -> tuple | None:
@@ -537,7 +584,8 @@ class Coordinator:
             if len(path) == 0:
                 continue
             free = self._available(primal, p)[self.prob.passes[p].graph.node_acq[path]]
-            self._assign(primal, p, rewalk(self.prob.passes[p], path[free]))
+            # a solver's path follows the arcs: re-walked only when some of its tasks are taken
+            self._assign(primal, p, path if free.all() else self.prob.rewalk(p, path[free]))
         self.descend(primal, list(range(n_pass)), deadline)
         return primal
 
@@ -572,7 +620,7 @@ class Coordinator:
                 ok = np.array([(pg.satellite, t) in keep for t in tasks.tolist()], dtype=bool)
                 if not ok.all():
                     self.barred[pg.satellite, tasks[~ok]] = True
-                    self._assign(primal, p, path[ok] if self.frozen[p] else rewalk(pg, path[ok]))
+                    self._assign(primal, p, path[ok] if self.frozen[p] else self.prob.rewalk(p, path[ok]))
                     freed += tasks[~ok].tolist()
             if attempt < 1:  # one round of re-solves of the passes that could take the dropped tasks
                 self.descend(primal, sorted({q for t in freed for q in self.prob.task_passes[t].tolist()}), deadline)
@@ -703,7 +751,7 @@ class Coordinator:
                 for p in np.flatnonzero(~self.frozen).tolist():
                     path = self.initial.paths[p]
                     free = self._available(first, p)[prob.passes[p].graph.node_acq[path]] if len(path) else path
-                    self._assign(first, p, rewalk(prob.passes[p], path[free]) if len(path) else path)
+                    self._assign(first, p, prob.rewalk(p, path[free]) if len(path) else path)
             else:  # every pass, each solve cut short past the deadline
                 self.construct(order, primal=first, deadline=deadline, whole=True)
             self.descend(first, list(range(len(prob.passes))), deadline)

@@ -8,7 +8,9 @@ the coordinate descent (:meth:`eosp.kinds.fleet.coordinator.Coordinator.descend`
 another pass serves is worth 0 to this one), which only the driver holds: it sends each pass's utilities,
 packed as one flat float64 vector and CSR offsets (a sweep of thousands of passes would be thousands of small
 objects otherwise).  The pass graphs stay where they were built: in this process, in forked children that
-share them, or on Ray actors that own whole satellites; the protocol names passes, never graphs.
+share them, or on Ray actors that own whole satellites (the driver then holds its passes without arcs, a lean
+:class:`~eosp.kinds.fleet.problem.Problem`, and sends every solve to the pool); the protocol names passes, never
+graphs.
 """
 
 from __future__ import annotations
@@ -85,7 +87,7 @@ def solve_utility_passes(prob: Problem, cfg: FleetConfig, passes: list[int], uti
 def solve_priced_pass(prob: Problem, p: int, prices: np.ndarray, pass_prices: np.ndarray, cfg: FleetConfig,
                       deadline: float | None) -> PassResult:
     """Pass `p` of a price round (:func:`eosp.kinds.fleet.problem.solve_round_pass`) under the prices."""
-    pg = prob.passes[p]
+    pg = prob.graph(p)
     return solve_round_pass(pg, priced(prob.weight, prices, pg.tasks, pg.energy_wh, pass_prices[p]), cfg, deadline)
 
 

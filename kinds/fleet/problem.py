@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -14,7 +14,8 @@ from eosp.fleet.energy import EnergyWindows, energy_windows
 from eosp.fleet.geometry import Geometry
 from eosp.fleet.model import Fleet, Schedule
 from eosp.fleet.opportunities import Opportunities
-from eosp.fleet.passgraph import PassGraph, bound_problem, build_passes, priced_instance
+from eosp.fleet.passgraph import (PassGraph, bound_problem, build_pass, build_passes, lean_pass, priced_instance,
+                                  walk)
 from eosp.fleet.slew import LineOfSight
 from eosp.graphs.prune import fifo_violations
 from eosp.kinds.fleet.config import FleetConfig
@@ -29,7 +30,13 @@ class PassResult:
 
 @dataclass
 class Problem:
-    """A fleet, its opportunities and its pass graphs, built once."""
+    """A fleet, its opportunities and its pass graphs, built once.
+
+    A *lean* problem (``Problem.build(..., lean=True)``) holds its passes without their arcs
+    (:func:`eosp.fleet.passgraph.lean_pass`): the driver of a pool whose workers own the graphs (Ray actors,
+    whole satellites each) keeps what coordination needs, the passes' nodes, tasks and energy; its paths are
+    re-walked from the geometry (:meth:`rewalk`, the same nodes as along the arcs) and a pass it must solve itself
+    (a lost worker's) gets its graph built then (:meth:`graph`)."""
 
     fleet: Fleet
     opps: Opportunities
@@ -41,26 +48,50 @@ class Problem:
     pass_time: np.ndarray  # (first start, last end) of each pass, seconds
     windows: EnergyWindows | None = None  # what the battery allows in runs of passes (eosp.fleet.energy)
     sun: SunCache | None = None  # sunlight of the satellites, computed once (the windows, the battery repair)
-    fifo_violations: int = 0  # see eosp.graphs.prune.fifo_violations: 0 makes the pass optima the passes'
+    fifo_violations: int | None = 0  # see eosp.graphs.prune.fifo_violations (None: lean, the workers' graphs)
     build_s: float = 0.0
+    lean: bool = False  # passes without arcs (see the class docstring)
+    built: dict[int, PassGraph] = field(default_factory=dict)  # lean: the graphs built here (lost workers' passes)
 
     @property
-    def bound_graphs(self) -> int:
-        """Passes whose bound term needs their bound problem (bridges, repeats, transitions between the margins)."""
-        return sum(pg.bound_graph is not None for pg in self.passes)
+    def bound_graphs(self) -> int | None:
+        """Passes whose bound term needs their bound problem (bridges, repeats, transitions between the margins);
+        None in a lean problem (its workers know)."""
+        return None if self.lean else sum(pg.bound_graph is not None for pg in self.passes)
 
     @property
-    def unprovable(self) -> int:
+    def unprovable(self) -> int | None:
         """Passes on which no bound problem can be proven (their bound graph is not FIFO): their term of the
-        Lagrangian bound is the sum of their tasks' positive values (:func:`solve_round_pass`)."""
-        return sum(not pg.bound_provable for pg in self.passes)
+        Lagrangian bound is the sum of their tasks' positive values (:func:`solve_round_pass`); None when lean."""
+        return None if self.lean else sum(not pg.bound_provable for pg in self.passes)
+
+    def graph(self, p: int) -> PassGraph:
+        """Pass `p` with its arcs: as held, or in a lean problem built now and kept (a lost worker's passes, solved
+        by the driver)."""
+        if not self.lean:
+            return self.passes[p]
+        pg = self.built.get(p)
+        if pg is None:
+            pg = self.built[p] = build_pass(self.fleet, self.opps, self.los, p, self.opps.pass_offsets())
+        return pg
+
+    def rewalk(self, p: int, path: np.ndarray) -> np.ndarray:
+        """:func:`rewalk` of pass `p`'s `path`, along its arcs or, lean, from the geometry (the same nodes)."""
+        if self.lean:
+            return walk(self.fleet, self.opps, self.los, self.passes[p], path)
+        return rewalk(self.passes[p], path)
 
     @classmethod
-    def build(cls, fleet: Fleet, opps: Opportunities, geo: Geometry | None = None) -> Problem:
+    def build(cls, fleet: Fleet, opps: Opportunities, geo: Geometry | None = None, lean: bool = False) -> Problem:
+        """`lean`: the passes without their arcs (see the class docstring)."""
         t0 = time.perf_counter()
         geo = geo or Geometry(fleet)
         los = LineOfSight(fleet, geo)
-        passes = build_passes(fleet, opps, los)
+        if lean:
+            off = opps.pass_offsets()
+            passes = [lean_pass(fleet, opps, p, off) for p in range(opps.n_passes)]
+        else:
+            passes = build_passes(fleet, opps, los)
         n = len(fleet.tasks)
         holders: list[list[int]] = [[] for _ in range(n)]
         for pg in passes:
@@ -69,13 +100,13 @@ class Problem:
         span = np.array([[pg.graph.node_time[1:].min(),
                           (pg.graph.node_time[1:] + pg.duration[pg.graph.node_acq[1:]]).max()] for pg in passes])
         span = span.reshape(-1, 2)
-        fifo = sum(fifo_violations(pg.graph) for pg in passes)
+        fifo = None if lean else sum(fifo_violations(pg.graph) for pg in passes)
         sun = SunCache(geo)
         windows = energy_windows(fleet, sun, np.array([pg.satellite for pg in passes], dtype=np.int64), span,
                                  np.array([most_wh(fleet, pg) for pg in passes]))
         return cls(fleet, opps, geo, los, passes, fleet.tasks.weight.astype(np.float64),
                    [np.asarray(h, dtype=np.int64) for h in holders], span, windows, sun, fifo,
-                   time.perf_counter() - t0)
+                   time.perf_counter() - t0, lean)
 
     @property
     def total_weight(self) -> float:
@@ -117,7 +148,7 @@ def pass_limit(cfg: FleetConfig, deadline: float | None) -> float:
 def solve_pass(prob: Problem, p: int, value: np.ndarray, cfg: FleetConfig,
                deadline: float | None = None) -> PassResult:
     """Pass `p` with utility `value[a]` per local task (non-positive ones left out)."""
-    return solve_pass_graph(prob.passes[p], value, cfg, deadline)
+    return solve_pass_graph(prob.graph(p), value, cfg, deadline)
 
 
 def solve_pass_graph(pg: PassGraph, value: np.ndarray, cfg: FleetConfig,
