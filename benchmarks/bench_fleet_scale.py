@@ -125,6 +125,8 @@ def main() -> None:
     ap.add_argument("--workers", type=int, nargs="+", default=[1, 2])
     ap.add_argument("--warm-start", default="heuristic", choices=["none", "heuristic", "learned"],
                     help="where the prices start (the fleet solver's --warm-start)")
+    ap.add_argument("--lean-driver", default="auto", choices=["auto", "yes", "no"],
+                    help="the job's --lean-driver (with workers > 1: the driver without the pass graphs' arcs)")
     ap.add_argument("--rounds", type=int, default=0, help="a fixed number of price rounds instead of the time limit "
                                                           "(deterministic: the runs must give the same schedule)")
     args = ap.parse_args()
@@ -144,7 +146,7 @@ def main() -> None:
                "--fleet.workers", str(w), "--fleet.time-limit", "0" if args.rounds else str(args.time_limit),
                "--ray.num-cpus", str(max(w, 2)),
                *(["--fleet.rounds", str(args.rounds)] if args.rounds else []),
-               "--fleet.warm-start", args.warm_start,
+               "--fleet.warm-start", args.warm_start, "--lean-driver", args.lean_driver,
                "--mlflow-uri", f"sqlite:///{(args.out / 'mlflow.db').resolve()}"]
         before = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss
         t0 = time.perf_counter()
@@ -164,7 +166,8 @@ def main() -> None:
         hist = res["history"]
         v60, v_end = at(hist, 60.0), at(hist, 1e18)
         rounds = res["price_round_s"]
-        row = {"workers": w, "first_schedule_s": res["first_schedule_s"], "build_s": res["build_s"],
+        row = {"workers": w, "lean_driver": res.get("lean_driver"), "first_schedule_s": res["first_schedule_s"],
+               "build_s": res["build_s"], "actor_graph_mb": res.get("actor_graph_mb"), "graph_mb": res.get("graph_mb"),
                "pool_s": res["pool_s"], "value_60s": v60 and v60[0], "gap_60s": v60 and (v60[1] - v60[0]) / v60[1],
                "value": res["value"], "bound": res["bound"], "gap": res["gap"], "rounds": res["rounds"],
                "price_round_median_s": sorted(rounds)[len(rounds) // 2] if rounds else None,

@@ -43,13 +43,14 @@ from eosp.sim.slew import bang_coast_bang
 
 # Memory of a fleet's pass graphs (Problem.build, a worker's graphs), on top of the whole horizon's geometry
 # (eosp.fleet.opportunities.horizon_bytes), fitted with margin to the solver's peak on generated days of 200
-# satellites (0.9 GB: 766,306 opportunities, 13,041 passes) and 1,000 satellites (8.7 GB: 19.5 M opportunities,
-# 62,247 passes, docs/results.md).  Per opportunity its node, lines of sight and share of the solver's state; per
-# pass its objects and arrays; arcs: from each node at most one to each other task of its pass, int32, measured
-# 0.42-0.49 of (nodes x tasks) a pass, counted at 0.5 with room for the bound graphs some passes need.
+# satellites (0.9 GB: 766,306 opportunities, 13,041 passes) and 1,000 satellites (8.7 GB with int32 arcs, 6.3 GB
+# with uint16 ones: 19.5 M opportunities, 62,247 passes, docs/results.md).  Per opportunity its node, lines of
+# sight and share of the solver's state; per pass its objects and arrays; arcs: from each node at most one to each
+# other task of its pass, uint16 (COMPACT_NODES), measured 0.42-0.49 of (nodes x tasks) a pass, counted at 0.5
+# with room for the bound graphs some passes need.
 NODE_BYTES = 150
 PASS_BYTES = 30_000
-PAIR_BYTES = 2.5  # per (node, task of its pass): 0.5 arcs x 4 bytes, x 1.25
+PAIR_BYTES = 1.25  # per (node, task of its pass): 0.5 arcs x 2 bytes, x 1.25
 
 
 def node_task_pairs(opps: Opportunities, n_tasks: int) -> int:
@@ -67,33 +68,41 @@ def graph_bytes(opps: Opportunities, n_tasks: int) -> int:
     return int(len(opps) * NODE_BYTES + opps.n_passes * PASS_BYTES + node_task_pairs(opps, n_tasks) * PAIR_BYTES)
 
 
-def require_solve_memory(fleet: Fleet, opps: Opportunities, where: object, processes: int = 1) -> None:
+def require_solve_memory(fleet: Fleet, opps: Opportunities, where: object, processes: int = 1,
+                         lean: bool = False) -> None:
     """Refuse (one line with the estimate) a fleet whose pass graphs cannot fit in memory, before building them.
     `processes`: processes on this machine that each build the geometry of the whole horizon and a share of the
-    graphs (the driver and local Ray actors; forked workers share the driver's).  With more than one the driver is
-    lean (:func:`lean_pass`): the graphs are held once, by the actors, and the nodes and the solver's state twice."""
+    graphs (the driver and local Ray actors; forked workers share the driver's).  `lean`: the driver keeps the
+    passes without arcs (:func:`lean_pass`), so the graphs are held once, by the actors, and the nodes and the
+    solver's state twice; else the driver holds every graph beside the actors' shares."""
     from eosp.fleet.opportunities import horizon_bytes
     from eosp.memory import require_memory
 
     geometry, n = horizon_bytes(fleet, processes)
-    need = geometry + graph_bytes(opps, len(fleet.tasks)) + (len(opps) * NODE_BYTES if processes > 1 else 0)
+    graphs = graph_bytes(opps, len(fleet.tasks))
+    need = geometry + (graphs + len(opps) * NODE_BYTES if lean else graphs * (2 if processes > 1 else 1))
     on = f" in {processes} processes" if processes > 1 else ""
     require_memory(where, int(need), f"the pass graphs of {len(opps):,} opportunities of "
                                      f"{len(fleet.satellites)} satellites over {fleet.horizon.seconds:,} s "
                                      f"({n:,} instants){on}")
 
 
-def require_solvable(fleet: Fleet, opps: Opportunities, where: object, geo=None, processes: int = 1):
+def require_solvable(fleet: Fleet, opps: Opportunities, where: object, geo=None, processes: int = 1,
+                     lean: bool = False):
     """Before solving: the pass graphs' memory estimated and checked (:func:`require_solve_memory`), then the fleet
     feasible (:func:`eosp.fleet.check.require_feasible`); returns the Geometry it checked with (`geo`, or a new one
     built once the memory is known to suffice)."""
     from eosp.fleet.check import require_feasible
     from eosp.fleet.geometry import Geometry
 
-    require_solve_memory(fleet, opps, where, processes)
+    require_solve_memory(fleet, opps, where, processes, lean)
     geo = geo or Geometry(fleet)
     require_feasible(fleet, where, geo)
     return geo
+
+
+LEAN_ABOVE_BYTES = 4 * 1024 ** 3  # the fleet job's driver is lean by default where the graphs are estimated above
+# this (a 1,000-satellite day: 12 GiB; a 200-satellite one, 1 GiB, keeps them: its small sweeps are solved there)
 
 
 COMPACT_NODES = 65_536  # a pass graph of at most this many nodes keeps its arcs' destinations as uint16
@@ -128,7 +137,7 @@ class PassGraph:
                   self.graph.indptr, self.graph.dst, self.graph.acq_ptr]
         if self.bound_graph is not None:
             arrays += [self.bound_graph.indptr, self.bound_graph.dst]
-        return sum(a.nbytes for a in arrays)
+        return sum(a.nbytes for a in arrays if 0 not in a.strides)  # (a lean pass's indptr: a view of one zero)
 
 
 def _slew(fleet: Fleet, sat: int) -> np.ndarray:
@@ -296,7 +305,8 @@ def build_pass(fleet: Fleet, opps: Opportunities, los: LineOfSight, p: int, offs
                      observation_wh(fleet, nd.sat, nd.tasks), loose, fifo)
 
 
-NO_ARCS = (np.zeros(1, dtype=np.int64), np.zeros(0, dtype=np.uint16))
+NO_ARCS = np.zeros(0, dtype=np.uint16)
+_ZERO = np.zeros(1, dtype=np.int64)
 
 
 def lean_pass(fleet: Fleet, opps: Opportunities, p: int, offsets: np.ndarray) -> PassGraph:
@@ -304,7 +314,8 @@ def lean_pass(fleet: Fleet, opps: Opportunities, p: int, offsets: np.ndarray) ->
     of it (its nodes, tasks and energy: a tenth of the graph's memory at 1,000 satellites), built without the
     geometry's scan of every pair of nodes."""
     nd = PassNodes.of(fleet, opps, p, offsets)
-    graph = DiscreteGraph(nd.node_acq, nd.node_time, np.zeros(len(nd.node_time) + 1, dtype=np.int64), NO_ARCS[1],
+    # no arc from any node: an indptr of zeros as a view of one zero (no memory: 19.5 M nodes at 1,000 satellites)
+    graph = DiscreteGraph(nd.node_acq, nd.node_time, np.broadcast_to(_ZERO, len(nd.node_time) + 1), NO_ARCS,
                           nd.acq_ptr)
     return PassGraph(p, nd.sat, nd.tasks.astype(np.int32), nd.rows, nd.duration, graph,
                      observation_wh(fleet, nd.sat, nd.tasks), None, True, lean=True)

@@ -7,10 +7,11 @@
 The same code runs on a laptop (a local Ray with ``--ray.num-cpus``) and on a cluster (``ray job submit``, or
 ``--ray.address``).  Each actor owns the passes of a set of satellites (balanced by opportunities) and builds
 their pass graphs once, where they are solved: the fleet goes to the object store once, and a round sends only
-pass ids and prices and gets paths back.  The coordinate descent's sweeps go to the same actors (each gets its
-passes' utilities, which depend on the driver's schedule, as one flat vector).  The driver keeps every graph
-too (small sweeps and the large-neighbourhood moves solve passes one at a time there, where a round trip would
-cost more than the solve).
+pass ids and prices and gets paths back.  The coordinate descent's sweeps and the construction's waves go to
+the same actors (each gets its passes' utilities, which depend on the driver's schedule, as one flat vector).
+Where the graphs are large (``--lean-driver``) the driver keeps the passes without their arcs and every solve is
+the actors'; else it holds every graph too and solves small sweeps itself, where a round trip would cost more than
+the solves.
 
 Faults: an actor that dies mid-round costs nothing but time: the driver solves that actor's passes of the round
 itself (the same deterministic solver, so the round's result is the same), and Ray restarts the actor where a CPU
@@ -40,7 +41,7 @@ from pathlib import Path
 import numpy as np
 
 from eosp.args import Parser, add_config_args, add_memory_arg, config_from_args, prefixed_config, run_job  # noqa: E402
-from eosp.config import RayConfig, flatten  # noqa: E402
+from eosp.config import RayConfig, choice, flatten  # noqa: E402
 from eosp.kinds.fleet.config import FleetConfig  # noqa: E402
 
 RUN_KIND = "fleet-run"
@@ -64,6 +65,11 @@ class SolveFleetJob:
     """MLflow tracking URI (empty: sqlite mlflow.db in the working directory)."""
     experiment: str = "eosp-fleet"
     """MLflow experiment."""
+    lean_driver: str = choice("auto", "auto", "yes", "no")
+    """With --fleet.workers > 1: yes, the driver keeps the passes without their arcs (the actors hold the graphs,
+    every pass solve is theirs: the memory of the graphs once, and the first graphs built in parallel); no, it
+    holds every graph too (small descent sweeps and those of a prefetched round solved on the driver: faster where
+    the graphs are small); auto: yes where the graphs are estimated above 4 GiB."""
     ray: RayConfig = field(default_factory=RayConfig)
 
 
@@ -539,6 +545,15 @@ def summary_rows(fleet, sched) -> list[dict]:
     return rows
 
 
+def lean_driver(job: SolveFleetJob, fleet, opps) -> bool:
+    """Whether the driver keeps its passes without arcs (``--lean-driver``; only with Ray's actors)."""
+    from eosp.fleet.passgraph import LEAN_ABOVE_BYTES, graph_bytes
+
+    if job.fleet.workers < 2 or job.lean_driver == "no":
+        return False
+    return job.lean_driver == "yes" or graph_bytes(opps, len(fleet.tasks)) > LEAN_ABOVE_BYTES
+
+
 def run(job: SolveFleetJob) -> dict:
     import csv
 
@@ -567,7 +582,8 @@ def run(job: SolveFleetJob) -> dict:
     local_actors = job.fleet.workers if job.fleet.workers > 1 and not job.ray.address else 0
     if local_actors:  # more workers than CPUs: refused before anything is written
         _require_cpus(job.fleet.workers, "")
-    geo = require_solvable(fleet, opps, f"--fleet-dir {job.fleet_dir}", processes=1 + local_actors)
+    lean = lean_driver(job, fleet, opps)
+    geo = require_solvable(fleet, opps, f"--fleet-dir {job.fleet_dir}", processes=1 + local_actors, lean=lean)
     if job.fleet.workers > 1:
         init_ray(job.ray.address, max(job.ray.num_cpus, job.fleet.workers))
         if job.ray.address:  # a cluster's CPUs are known once connected
@@ -576,9 +592,7 @@ def run(job: SolveFleetJob) -> dict:
     make_run_dir(run_dir, replace=False, kind=RUN_KIND)
     (run_dir / META).write_text(json.dumps({"fingerprint": fp, "case_id": fleet.case_id,
                                             "fleet_dir": str(Path(job.fleet_dir).resolve())}, indent=1))
-    # the Geometry the feasibility check built (not built twice); with Ray's actors the driver is lean: the actors
-    # build and hold the pass graphs, the driver their nodes (Problem)
-    prob = Problem.build(fleet, opps, geo, lean=job.fleet.workers > 1)
+    prob = Problem.build(fleet, opps, geo, lean=lean)  # the Geometry the feasibility check built (not built twice)
     t_build = time.perf_counter() - t0
     peak["graphs"] = peak_rss_gb()
     pool = None
@@ -621,6 +635,7 @@ def run(job: SolveFleetJob) -> dict:
                   round(first_t + t_read - t0, 2), "wall_s": round(wall, 2), "faults": 0 if pool is None else pool.faults,
                   "actors_given_up": 0 if pool is None else pool.given_up,
                   "workers": job.fleet.workers, "nodes": 0 if pool is None else len(set(pool.nodes)),
+                  "lean_driver": lean,
                   "resumed_from_round": 0 if resume is None else resume.rounds_done,
                   "price_round_s": sol.info["price_round_s"], "interrupted": sol.info["interrupted"],
                   "check_reserve_s": sol.info["check_reserve_s"], "final_check_s": sol.info["final_check_s"],

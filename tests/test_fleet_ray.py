@@ -51,9 +51,9 @@ def two_nodes():
     cluster.shutdown()
 
 
-def job(fleet_dir, run_dir, workers=1, address="", rounds=ROUNDS, mlflow_dir=None):
+def job(fleet_dir, run_dir, workers=1, address="", rounds=ROUNDS, mlflow_dir=None, lean="auto"):
     return job_mod.SolveFleetJob(
-        fleet_dir=str(fleet_dir), run_dir=str(run_dir),
+        fleet_dir=str(fleet_dir), run_dir=str(run_dir), lean_driver=lean,
         fleet=FleetConfig(pass_solver="exact", rounds=rounds, time_limit=None, workers=workers, seed=0),
         mlflow_uri=f"sqlite:///{mlflow_dir or run_dir.parent}/mlflow.db",
         ray=job_mod.RayConfig(address=address, num_cpus=2))
@@ -65,11 +65,15 @@ def schedule_rows(fleet_dir, path):
     return sorted(zip(s.satellite.tolist(), s.task.tolist(), s.start_us.tolist()))
 
 
+@pytest.mark.parametrize("lean", ["no", "yes"])
 def test_two_nodes_give_the_single_process_schedule_and_a_killed_actor_costs_nothing(fleet_dir, two_nodes,
-                                                                                    tmp_path, monkeypatch):
+                                                                                    tmp_path, monkeypatch, lean):
+    """With the driver holding every graph, and lean (the actors' graphs only, every solve theirs)."""
     alone = job_mod.run(job(fleet_dir, tmp_path / "alone"))
-    spread = job_mod.run(job(fleet_dir, tmp_path / "spread", workers=2, address=two_nodes.address))
+    spread = job_mod.run(job(fleet_dir, tmp_path / "spread", workers=2, address=two_nodes.address, lean=lean))
     assert spread["nodes"] == 2  # one actor on each node
+    assert spread["lean_driver"] == (lean == "yes") and spread["actor_graph_mb"] > 0
+    assert spread["bound_graphs"] == alone["bound_graphs"]
     assert spread["faults"] == 0
     assert (spread["value"], spread["bound"]) == (alone["value"], alone["bound"])
     assert alone["value"] > 0 and alone["bound"] >= alone["value"]
@@ -79,19 +83,21 @@ def test_two_nodes_give_the_single_process_schedule_and_a_killed_actor_costs_not
     assert times[0] == "pass,opportunities,seconds,worker" and len(times) > 10
 
     monkeypatch.setenv("EOSP_FAULT_KILL_ACTOR_ROUND", "1")  # actor 0 killed as the first round is sent
-    hurt = job_mod.run(job(fleet_dir, tmp_path / "hurt", workers=2, address=two_nodes.address))
+    hurt = job_mod.run(job(fleet_dir, tmp_path / "hurt", workers=2, address=two_nodes.address, lean=lean))
     assert hurt["faults"] >= 1
     assert (hurt["value"], hurt["bound"]) == (alone["value"], alone["bound"])
     assert schedule_rows(fleet_dir, tmp_path / "hurt/schedule.parquet") == \
         schedule_rows(fleet_dir, tmp_path / "alone/schedule.parquet")
 
 
+@pytest.mark.parametrize("lean", [False, True])
 def test_ray_sweeps_with_one_and_two_actors_give_the_in_process_schedule(clustered_fleet_dir, two_nodes,
-                                                                         monkeypatch):
+                                                                         monkeypatch, lean):
     """The coordinate descent's sweeps on Ray actors (one actor, then one on each node, then with actor 0 killed in
     the first sweep sent to them): for fixed rounds and seed the schedule, value, bound and solve count of this
     process alone, the second price round sent to the actors before the first round's recovery.  Every sweep of 2 passes or more goes to the pool (this fleet's are smaller than the default
-    threshold)."""
+    threshold).  Lean: the driver holds no arc (every sweep and wave of the construction on the actors, paths
+    re-walked from the geometry) and builds none while no actor is lost."""
     import ray
 
     from eosp.kinds.fleet import coordinator as coord_mod
@@ -100,11 +106,13 @@ def test_ray_sweeps_with_one_and_two_actors_give_the_in_process_schedule(cluster
 
     monkeypatch.setattr(coord_mod, "SWEEP_IN_PROCESS", 2)
     fleet, opps = read_fleet(clustered_fleet_dir)
-    prob = Problem.build(fleet, opps)
+    full = Problem.build(fleet, opps)
+    driver = Problem.build(fleet, opps, full.geo, lean=True) if lean else full
 
     def run(workers, pool=True):
         cfg = FleetConfig(pass_solver="exact", rounds=ROUNDS, time_limit=None, workers=workers, seed=4)
-        ray_pool = job_mod.RayPassPool(prob, cfg) if pool else None
+        ray_pool = job_mod.RayPassPool(driver, cfg) if pool else None
+        prob = driver if pool else full
         try:
             sol = solve(fleet, opps, cfg, problem=prob, pool=ray_pool)
         finally:
@@ -121,6 +129,7 @@ def test_ray_sweeps_with_one_and_two_actors_give_the_in_process_schedule(cluster
         got, pool = run(workers)
         assert pool.sweeps >= 1 and pool.faults == 0
         assert got == alone, workers
+        assert not driver.built
         assert run.prefetched >= 1  # round 2 was sent to the actors before round 1's recovery, and taken
     monkeypatch.setenv("EOSP_FAULT_KILL_ACTOR_SWEEP", "1")
     hurt, pool = run(2)
