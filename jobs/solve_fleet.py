@@ -641,7 +641,7 @@ def run(job: SolveFleetJob) -> dict:
                   "check_reserve_s": sol.info["check_reserve_s"], "final_check_s": sol.info["final_check_s"],
                   "driver_peak_gb": {k: None if v is None else round(v, 3) for k, v in peak.items()},
                   "graph_mb": round(sum(pg.nbytes for pg in prob.passes) / 1e6, 1),  # the driver's (lean: nodes)
-                  "actor_graph_mb": None if pool is None else round(sum(x["bytes"] for x in graphs) / 1e6, 1),
+                  "actor_graph_mb": None if pool is None else round(sum(x["bytes"] for x in graphs) / 1e6, 3),
                   "bound_graphs": sol.info["bound_graphs"] if pool is None else sum(x["bound_graphs"] for x in graphs),
                   "read_s": round(t_read - t0, 2),  # the solve's history counts from the read (the graphs in it)
                   "history": [(round(t + t_read - t0, 3), v, b) for t, v, b in sol.history]}
