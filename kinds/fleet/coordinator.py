@@ -63,34 +63,9 @@ SWEEP_IN_PROCESS = 32  # a descent sweep of fewer passes is solved on the driver
 
 
 @numba.njit(cache=True)
-def disjoint(queued, ptr, idx, claimed):
-    """Mask of `queued` (ascending pass ids): each pass taken when it shares no task with a pass taken before it
-    (a sweep's batch whose results cannot conflict); `claimed` (bool per task) is left all False."""
-    take = np.zeros(len(queued), dtype=np.bool_)
-    for i in range(len(queued)):
-        p = queued[i]
-        free = True
-        for j in range(ptr[p], ptr[p + 1]):
-            if claimed[idx[j]]:
-                free = False
-                break
-        if free:
-            take[i] = True
-            for j in range(ptr[p], ptr[p + 1]):
-                claimed[idx[j]] = True
-    for i in range(len(queued)):
-        if take[i]:
-            p = queued[i]
-            for j in range(ptr[p], ptr[p + 1]):
-                claimed[idx[j]] = False
-    return take
-
-
-@numba.njit(cache=True)
-def wave(order, ptr, idx, claimed):
-    """Mask of `order` (pass ids): each pass taken when it shares no task with any pass before it in `order`,
-    taken or not (the passes a one-by-one construction in that order would solve from the same state);
-    `claimed` (bool per task) is left all False.  The first pass is always taken."""
+def _take(order, ptr, idx, claimed, in_order):
+    """Mask of `order` (pass ids): each pass taken when it shares no task with a pass taken before it, or, with
+    `in_order`, with any pass before it, taken or not; `claimed` (bool per task) is left all False."""
     take = np.zeros(len(order), dtype=np.bool_)
     for i in range(len(order)):
         p = order[i]
@@ -100,13 +75,27 @@ def wave(order, ptr, idx, claimed):
                 free = False
                 break
         take[i] = free
-        for j in range(ptr[p], ptr[p + 1]):
-            claimed[idx[j]] = True
+        if free or in_order:
+            for j in range(ptr[p], ptr[p + 1]):
+                claimed[idx[j]] = True
     for i in range(len(order)):
         p = order[i]
         for j in range(ptr[p], ptr[p + 1]):
             claimed[idx[j]] = False
     return take
+
+
+def disjoint(queued, ptr, idx, claimed):
+    """Mask of `queued` (ascending pass ids): each pass taken when it shares no task with a pass taken before it
+    (a sweep's batch whose results cannot conflict); `claimed` (bool per task) is left all False."""
+    return _take(queued, ptr, idx, claimed, False)
+
+
+def wave(order, ptr, idx, claimed):
+    """Mask of `order` (pass ids): each pass taken when it shares no task with any pass before it in `order`,
+    taken or not (the passes a one-by-one construction in that order would solve from the same state);
+    `claimed` (bool per task) is left all False.  The first pass is always taken."""
+    return _take(order, ptr, idx, claimed, True)
 
 
 @dataclass
