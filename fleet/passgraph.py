@@ -34,6 +34,7 @@ from eosp.fleet.geometry import NUMERICAL_EPS
 from eosp.fleet.model import Fleet
 from eosp.fleet.opportunities import Opportunities
 from eosp.fleet.slew import MARGIN_S, LineOfSight
+from eosp.graphs.build import first_at_or_after
 from eosp.graphs.discrete import DiscreteGraph, arc_to_acq
 from eosp.graphs.prune import fifo_violations
 from eosp.instances.instance import Acquisitions, Instance
@@ -160,18 +161,6 @@ def _need(u, v, rate, acc, settle):
     return bang_coast_bang(angle, rate, acc) + settle
 
 
-@numba.njit(cache=True, inline="always")
-def _first_from(node_time, lo, hi, t):
-    """The first node in [lo, hi) (one acquisition's, by start) starting at or after `t`; hi when none."""
-    while lo < hi:
-        mid = (lo + hi) >> 1
-        if node_time[mid] < t:
-            lo = mid + 1
-        else:
-            hi = mid
-    return lo
-
-
 @numba.njit(cache=True)
 def _arcs(acq_ptr, node_time, node_end, los_start, los_end, nadir, slew, margin):
     """Both graphs of a pass in one scan: the schedule's (`margin` to spare, no arc to the node's own acquisition)
@@ -216,7 +205,7 @@ def _arcs(acq_ptr, node_time, node_end, los_start, los_end, nadir, slew, margin)
             acq += 1
         for b in range(k):
             own = b == acq
-            lo = _first_from(node_time, acq_ptr[b], acq_ptr[b + 1], node_end[u])  # first of b after u ends
+            lo = first_at_or_after(node_time, acq_ptr[b], acq_ptr[b + 1], node_end[u])  # first of b after u ends
             found_l = -1
             found_s = -1
             for v in range(lo, acq_ptr[b + 1]):
@@ -344,7 +333,7 @@ def _walk(acq_ptr, node_acq, node_time, node_end, los_start, los_end, nadir, sle
                     found = v
                     break
         elif b != node_acq[u]:
-            lo = _first_from(node_time, acq_ptr[b], acq_ptr[b + 1], node_end[u])  # first of b after u ends
+            lo = first_at_or_after(node_time, acq_ptr[b], acq_ptr[b + 1], node_end[u])  # first of b after u ends
             for v in range(lo, acq_ptr[b + 1]):
                 if node_time[v] - node_end[u] >= _need(los_end[u], los_start[v], rate, acc, settle) + margin:
                     found = v

@@ -27,7 +27,8 @@ from eosp.sim.slew import PIECEWISE, slew_time, slew_times
 
 
 @numba.njit(cache=True, inline="always")
-def _first_at_or_after(node_time, lo, hi, t):
+def first_at_or_after(node_time, lo, hi, t):
+    """The first node in [lo, hi) (sorted by time, one acquisition's) at or after `t`; hi when none."""
     while lo < hi:
         mid = (lo + hi) >> 1
         if node_time[mid] < t:
@@ -74,7 +75,7 @@ def _build_arcs(node_acq, node_time, trig, durations, acq_ptr, model, max_slew, 
                 e += 1
                 continue
             end = acq_ptr[j + 1]
-            w = _first_at_or_after(node_time, acq_ptr[j], end, finish + min_slew)
+            w = first_at_or_after(node_time, acq_ptr[j], end, finish + min_slew)
             while w < end:
                 # rotation angle from cos of the roll and pitch differences
                 cr = cr_u * trig[w, 0] + sr_u * trig[w, 1]
@@ -89,7 +90,7 @@ def _build_arcs(node_acq, node_time, trig, durations, acq_ptr, model, max_slew, 
                 if lipschitz > 0.0:
                     # no feasible start before node_time[w] - f / (1 + L): the slew time
                     # cannot drop faster than L seconds per second
-                    nxt = _first_at_or_after(node_time, w + 1, end, node_time[w] - f / (1.0 + lipschitz))
+                    nxt = first_at_or_after(node_time, w + 1, end, node_time[w] - f / (1.0 + lipschitz))
                     w = max(w + 1, nxt)
                 else:
                     w += 1
