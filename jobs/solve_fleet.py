@@ -510,6 +510,7 @@ class Checkpoint:
         self.run, self.fleet, self.mlflow, self.W = run, fleet, mlflow, W
         self.t0 = time.perf_counter()
         self.last_value = -1.0
+        self.phases = 0  # round phases logged so far
 
     def __call__(self, coord) -> None:
         from eosp.atomic import atomic_path
@@ -528,8 +529,11 @@ class Checkpoint:
             os.kill(os.getpid(), signal.SIGKILL)  # fault injection for the tests: die like a killed driver
         v, b = coord.best.value / self.W, min(1.0, coord.best_bound / self.W)
         if self.mlflow is not None:
+            new = len(coord.phases) > self.phases  # this round's phases (a price round's)
+            phases = {f"phase/{k}_s": x for k, x in coord.phases[-1].items()} if new else {}
+            self.phases = len(coord.phases)
             self.mlflow.log_metrics({"value": v, "bound": b, "gap": (b - v) / b if b > 0 else 0.0,
-                                     "wall_s": time.perf_counter() - self.t0}, step=coord.rounds_done)
+                                     "wall_s": time.perf_counter() - self.t0, **phases}, step=coord.rounds_done)
 
 
 def summary_rows(fleet, sched) -> list[dict]:
@@ -637,7 +641,8 @@ def run(job: SolveFleetJob) -> dict:
                   "workers": job.fleet.workers, "nodes": 0 if pool is None else len(set(pool.nodes)),
                   "lean_driver": lean,
                   "resumed_from_round": 0 if resume is None else resume.rounds_done,
-                  "price_round_s": sol.info["price_round_s"], "interrupted": sol.info["interrupted"],
+                  "price_round_s": sol.info["price_round_s"], "round_phases_s": sol.info["round_phases_s"],
+                  "interrupted": sol.info["interrupted"],
                   "check_reserve_s": sol.info["check_reserve_s"], "final_check_s": sol.info["final_check_s"],
                   "driver_peak_gb": {k: None if v is None else round(v, 3) for k, v in peak.items()},
                   "graph_mb": round(sum(pg.nbytes for pg in prob.passes) / 1e6, 1),  # the driver's (lean: nodes)

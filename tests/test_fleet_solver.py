@@ -103,6 +103,19 @@ def test_a_run_with_rounds_is_deterministic_for_a_seed(problem):
     assert np.array_equal(a.schedule.start_us, b.schedule.start_us) and a.bound == b.bound
 
 
+def test_each_price_round_says_where_its_time_went():
+    from eosp.kinds.fleet.config import FleetConfig
+    from eosp.kinds.fleet.solve import solve
+
+    prob = build(40, 1)
+    sol = solve(prob.fleet, prob.opps, FleetConfig(rounds=3, seed=7, time_limit=None), problem=prob)
+    phases, rounds_s = sol.info["round_phases_s"], sol.info["price_round_s"]
+    assert len(phases) == len(rounds_s) == 3
+    for ph, s in zip(phases, rounds_s):  # the round's wait and its price step add up to its wall time
+        assert set(ph) == {"round", "prices", "recover", "repair", "moves", "pool"}
+        assert min(ph.values()) >= 0 and abs(ph["round"] + ph["prices"] - s) < 2e-3
+
+
 def test_ramp_passes_give_a_schedule_and_no_bound(problem):
     from eosp.kinds.fleet.config import FleetConfig
     from eosp.kinds.fleet.solve import solve

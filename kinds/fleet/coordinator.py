@@ -125,6 +125,10 @@ class Coordinator:
     on_round: Callable[[Coordinator], None] | None = None  # called after every round (checkpoints, MLflow)
     start_round: int = 0  # rounds a resumed run has done already
     round_s: list[float] = field(default_factory=list)  # wall seconds of every finished price round
+    # where each round's wall time went (seconds): waiting for the price round's passes ("round"), the master LP
+    # and the price step ("prices"), the recovery, the battery repair of what it recovered, the neighbourhood
+    # moves, and of these the time spent waiting for sweeps and waves on the pool ("pool")
+    phases: list[dict] = field(default_factory=list)
     initial: Primal | None = None  # a schedule to start from (--init)
     frozen: np.ndarray | None = None  # bool per pass: kept as in `initial`, never solved again (--freeze-until)
 
@@ -139,6 +143,8 @@ class Coordinator:
         self._lp_misses = 0  # master solves in a row that did not finish in their time (MASTER_PATIENCE)
         self.integer_done = False  # whether the master's integer solution was tried (once, when converged)
         self._pending = None  # (prices, pass prices, result, when sent) of a price round sent ahead (prefetch)
+        self._pool_s = 0.0  # seconds waited for sweeps and waves on the pool (see phases)
+        self._wait_s = 0.0  # seconds the last price round waited for its passes
         self._pass_sat = np.array([pg.satellite for pg in self.prob.passes], dtype=np.int64)
         self._terms = np.zeros(len(self.prob.passes))  # the pass terms of the last price round
         self._no_shift = np.zeros(n)  # zero task prices, made once (a descent sweep prices every pass twice)
@@ -281,7 +287,11 @@ class Coordinator:
         if not self.prob.lean and (len(batch) < SWEEP_IN_PROCESS or self._pending is not None):
             return {p: solve_pass(self.prob, p, util[offsets[i]:offsets[i + 1]], self.cfg, deadline)
                     for i, p in enumerate(batch)}
-        return self.pool.solve_utilities(batch, util, offsets, deadline)
+        t = time.perf_counter()
+        try:
+            return self.pool.solve_utilities(batch, util, offsets, deadline)
+        finally:
+            self._pool_s += time.perf_counter() - t
 
     def construct(self, order: np.ndarray, util_shift: np.ndarray | None = None,
                   primal: Primal | None = None, deadline: float | None = None, whole: bool = False) -> Primal:
@@ -332,11 +342,13 @@ class Coordinator:
         pi = self.prices.pass_price()
         todo = np.flatnonzero(~self.frozen).tolist()
         pending, self._pending = self._pending, None
+        t = time.perf_counter()
         if pending is not None and np.array_equal(pending[0], lam) and np.array_equal(pending[1], pi):
             solved = pending[2]()  # sent before the last recovery (prefetch): the same prices, the same passes
             self.prefetched += 1
         else:
             solved = self.pool.solve_priced(todo, lam, pi, deadline)
+        self._wait_s = time.perf_counter() - t
         if solved is None:
             return None  # cut by the deadline
         self.pass_solves += len(todo)
@@ -810,8 +822,18 @@ class Coordinator:
                 if cfg.pass_solver == "exact" and not self.converged and (cfg.rounds is None
                                                                           or rounds + 1 < cfg.rounds):
                     self.prefetch(deadline)
-                if not self.offer(self.recover(rng, deadline), deadline):
+                self._pool_s, t = 0.0, [time.perf_counter()]
+                primal = self.recover(rng, deadline)
+                t.append(time.perf_counter())
+                kept = self.offer(primal, deadline)
+                t.append(time.perf_counter())
+                if not kept:
                     self.neighbourhood(rng, deadline)
+                t.append(time.perf_counter())
+                self.phases.append({"round": round(self._wait_s, 3),
+                                    "prices": round(self.round_s[-1] - self._wait_s, 3),
+                                    "recover": round(t[1] - t[0], 3), "repair": round(t[2] - t[1], 3),
+                                    "moves": round(t[3] - t[2], 3), "pool": round(self._pool_s, 3)})
             elif self.converged and not self.integer_done and self.master is not None:
                 self.integer_round(deadline)
             else:

@@ -133,6 +133,7 @@ def solve(fleet: Fleet, opps: Opportunities, cfg: FleetConfig | None = None, pro
             "final_check_s": round(time.perf_counter() - t_final, 3),
             "metrics": res.metrics, "interrupted": coord.interrupted,
             "bound_source": source, "price_round_s": [round(x, 4) for x in coord.round_s],
+            "round_phases_s": coord.phases,
             "bound_graphs": prob.bound_graphs, "bound_refused": list(coord.refused),
             "no_lagrangian_bound_because": None if coord.bound_source == "lagrangian" else (
                 f"pass solver {cfg.pass_solver} proves no pass bound" if cfg.pass_solver != "exact"
