@@ -17,6 +17,7 @@ import argparse
 import csv
 import json
 import resource
+import statistics
 import subprocess
 import sys
 import threading
@@ -166,10 +167,16 @@ def main() -> None:
         hist = res["history"]
         v60, v_end = at(hist, 60.0), at(hist, 1e18)
         rounds = res["price_round_s"]
+        phases = res.get("round_phases_s") or []
+        v600 = at(hist, 600.0)
         row = {"workers": w, "lean_driver": res.get("lean_driver"), "first_schedule_s": res["first_schedule_s"],
                "build_s": res["build_s"], "actor_graph_mb": res.get("actor_graph_mb"), "graph_mb": res.get("graph_mb"),
                "pool_s": res["pool_s"], "value_60s": v60 and v60[0], "gap_60s": v60 and (v60[1] - v60[0]) / v60[1],
+               "value_600s": v600 and v600[0], "gap_600s": v600 and (v600[1] - v600[0]) / v600[1],
                "value": res["value"], "bound": res["bound"], "gap": res["gap"], "rounds": res["rounds"],
+               # where a price round's time went: the median of each phase over the price rounds (seconds)
+               "round_phases_median_s": {k: round(statistics.median(ph[k] for ph in phases), 2)
+                                         for k in phases[0]} if phases else None,
                "price_round_median_s": sorted(rounds)[len(rounds) // 2] if rounds else None,
                "wall_s": round(wall, 1), "driver_peak_gb": round(max(before, resource.getrusage(
                    resource.RUSAGE_CHILDREN).ru_maxrss) / 1e6, 2), "faults": res["faults"],
@@ -203,6 +210,16 @@ def main() -> None:
         for step, m in r["memory_gb"].items():
             if m is not None:
                 print(f"| {r['workers']} | {step} | {m['total']} | {m['driver']} | {m['actors']} | {m['ray_other']} |")
+    print("\nWhere a price round's time went (median seconds over the price rounds: waiting for its passes, the "
+          "master LP and price step, the recovery, its battery repair, the moves; pool: of these, waiting for "
+          "sweeps and waves on the workers):\n")
+    print("| workers | WCR at 600 s | gap at 600 s | round | prices | recover | repair | moves | pool |")
+    print("|---|---|---|---|---|---|---|---|---|")
+    for r in results["runs"]:
+        m = r["round_phases_median_s"] or {}
+        f = lambda x, d=4: "-" if x is None else f"{x:.{d}f}"  # noqa: E731
+        print(f"| {r['workers']} | {f(r['value_600s'])} | {f(r['gap_600s'])} | "
+              + " | ".join(str(m.get(k, "-")) for k in ("round", "prices", "recover", "repair", "moves", "pool")) + " |")
     for r in results["runs"]:
         if r["pass_sizes"]:
             print(f"\nPass solve times on the actors ({r['workers']} workers):\n")

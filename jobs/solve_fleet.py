@@ -212,6 +212,7 @@ class RayPassPool:
         self.revive_s = float(os.environ.get("EOSP_REVIVE_S", "") or REVIVE_S)
         self.given_up = 0  # actors whose passes went to the others
         self.calls = 0
+        self.round_solve_s = 0.0  # the last round collected: its busiest actor's seconds of solves
         self.faults = 0  # actor calls lost to a dead actor (their passes solved by the driver)
         self.times: list[tuple[int, float, int]] = []  # (pass, seconds, worker): price-round passes actors solved
         self.kill_round = int(os.environ.get("EOSP_FAULT_KILL_ACTOR_ROUND", "0") or 0)
@@ -348,6 +349,7 @@ class RayPassPool:
             ready, _ = ray.wait(refs, num_returns=len(refs), timeout=timeout)
             if len(ready) < len(refs):
                 return None  # the deadline came first
+            busy = [0.0]  # each actor's seconds of solves in this round
             for ref, (k, idx) in zip(refs, parts):
                 try:
                     got, value, bound, offsets, nodes, secs = ray.get(ref)
@@ -360,6 +362,8 @@ class RayPassPool:
                     b = float(bound[i])
                     out[p] = PassResult(nodes[offsets[i]:offsets[i + 1]], float(value[i]), None if b != b else b)
                 self.times += list(zip(got.tolist(), secs.tolist(), [k] * len(got)))
+                busy.append(float(secs.sum()))
+            self.round_solve_s = max(busy)
             return out
 
         return collect

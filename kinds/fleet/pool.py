@@ -28,7 +28,9 @@ class PassPool(Protocol):
     """Solves passes under task prices and energy prices.  A pool whose workers run beside the driver may also
     offer ``submit_priced(passes, prices, pass_prices, deadline)``: :meth:`solve_priced` sent now, returning a
     function that waits for its result (Ray's actors; the coordinator then solves the next price round while it
-    recovers a schedule, :meth:`eosp.kinds.fleet.coordinator.Coordinator.prefetch`)."""
+    recovers a schedule, :meth:`eosp.kinds.fleet.coordinator.Coordinator.prefetch`); it then says, as
+    ``round_solve_s``, the seconds of solves of its busiest worker in the last round it returned (the master LP's
+    time limit: the time since such a round was sent counts the recovery it ran beside)."""
 
     def solve_priced(self, passes: list[int], prices: np.ndarray, pass_prices: np.ndarray,
                      deadline: float | None) -> dict[int, PassResult] | None:
