@@ -534,7 +534,8 @@ class Checkpoint:
         v, b = coord.best.value / self.W, min(1.0, coord.best_bound / self.W)
         if self.mlflow is not None:
             new = len(coord.phases) > self.phases  # this round's phases (a price round's)
-            phases = {f"phase/{k}_s": x for k, x in coord.phases[-1].items()} if new else {}
+            phases = {f"phase/{k}" + ("" if k == "pool_calls" else "_s"): x
+                      for k, x in coord.phases[-1].items()} if new else {}
             self.phases = len(coord.phases)
             self.mlflow.log_metrics({"value": v, "bound": b, "gap": (b - v) / b if b > 0 else 0.0,
                                      "wall_s": time.perf_counter() - self.t0, **phases}, step=coord.rounds_done)

@@ -86,9 +86,10 @@ def test_the_smoothed_prices_are_between_the_centre_and_the_duals():
 
 
 def test_a_master_slower_than_its_round_gives_way_to_weighted_steps_from_the_start(monkeypatch):
-    """When the master's LP is not solved within its time (a 200-satellite day) MASTER_PATIENCE rounds in a row,
-    the solver drops it and goes on with weighted subgradient steps from the prices it started with; before that
-    each such round takes a weighted step and keeps the master; the bound stays a bound."""
+    """When the master's LP, once solved in its time, is then not solved within it (a 200-satellite day)
+    MASTER_PATIENCE rounds in a row, the solver drops it and goes on with weighted subgradient steps from the prices
+    it started with; before that each such round takes a weighted step and keeps the master; the bound stays a
+    bound."""
     from eosp.kinds.fleet.config import FleetConfig
     from eosp.kinds.fleet.coordinator import MASTER_PATIENCE, Coordinator
     from eosp.kinds.fleet.master import Master
@@ -99,6 +100,8 @@ def test_a_master_slower_than_its_round_gives_way_to_weighted_steps_from_the_sta
     coord = Coordinator(prob, FleetConfig(rounds=1, time_limit=None))
     start = prob.weight * 0.3
     coord.prices.lam = start.copy()
+    coord.price_round(None)  # solved in its time
+    assert coord.master is not None and coord.master.solved
     monkeypatch.setattr(Master, "duals", lambda self, deadline, limit, iterations=None: None)  # out of time
     for _ in range(MASTER_PATIENCE - 1):
         before = coord.prices.lam.copy()
@@ -111,6 +114,25 @@ def test_a_master_slower_than_its_round_gives_way_to_weighted_steps_from_the_sta
     coord.price_round(None)  # a weighted step now
     assert not np.array_equal(coord.prices.lam, start)
     assert coord.best_bound >= full_lp(prob) / 1.0 - 1e-9
+
+
+def test_a_master_that_never_solved_in_its_time_is_dropped_at_its_first_miss(monkeypatch):
+    """A master whose first solve runs out of its time is not one slow solve near the optimum (a 1,000-satellite
+    day: its first three solves ran out, each as long as the round's pass solves): dropped at once, the prices back
+    where the run started."""
+    from eosp.kinds.fleet.config import FleetConfig
+    from eosp.kinds.fleet.coordinator import Coordinator
+    from eosp.kinds.fleet.master import Master
+    from eosp.kinds.fleet.problem import Problem
+
+    fleet = narrow_fleet(12, 0)
+    prob = Problem.build(fleet, compute(fleet, Geometry(fleet)))
+    coord = Coordinator(prob, FleetConfig(rounds=1, time_limit=None))
+    start = prob.weight * 0.3
+    coord.prices.lam = start.copy()
+    monkeypatch.setattr(Master, "duals", lambda self, deadline, limit, iterations=None: None)  # out of time
+    coord.price_round(None)
+    assert coord.master is None and np.array_equal(coord.prices.lam, start)
 
 
 def test_the_master_time_limit_counts_from_the_time_already_run():

@@ -128,7 +128,7 @@ class Coordinator:
     round_s: list[float] = field(default_factory=list)  # wall seconds of every finished price round
     # where each round's wall time went (seconds): waiting for the price round's passes ("round"), the master LP
     # and the price step ("prices"), the recovery, the battery repair of what it recovered, the neighbourhood
-    # moves, and of these the time spent waiting for sweeps and waves on the pool ("pool")
+    # moves, and of these the time spent waiting for sweeps and waves on the pool ("pool", in "pool_calls" calls)
     phases: list[dict] = field(default_factory=list)
     initial: Primal | None = None  # a schedule to start from (--init)
     frozen: np.ndarray | None = None  # bool per pass: kept as in `initial`, never solved again (--freeze-until)
@@ -146,6 +146,7 @@ class Coordinator:
         self.integer_done = False  # whether the master's integer solution was tried (once, when converged)
         self._pending = None  # (prices, pass prices, result, when sent) of a price round sent ahead (prefetch)
         self._pool_s = 0.0  # seconds waited for sweeps and waves on the pool (see phases)
+        self._pool_calls = 0  # sweeps and waves sent to the pool (see phases)
         self._wait_s = 0.0  # seconds the last price round waited for its passes
         self._solve_s = 0.0  # seconds the last price round's pass solves took (the master LP's time limit)
         self._pass_sat = np.array([pg.satellite for pg in self.prob.passes], dtype=np.int64)
@@ -291,6 +292,7 @@ class Coordinator:
             return {p: solve_pass(self.prob, p, util[offsets[i]:offsets[i + 1]], self.cfg, deadline)
                     for i, p in enumerate(batch)}
         t = time.perf_counter()
+        self._pool_calls += 1
         try:
             return self.pool.solve_utilities(batch, util, offsets, deadline)
         finally:
@@ -830,7 +832,7 @@ class Coordinator:
                 if cfg.pass_solver == "exact" and not self.converged and (cfg.rounds is None
                                                                           or rounds + 1 < cfg.rounds):
                     self.prefetch(deadline)
-                self._pool_s, t = 0.0, [time.perf_counter()]
+                self._pool_s, self._pool_calls, t = 0.0, 0, [time.perf_counter()]
                 primal = self.recover(rng, deadline)
                 t.append(time.perf_counter())
                 kept = self.offer(primal, deadline)
@@ -841,7 +843,8 @@ class Coordinator:
                 self.phases.append({"round": round(self._wait_s, 3),
                                     "prices": round(self.round_s[-1] - self._wait_s, 3),
                                     "recover": round(t[1] - t[0], 3), "repair": round(t[2] - t[1], 3),
-                                    "moves": round(t[3] - t[2], 3), "pool": round(self._pool_s, 3)})
+                                    "moves": round(t[3] - t[2], 3), "pool": round(self._pool_s, 3),
+                                    "pool_calls": self._pool_calls})
             elif self.converged and not self.integer_done and self.master is not None:
                 self.integer_round(deadline)
             else:
