@@ -197,13 +197,13 @@ def main() -> None:
         if base and r["rounds_per_min"] and base["rounds_per_min"]:
             r["rounds_speedup"] = round(r["rounds_per_min"] / base["rounds_per_min"], 2)
     (args.out / "scale.json").write_text(json.dumps(results, indent=1))
+    f = lambda x, d=4: "-" if x is None else f"{x:.{d}f}"  # noqa: E731  (a cell of the tables below)
     print(f"\n{results['satellites']} satellites, {results['tasks']} tasks, {results['opportunities']} opportunities, "
           f"{results['passes']} passes; generated in {results['generate_s']} s (peak {results['generate_peak_gb']} GB)\n")
     print("| workers | first schedule (s) | WCR at 60 s | gap at 60 s | WCR at end | bound | gap at end | rounds | "
           "price round (s) | rounds a minute | speed-up | driver peak (GB) |")
     print("|---|---|---|---|---|---|---|---|---|---|---|---|")
     for r in results["runs"]:
-        f = lambda x, d=4: "-" if x is None else f"{x:.{d}f}"  # noqa: E731
         print(f"| {r['workers']} | {r['first_schedule_s']} | {f(r['value_60s'])} | {f(r['gap_60s'])} | "
               f"{f(r['value'])} | {f(r['bound'])} | {f(r['gap'])} | {r['rounds']} | {f(r['price_round_median_s'], 2)} | "
               f"{r['rounds_per_min']} | {r.get('rounds_speedup', '-')} | {r['driver_peak_gb']} |")
@@ -221,9 +221,8 @@ def main() -> None:
     print("|---|---|---|---|---|---|---|---|---|---|")
     for r in results["runs"]:
         m = r["round_phases_median_s"] or {}
-        f = lambda x, d=4: "-" if x is None else f"{x:.{d}f}"  # noqa: E731
-        print(f"| {r['workers']} | {f(r['value_600s'])} | {f(r['gap_600s'])} | "
-              + " | ".join(str(m.get(k, "-")) for k in ("round", "prices", "recover", "repair", "moves", "pool", "pool_calls")) + " |")
+        cells = [str(m.get(k, "-")) for k in ("round", "prices", "recover", "repair", "moves", "pool", "pool_calls")]
+        print(f"| {r['workers']} | {f(r['value_600s'])} | {f(r['gap_600s'])} | " + " | ".join(cells) + " |")
     for r in results["runs"]:
         if r["pass_sizes"]:
             print(f"\nPass solve times on the actors ({r['workers']} workers):\n")
