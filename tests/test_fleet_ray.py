@@ -137,6 +137,45 @@ def test_ray_sweeps_with_one_and_two_actors_give_the_in_process_schedule(cluster
     assert hurt == alone
 
 
+def test_four_actors_on_four_nodes_give_the_in_process_schedule(clustered_fleet_dir, two_nodes, monkeypatch):
+    """Two more nodes join (four CPUs in all) and four actors, the driver lean, solve with fixed rounds: every sweep
+    of 2 passes or more on the actors, filled batches included (the descent's batches change with the worker count
+    nowhere); the schedule, value, bound and solve count of this process alone.  The nodes leave afterwards."""
+    import ray
+
+    from eosp.kinds.fleet import coordinator as coord_mod
+    from eosp.kinds.fleet.problem import Problem
+    from eosp.kinds.fleet.solve import solve
+
+    monkeypatch.setattr(coord_mod, "SWEEP_IN_PROCESS", 2)
+    fleet, opps = read_fleet(clustered_fleet_dir)
+    full = Problem.build(fleet, opps)
+    driver = Problem.build(fleet, opps, full.geo, lean=True)
+
+    def result(sol):
+        rows = sorted(zip(sol.schedule.satellite.tolist(), sol.schedule.task.tolist(), sol.schedule.start_us.tolist()))
+        return rows, sol.value, sol.bound, sol.info["pass_solves"]
+
+    cfg = FleetConfig(pass_solver="exact", rounds=ROUNDS, time_limit=None, workers=4, seed=4)
+    alone = result(solve(fleet, opps, FleetConfig(pass_solver="exact", rounds=ROUNDS, time_limit=None, workers=1,
+                                                  seed=4), problem=full))
+    if not ray.is_initialized():
+        ray.init(address=two_nodes.address)
+    added = [two_nodes.add_node(num_cpus=1) for _ in range(2)]
+    two_nodes.wait_for_nodes()
+    pool = None
+    try:
+        pool = job_mod.RayPassPool(driver, cfg)
+        assert len(set(pool.nodes)) == 4  # one actor on each node
+        assert result(solve(fleet, opps, cfg, problem=driver, pool=pool)) == alone
+        assert pool.sweeps >= 1 and pool.faults == 0 and not driver.built
+    finally:
+        if pool is not None:
+            pool.close()
+        for node in added:
+            two_nodes.remove_node(node)
+
+
 def test_a_killed_driver_resumes_from_its_run_dir(clustered_fleet_dir, tmp_path):
     import os
     import subprocess

@@ -93,13 +93,11 @@ def sweep(prob: Problem, pool, seed: int) -> tuple[list, float, int]:
     return [p.tolist() for p in primal.paths], primal.value, coord.pass_solves
 
 
-@pytest.mark.parametrize("small,least", [(1, 1), (coord_mod.SWEEP_IN_PROCESS, 1),
-                                         (coord_mod.SWEEP_IN_PROCESS, coord_mod.SWEEP_MIN)])
-def test_the_sweep_gives_the_same_schedule_on_every_pool(crowded, monkeypatch, small, least):
-    """Whoever solves a batch (this process, two forked workers), whatever batch is small enough to stay here,
-    with batches of disjoint passes only or filled: the same paths, value and solve count."""
+@pytest.mark.parametrize("small", [1, coord_mod.SWEEP_IN_PROCESS])
+def test_the_sweep_gives_the_same_schedule_on_every_pool(crowded, monkeypatch, small):
+    """Whoever solves a batch (this process, two forked workers), and whatever batch is small enough to stay here:
+    the same paths, value and solve count."""
     monkeypatch.setattr(coord_mod, "SWEEP_IN_PROCESS", small)
-    monkeypatch.setattr(coord_mod, "SWEEP_MIN", least)
     prob = crowded[1]
     here = sweep(prob, InProcessPool(prob, FleetConfig()), 4)
     pool = ForkPool(prob, FleetConfig(workers=2))
@@ -164,15 +162,11 @@ def tiny(kind: str, seed: int) -> Problem:
     return Problem.build(fleet, compute(fleet, Geometry(fleet)))
 
 
-@pytest.mark.parametrize("least", [1, 128])
 @pytest.mark.parametrize("kind,seed", [("two passes", 5), ("two passes", 6), ("6x120", 7), ("8x150", 5),
                                        ("8x150", 7)])
-def test_after_the_sweep_no_pass_alone_is_worth_more(kind, seed, least, monkeypatch):
-    """From an empty schedule, descend to its end, in batches of disjoint passes only (least 1) or filled with
-    passes that share tasks (least 128: here every queued pass, so every pass wants every task in the first batch);
-    then no pass, solved alone by brute force with the tasks no other pass serves, serves more weight than its
-    path."""
-    monkeypatch.setattr(coord_mod, "SWEEP_MIN", least)
+def test_after_the_sweep_no_pass_alone_is_worth_more(kind, seed):
+    """From an empty schedule (every pass wants every task in the first batch), descend to its end; then no pass,
+    solved alone by brute force with the tasks no other pass serves, serves more weight than its path."""
     prob = tiny(kind, seed)
     assert sum(len(h) > 1 for h in prob.task_passes) >= 5  # contested tasks: a sweep has conflicts to settle
     coord = Coordinator(prob, FleetConfig(rounds=1, time_limit=None))
@@ -209,15 +203,20 @@ def test_a_sweeps_utilities_are_each_pass_utility(crowded, seed):
             assert np.array_equal(util[offsets[i]:offsets[i + 1]], coord._utility(primal, p))
 
 
-def test_a_sweeps_batch_is_the_disjoint_passes_filled_in_ascending_order():
-    """Passes 0-4 over tasks {0,1}, {1,2}, {3}, {0}, {4}: the disjoint ones are 0, 2, 4 (1 and 3 share a task with
-    0); filled to 4 the batch adds 1, the lowest of the rest; to 1 or 3 it is the disjoint ones; to 9 all."""
+def test_a_sweeps_batch_shares_no_open_task():
+    """Passes 0-4 over tasks {0,1}, {1,2}, {3}, {0}, {4}.  With every task open the batch is 0, 2, 4 (1 and 3 share
+    a task with 0); with task 1 served (by some pass) 1 joins (it shares only task 1 with 0), 3 still shares the open
+    task 0; with 0 and 1 served all five.  Passes not queued are not looked at."""
     tasks = [[0, 1], [1, 2], [3], [0], [4]]
     ptr = np.r_[0, np.cumsum([len(t) for t in tasks])].astype(np.int64)
     idx = np.array([t for ts in tasks for t in ts], dtype=np.int64)
     claimed = np.zeros(5, dtype=bool)
     queued = np.arange(5, dtype=np.int64)
-    for least, want in [(1, [0, 2, 4]), (3, [0, 2, 4]), (4, [0, 1, 2, 4]), (9, [0, 1, 2, 3, 4])]:
-        assert np.flatnonzero(coord_mod.sweep_batch(queued, ptr, idx, claimed, least)).tolist() == want
+    for served, want in [([], [0, 2, 4]), ([1], [0, 1, 2, 4]), ([0, 1], [0, 1, 2, 3, 4])]:
+        open_ = np.ones(5, dtype=bool)
+        open_[served] = False
+        assert np.flatnonzero(coord_mod.disjoint(queued, ptr, idx, claimed, open_)).tolist() == want
         assert not claimed.any()
-    assert np.flatnonzero(coord_mod.sweep_batch(queued[[1, 3, 4]], ptr, idx, claimed, 1)).tolist() == [0, 1, 2]
+    every = np.ones(5, dtype=bool)
+    assert np.flatnonzero(coord_mod.disjoint(queued[[1, 3, 4]], ptr, idx, claimed, every)).tolist() == [0, 1, 2]
+    assert np.flatnonzero(coord_mod.wave(queued[[3, 0, 1]], ptr, idx, claimed)).tolist() == [0]

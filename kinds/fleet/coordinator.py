@@ -61,20 +61,19 @@ INTEGER_MAX_S = 30.0  # seconds the master's integer solution may take at most (
 INTEGER_NODES = 200  # its branch-and-bound nodes when the solve has no time limit (--rounds): machine-independent
 SWEEP_IN_PROCESS = 32  # a descent sweep of fewer passes is solved on the driver, not sent to the pool (a Ray
 # round trip costs milliseconds, a small pass under true weights 0.02-0.6 ms: docs/results.md)
-SWEEP_MIN = 128  # a descent sweep's batch is filled up to this many queued passes (ascending), sharing tasks or not:
-# the descent's tail is then a few sweeps, not hundreds of one or two passes each (docs/results.md)
 
 
 @numba.njit(cache=True)
-def _take(order, ptr, idx, claimed, in_order):
-    """Mask of `order` (pass ids): each pass taken when it shares no task with a pass taken before it, or, with
-    `in_order`, with any pass before it, taken or not; `claimed` (bool per task) is left all False."""
+def _take(order, ptr, idx, claimed, in_order, open_):
+    """Mask of `order` (pass ids): each pass taken when it shares no open task (`open_`, bool per task) with a pass
+    taken before it, or, with `in_order`, with any pass before it, taken or not; `claimed` (bool per task) is left
+    all False."""
     take = np.zeros(len(order), dtype=np.bool_)
     for i in range(len(order)):
         p = order[i]
         free = True
         for j in range(ptr[p], ptr[p + 1]):
-            if claimed[idx[j]]:
+            if claimed[idx[j]] and open_[idx[j]]:
                 free = False
                 break
         take[i] = free
@@ -88,33 +87,23 @@ def _take(order, ptr, idx, claimed, in_order):
     return take
 
 
-def disjoint(queued, ptr, idx, claimed):
-    """Mask of `queued` (ascending pass ids): each pass taken when it shares no task with a pass taken before it
-    (a sweep's batch whose results cannot conflict); `claimed` (bool per task) is left all False."""
-    return _take(queued, ptr, idx, claimed, False)
+def disjoint(queued, ptr, idx, claimed, open_):
+    """Mask of `queued` (ascending pass ids): each pass taken when it shares no open task (`open_`: bool per task,
+    those no pass serves) with a pass taken before it: a sweep's batch whose results cannot conflict, since a
+    pass of the batch can take only a task no pass serves at the batch's start (one another pass serves is worth
+    0 to it); `claimed` (bool per task) is left all False.
 
-
-def sweep_batch(queued, ptr, idx, claimed, least: int | None = None):
-    """Mask of `queued` (ascending pass ids): a descent sweep's batch.  The disjoint passes (:func:`disjoint`),
-    then, while the batch has fewer than `least` (default :data:`SWEEP_MIN`), the other queued passes in ascending
-    order.  Why: a freed task queues every pass that can serve it, and these share it, so disjoint batches alone
-    end each descent in hundreds of sweeps of a pass or two (each a round trip to the pool); filled, a few passes
-    of a batch may want the same task, the lowest keeps it when the batch is settled and the others are solved
-    again (:meth:`Coordinator._settle`).  On the generated 200-satellite day (4 fixed rounds, 3 seeds) filling to
-    128 cut the sweeps 3.1x for 0.2% more pass solves, at the same value or higher (docs/results.md)."""
-    least = SWEEP_MIN if least is None else least
-    take = disjoint(queued, ptr, idx, claimed)
-    short = least - int(take.sum())
-    if short > 0:
-        take[np.flatnonzero(~take)[:short]] = True
-    return take
+    Why open tasks only: a freed task queues every pass that can serve it, and once one of them has taken it
+    again the others still share it; counted, they would be solved one per sweep (hundreds of sweeps of a pass or
+    two, each a round trip to the pool on a lean driver)."""
+    return _take(queued, ptr, idx, claimed, False, open_)
 
 
 def wave(order, ptr, idx, claimed):
     """Mask of `order` (pass ids): each pass taken when it shares no task with any pass before it in `order`,
     taken or not (the passes a one-by-one construction in that order would solve from the same state);
     `claimed` (bool per task) is left all False.  The first pass is always taken."""
-    return _take(order, ptr, idx, claimed, True)
+    return _take(order, ptr, idx, claimed, True, np.ones(len(claimed), dtype=np.bool_))
 
 
 @dataclass
@@ -227,10 +216,10 @@ class Coordinator:
         return freed.tolist()
 
     def descend(self, primal: Primal, queue: list[int], deadline: float | None) -> None:
-        """Coordinate descent as a sweep: the queued passes (frozen ones skipped; those sharing no task, filled up
-        to :data:`SWEEP_MIN` passes, :func:`sweep_batch`) are solved as one batch with every task no other pass
-        serves at the batch's start (utilities :meth:`_utility`), on the pool; then the results are settled here
-        in ascending pass order (:meth:`_settle`).  Passes that gain freed tasks, and
+        """Coordinate descent as a sweep: the queued passes (frozen ones skipped; those sharing no task that no
+        pass serves, :func:`disjoint`) are solved as one batch with every task no other pass serves at the batch's
+        start (utilities :meth:`_utility`), on the pool; then the results are settled here in ascending pass order
+        (:meth:`_settle`).  Passes that gain freed tasks, and
         passes whose result lost tasks to a lower pass of the same batch, make the next batch; until none is
         left or the deadline.
 
@@ -253,7 +242,8 @@ class Coordinator:
                 return
             if deadline is not None and time.perf_counter() > deadline:
                 return
-            batch = queued[sweep_batch(queued, self._task_ptr, self._task_idx, self._claimed)].tolist()
+            open_ = primal.served < 0
+            batch = queued[disjoint(queued, self._task_ptr, self._task_idx, self._claimed, open_)].tolist()
             solved = self._solve_batch(batch, *self._batch_utilities(primal, batch), deadline)
             if solved is None:
                 return  # cut by the deadline: the schedule is as the last batch left it (every edit whole)
