@@ -219,9 +219,9 @@ class Coordinator:
         """Coordinate descent as a sweep: the queued passes (frozen ones skipped; those sharing no task that no
         pass serves, :func:`disjoint`) are solved as one batch with every task no other pass serves at the batch's
         start (utilities :meth:`_utility`), on the pool; then the results are settled here in ascending pass order
-        (:meth:`_settle`).  Passes that gain freed tasks, and
-        passes whose result lost tasks to a lower pass of the same batch, make the next batch; until none is
-        left or the deadline.
+        (:meth:`_settle`).  Passes that gain freed tasks, and passes whose result lost tasks to a lower pass of the
+        same batch (never with this batch rule; settled all the same), make the next batch; until none is left or
+        the deadline.
 
         Why a sweep, not a queue of single solves: one pass after another, each seeing its predecessors'
         changes, is serial, and on a 200-satellite day it took half of a round on the driver whatever the number
