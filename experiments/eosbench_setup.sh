@@ -43,6 +43,9 @@ while IFS=$'\t' read -r meta path; do
         missing=$((missing + 1))
     fi
 done < <(git --git-dir "$gitdir" ls-tree -r HEAD | grep -v '^160000')
+if [ "$missing" -gt 0 ]; then
+    echo "$missing file(s) of their repository not copied (named above)" >&2
+fi
 for f in main_generate.py main_scheduler.py schedulers/constraint_model.py; do
     if [ ! -f "$work/EOS-Bench/$f" ]; then
         echo "$src: no $f at HEAD; not EOS-Bench" >&2

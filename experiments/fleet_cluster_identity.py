@@ -71,7 +71,7 @@ def main() -> int:
                 ray.shutdown()
     finally:
         cluster.shutdown()
-    w0, rows0, res0 = runs[0]
+    _, rows0, res0 = runs[0]
     same = all(rows == rows0 and (r["value"], r["bound"], r["pass_solves"]) ==
                (res0["value"], res0["bound"], res0["pass_solves"]) for _, rows, r in runs[1:])
     print(f"the same schedule, value, bound and pass solves with {', '.join(str(w) for w, _, _ in runs)} workers: "
