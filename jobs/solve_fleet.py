@@ -152,22 +152,25 @@ class PassWorker:
                         left_s: float | None) -> tuple:
         """A sweep of the coordinate descent: pass ``passes[i]`` with utilities ``util[util_offsets[i]:
         util_offsets[i + 1]]`` (the driver's, from its schedule) by the pass solver alone, each solve stopped
-        `left_s` seconds from now; packed as :meth:`solve_priced` (bounds all NaN)."""
+        `left_s` seconds from now; packed as :meth:`solve_priced` (each bound the solver's, NaN when none: the
+        driver keeps the proven optima, as it does for its own solves)."""
         from eosp.kinds.fleet.problem import solve_pass_graph
 
         deadline = None if left_s is None else time.perf_counter() + left_s
         n = len(passes)
-        value, secs = np.zeros(n), np.zeros(n)
+        value, bound, secs = np.zeros(n), np.full(n, np.nan), np.zeros(n)
         paths = []
         for i, p in enumerate(passes.tolist()):
             t = time.perf_counter()
             res = solve_pass_graph(self.graphs[p], util[util_offsets[i]:util_offsets[i + 1]], self.cfg, deadline)
             secs[i] = time.perf_counter() - t
             value[i] = res.value
+            if res.bound is not None:
+                bound[i] = res.bound
             paths.append(res.nodes)
         offsets = np.r_[0, np.cumsum([len(x) for x in paths])].astype(np.int64)
         nodes = np.concatenate(paths).astype(np.int64) if paths else np.zeros(0, np.int64)
-        return passes, value, np.full(n, np.nan), offsets, nodes, secs
+        return passes, value, bound, offsets, nodes, secs
 
 
 def assign(prob, workers: int) -> np.ndarray:
@@ -408,7 +411,7 @@ class RayPassPool:
             return None  # the deadline came first
         for ref, (k, idx), (mine_util, mine_off) in zip(refs, parts, sent):
             try:
-                got, value, _, offs, nodes, secs = ray.get(ref)
+                got, value, bound, offs, nodes, secs = ray.get(ref)
             except RayActorError:
                 self._lost(k)
                 done = solve_utility_passes(self.prob, self.cfg, ids[idx].tolist(), mine_util, mine_off, deadline)
@@ -416,8 +419,8 @@ class RayPassPool:
                     return None
                 out.update(done)
                 continue
-            for i, p in enumerate(got.tolist()):
-                out[p] = PassResult(nodes[offs[i]:offs[i + 1]], float(value[i]), None)
+            for i, (p, b) in enumerate(zip(got.tolist(), bound.tolist())):
+                out[p] = PassResult(nodes[offs[i]:offs[i + 1]], float(value[i]), None if b != b else b)
         return out
 
     def summary(self) -> list[dict]:
@@ -639,7 +642,8 @@ def run(job: SolveFleetJob) -> dict:
                 w.writerows([(p, len(prob.passes[p].rows), round(s, 6), k) for p, s, k in times])
         first_t = sol.history[0][0] if sol.history else None
         result = {"value": sol.value, "bound": sol.bound, "gap": sol.gap, "rounds": sol.info["rounds"],
-                  "pass_solves": sol.info["pass_solves"], "passes": len(prob.passes), "build_s": round(t_build, 2),
+                  "pass_solves": sol.info["pass_solves"], "memo_hits": sol.info["memo_hits"],
+                  "passes": len(prob.passes), "build_s": round(t_build, 2),
                   "pool_s": round(t_pool - t_build, 2), "first_schedule_s": None if first_t is None else
                   round(first_t + t_read - t0, 2), "wall_s": round(wall, 2), "faults": 0 if pool is None else pool.faults,
                   "actors_given_up": 0 if pool is None else pool.given_up,

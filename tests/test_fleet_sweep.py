@@ -16,7 +16,7 @@ from eosp.kinds.fleet import coordinator as coord_mod
 from eosp.kinds.fleet.config import FleetConfig
 from eosp.kinds.fleet.coordinator import Coordinator
 from eosp.kinds.fleet.pool import ForkPool, InProcessPool
-from eosp.kinds.fleet.problem import Primal, Problem, path_tasks, rewalk
+from eosp.kinds.fleet.problem import Primal, Problem, path_tasks, rewalk, solve_pass
 from tests.test_fleet import synthetic_fleet
 
 
@@ -117,6 +117,48 @@ def test_fixed_rounds_give_the_same_schedule_with_one_and_two_workers(crowded):
     assert one.schedule.task.tolist() == two.schedule.task.tolist()
     assert np.array_equal(one.schedule.start_us, two.schedule.start_us)
     assert (one.value, one.bound, one.info["pass_solves"]) == (two.value, two.bound, two.info["pass_solves"])
+
+
+class Forgetful(Coordinator):
+    """The coordinator without its memo: every pass of a sweep or a wave solved again."""
+
+    def _solve_batch(self, batch, util, offsets, deadline):
+        self._memo_res = [None] * len(self._memo_res)
+        return super()._solve_batch(batch, util, offsets, deadline)
+
+
+def test_the_memo_changes_no_schedule_only_the_solves(crowded, monkeypatch):
+    """A pass whose utilities are those of its last proven-optimal solve takes that result: fixed rounds give the
+    same schedule, value and bound as solving every pass again, and the solves saved are the memo's hits."""
+    from eosp.kinds.fleet import solve as solve_mod
+
+    for prob in crowded:
+        cfg = FleetConfig(rounds=3, seed=1, time_limit=None)
+        memo = solve_mod.solve(prob.fleet, prob.opps, cfg, problem=prob)
+        monkeypatch.setattr(solve_mod, "Coordinator", Forgetful)
+        again = solve_mod.solve(prob.fleet, prob.opps, cfg, problem=prob)
+        monkeypatch.undo()
+        assert memo.schedule.task.tolist() == again.schedule.task.tolist()
+        assert np.array_equal(memo.schedule.start_us, again.schedule.start_us)
+        assert (memo.value, memo.bound) == (again.value, again.bound)
+        assert again.info["memo_hits"] == 0 and memo.info["memo_hits"] > 0
+        assert memo.info["pass_solves"] + memo.info["memo_hits"] == again.info["pass_solves"]
+
+
+def test_a_memo_hit_is_the_pass_solved_again(crowded):
+    """Every result the memo gives in a descent equals a fresh solve of the pass under the same utilities."""
+    prob = crowded[1]
+    coord = Coordinator(prob, FleetConfig(rounds=1, time_limit=None))
+    primal = start(coord, 3)
+    coord.descend(primal, list(range(len(prob.passes))), None)
+    n = len(prob.passes)
+    util, offsets = coord._batch_utilities(primal, list(range(n)))
+    hits_before = coord.memo_hits
+    got = coord._solve_batch(list(range(n)), util, offsets, None)
+    assert coord.memo_hits > hits_before
+    for p in range(n):
+        fresh = solve_pass(prob, p, util[offsets[p]:offsets[p + 1]], coord.cfg)
+        assert np.array_equal(got[p].nodes, fresh.nodes) and got[p].value == fresh.value, p
 
 
 def best_alone(prob: Problem, p: int, allowed: np.ndarray) -> float:

@@ -123,6 +123,7 @@ def solve(fleet: Fleet, opps: Opportunities, cfg: FleetConfig | None = None, pro
     if source == "lagrangian" and coord.frozen.any():
         source = "lagrangian, frozen passes as given"  # what it bounds: the schedules that keep them
     info = {"pass_solver": cfg.pass_solver, "rounds": coord.rounds_done, "pass_solves": coord.pass_solves,
+            "memo_hits": coord.memo_hits,
             "prefetched_rounds": coord.prefetched,
             "passes": len(prob.passes), "build_s": round(prob.build_s, 3), "checker_drops": dropped,
             "battery_barred": int(coord.barred.sum()), "repair_removed": coord.repair_drops,
