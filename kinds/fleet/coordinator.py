@@ -63,6 +63,15 @@ SWEEP_IN_PROCESS = 32  # a descent sweep of fewer passes is solved on the driver
 # round trip costs milliseconds, a small pass under true weights 0.02-0.6 ms: docs/results.md)
 
 
+def csr_take(ptr: np.ndarray, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Rows `rows` of a CSR layout with pointers `ptr`: the positions of their entries, one flat vector in the
+    order of `rows`, and its offsets by row."""
+    lens = ptr[rows + 1] - ptr[rows]
+    offsets = np.zeros(len(rows) + 1, dtype=np.int64)
+    np.cumsum(lens, out=offsets[1:])
+    return np.repeat(ptr[rows] - offsets[:-1], lens) + np.arange(offsets[-1]), offsets
+
+
 @numba.njit(cache=True)
 def _take(order, ptr, idx, claimed, in_order, open_):
     """Mask of `order` (pass ids): each pass taken when it shares no open task (`open_`, bool per task) with a pass
@@ -283,7 +292,7 @@ class Coordinator:
         numbers: weight less `shift` and the pass's price of the tasks' energy, 0 where another pass serves the task
         or the repair barred it), gathered from the passes' tasks as CSR instead of pass by pass."""
         b = np.asarray(batch, dtype=np.int64)
-        pos, offsets = self._positions(b)
+        pos, offsets = csr_take(self._task_ptr, b)
         tasks, owner = self._task_idx[pos], np.repeat(b, np.diff(offsets))
         w = self.prob.weight
         shift = self._no_shift if shift is None else np.minimum(shift, 0.999 * w)
@@ -291,14 +300,6 @@ class Coordinator:
         s = primal.served[tasks]
         free = ((s < 0) | (s == owner)) & ~self.barred[self._pass_sat[owner], tasks]
         return np.where(free, util, 0.0), offsets
-
-    def _positions(self, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Where the tasks of passes `b` sit in the passes' task CSR (:attr:`_task_idx`), one flat vector, and its
-        CSR offsets by pass of `b`."""
-        lens = self._task_ptr[b + 1] - self._task_ptr[b]
-        offsets = np.zeros(len(b) + 1, dtype=np.int64)
-        np.cumsum(lens, out=offsets[1:])
-        return np.repeat(self._task_ptr[b] - offsets[:-1], lens) + np.arange(offsets[-1]), offsets
 
     def _solve_batch(self, batch: list[int], util: np.ndarray, offsets: np.ndarray,
                      deadline: float | None) -> dict[int, PassResult] | None:
@@ -314,7 +315,7 @@ class Coordinator:
         result is the one a new solve would give, wherever it ran: the schedules are unchanged, the solves fewer.
         Only results proven optimal are kept (a solve cut by its time limit could differ)."""
         b = np.asarray(batch, dtype=np.int64)
-        pos, _ = self._positions(b)
+        pos, _ = csr_take(self._task_ptr, b)
         differ = np.r_[0, np.cumsum(util != self._memo_util[pos])]  # NaN (nothing kept) differs from any value
         hit = (differ[offsets[1:]] == differ[offsets[:-1]]) & np.array([self._memo_res[p] is not None
                                                                         for p in batch], dtype=bool)
@@ -324,10 +325,7 @@ class Coordinator:
             return out
         miss = np.flatnonzero(~hit)
         if len(out):  # the missing passes' utilities, as their own flat vector and offsets
-            lens = offsets[miss + 1] - offsets[miss]
-            sub = np.zeros(len(miss) + 1, dtype=np.int64)
-            np.cumsum(lens, out=sub[1:])
-            take = np.repeat(offsets[miss] - sub[:-1], lens) + np.arange(sub[-1])
+            take, sub = csr_take(offsets, miss)
             batch, util, offsets = b[miss].tolist(), util[take], sub
         solved = self._solve_missing(batch, util, offsets, deadline)
         if solved is None:
