@@ -123,7 +123,7 @@ class Forgetful(Coordinator):
     """The coordinator without its memo: every pass of a sweep or a wave solved again."""
 
     def _solve_batch(self, batch, util, offsets, deadline):
-        self._memo_res = [None] * len(self._memo_res)
+        self._memo_ok[:] = False
         return super()._solve_batch(batch, util, offsets, deadline)
 
 

@@ -179,6 +179,7 @@ class Coordinator:
         # the passes' task CSR (NaN: none, never equal), and its result (see _solve_batch)
         self._memo_util = np.full(len(self._task_idx), np.nan)
         self._memo_res: list[PassResult | None] = [None] * len(self.prob.passes)
+        self._memo_ok = np.zeros(len(self.prob.passes), dtype=bool)  # whether _memo_res holds a pass's result
         self.memo_hits = 0  # pass solves a sweep or wave took from the memo instead of solving again
         self.spend = np.zeros(len(self.prob.passes))  # price of a Wh in each pass for the schedules (energy_price)
         self.pool = self.pool or InProcessPool(self.prob, self.cfg)
@@ -317,8 +318,7 @@ class Coordinator:
         b = np.asarray(batch, dtype=np.int64)
         pos, _ = csr_take(self._task_ptr, b)
         differ = np.r_[0, np.cumsum(util != self._memo_util[pos])]  # NaN (nothing kept) differs from any value
-        hit = (differ[offsets[1:]] == differ[offsets[:-1]]) & np.array([self._memo_res[p] is not None
-                                                                        for p in batch], dtype=bool)
+        hit = (differ[offsets[1:]] == differ[offsets[:-1]]) & self._memo_ok[b]
         out = {p: self._memo_res[p] for p in b[hit].tolist()}
         self.memo_hits += len(out)
         if hit.all():
@@ -333,7 +333,7 @@ class Coordinator:
         for i, p in enumerate(batch):
             res = solved[p]
             kept = res.bound is not None and res.value >= res.bound
-            self._memo_res[p] = res if kept else None
+            self._memo_res[p], self._memo_ok[p] = (res if kept else None), kept
             if kept:
                 s = self._task_ptr[p]
                 self._memo_util[s:s + offsets[i + 1] - offsets[i]] = util[offsets[i]:offsets[i + 1]]
