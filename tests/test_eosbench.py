@@ -20,7 +20,8 @@ from eosp.eosbench.check import check, metrics
 from eosp.eosbench.model import Schedule
 from eosp.eosbench.read import read_scenario
 from eosp.eosbench.schedules import read_schedule, schedule_json
-from eosp.eosbench.transition import C_SMALL, Rules, documented_s, to_us
+from eosp.eosbench.transition import C_SMALL, Rules, documented_s, to_us, transition_s
+from eosp.kinds.eosbench.passes import build_passes, graph
 from eosp.kinds.eosbench.solve import EosBenchConfig, solve
 
 T0 = datetime(2025, 11, 18, 12, 0, 0)
@@ -265,6 +266,52 @@ def test_the_solver_is_valid_and_its_bound_holds_against_brute_force(tmp_path, r
     assert res.value == opt  # two satellites, four tasks: the passes are solved exactly
     again = solve(scen, EosBenchConfig(time_limit=None, rounds=5, transition=reading))
     assert schedule_json(again.schedule, scen) == schedule_json(res.schedule, scen)
+
+
+def reference_arcs(p, rules: Rules, agile: bool, allowed: np.ndarray, release: int) -> list[list[int]]:
+    """The pass graph's arcs by their definition, node by node: from the source, each acquisition's first allowed
+    node starting at or after the release; from each allowed node u, for every other acquisition, its earliest
+    allowed node x with start[x] >= end[u] + the transition from u to x (their checker's rule)."""
+    out = [[] for _ in range(p.n_nodes)]
+    k = len(p.acq_ptr) - 1
+    for u in range(p.n_nodes):
+        if not allowed[u]:
+            continue
+        for b in range(k):
+            if u and b == p.node_acq[u]:
+                continue
+            for x in range(p.acq_ptr[b], p.acq_ptr[b + 1]):
+                if not allowed[x]:
+                    continue
+                if u == 0:
+                    ok = p.start_us[x] >= release
+                else:
+                    need = to_us(transition_s(rules, agile, p.last[u], p.first[x]))[0]
+                    ok = p.start_us[x] >= p.end_us[u] + need
+                if ok:
+                    out[u].append(x)
+                    break
+    return out
+
+
+@settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(seed=st.integers(0, 10_000), reading=st.sampled_from(["code", "documented"]), agile=st.booleans(),
+       share=st.floats(0.0, 1.0))
+def test_pass_arcs_follow_their_definition_under_any_mask(tmp_path, seed, reading, agile, share):
+    if reading == "code" and not agile:
+        reading = "documented"  # the code reading has no non-agile rule
+    rng = np.random.default_rng(seed)
+    wins = [{"task": t % 5, "sat": 0, "start": float(rng.integers(0, 90)), "length": int(rng.integers(6, 40)),
+             "pitch0": float(rng.uniform(-60, 40)), "roll": float(rng.uniform(-45, 45))} for t in range(8)]
+    scen = read_scenario(write(tmp_path, scenario_json(wins, n_sat=1, n_task=5, agile=agile)))
+    rules = Rules(reading)
+    for p in build_passes(scen):
+        allowed = rng.random(p.n_nodes) >= share
+        allowed[0] = True
+        release = int(rng.integers(0, 40)) * 1_000_000 + int(p.start_us[1:].min())
+        g = graph(p, rules, agile, allowed, release)
+        got = [sorted(g.dst[g.indptr[u]:g.indptr[u + 1]].tolist()) for u in range(p.n_nodes)]
+        assert got == [sorted(x) for x in reference_arcs(p, rules, agile, allowed, release)]
 
 
 def tiny(seed: int) -> dict:

@@ -79,11 +79,11 @@ def _nodes_of_window(scenario: Scenario, r: int) -> tuple[np.ndarray, np.ndarray
     a = lo + ks
     b = np.minimum(a + n, hi) - 1
     ok = a < hi
-    att = np.stack([w.pitch, w.yaw, w.roll], axis=1) if hi > lo else np.zeros((0, 3))
+    att = np.stack([w.pitch[lo:hi], w.yaw[lo:hi], w.roll[lo:hi]], axis=1)  # this window's samples only
     first = np.full((len(ks), 3), np.nan)
     last = np.full((len(ks), 3), np.nan)
-    first[ok] = att[a[ok]]
-    last[ok] = att[b[ok]]
+    first[ok] = att[a[ok] - lo]
+    last[ok] = att[b[ok] - lo]
     return ks, first, last, np.ones(len(ks), bool)
 
 
@@ -183,40 +183,72 @@ OFFSETS_NB = OFFSETS.copy()
 def _arcs(acq_ptr, nodes, allowed, release, code, v, non_agile_us, agile):
     """CSR arcs over the allowed nodes (`nodes`: start, end, first and last attitudes): from the source to each
     acquisition's first allowed node starting at or after `release`; from each allowed node to the earliest
-    allowed node of every other acquisition that can follow it."""
+    allowed node of every other acquisition that can follow it.
+
+    Linear in the arcs it writes: acquisitions without an allowed node are skipped, each scan jumps from allowed
+    node to allowed node (`nxt`), and where the transition time is one constant (the code reading, non-agile
+    satellites) one binary search finds the arc."""
     start, end, first, last = nodes
     n = start.shape[0]
     k = acq_ptr.shape[0] - 1
-    indptr = np.zeros(n + 1, dtype=np.int64)
-    dst = np.empty(max(1, n * k), dtype=np.int32)
-    cnt = 0
+    nxt = np.empty(n + 1, dtype=np.int64)  # the first allowed node at or after x in x's acquisition, or its end
+    live = np.zeros(k, dtype=np.int64)  # acquisitions with an allowed node
+    n_live = 0
     for b in range(k):
-        for x in range(acq_ptr[b], acq_ptr[b + 1]):
-            if allowed[x] and start[x] >= release:
-                dst[cnt] = x
-                cnt += 1
-                break
+        hi = acq_ptr[b + 1]
+        nxt_x = hi
+        for x in range(hi - 1, acq_ptr[b] - 1, -1):
+            if allowed[x]:
+                nxt_x = x
+            nxt[x] = nxt_x
+        nxt[hi] = hi
+        if nxt_x < hi:
+            live[n_live] = b
+            n_live += 1
+    const = code or not agile
+    need_c = np.int64(np.rint(C_SMALL * 1e6)) if agile else non_agile_us
+    indptr = np.zeros(n + 1, dtype=np.int64)
+    dst = np.empty(max(1, n_live + int(allowed.sum()) * max(n_live - 1, 0)), dtype=np.int32)
+    cnt = 0
+    for i in range(n_live):
+        b = live[i]
+        lo, hi = acq_ptr[b], acq_ptr[b + 1]
+        while lo < hi:  # first node of b starting at or after the release
+            mid = (lo + hi) >> 1
+            if start[mid] < release:
+                lo = mid + 1
+            else:
+                hi = mid
+        if lo < acq_ptr[b + 1] and nxt[lo] < acq_ptr[b + 1]:
+            dst[cnt] = nxt[lo]
+            cnt += 1
     indptr[1] = cnt
     acq = 0
     for u in range(1, n):
         while u >= acq_ptr[acq + 1]:
             acq += 1
         if allowed[u]:
-            for b in range(k):
+            for i in range(n_live):
+                b = live[i]
                 if b == acq:
                     continue
-                lo, hi = acq_ptr[b], acq_ptr[b + 1]
-                while lo < hi:  # first node of b starting after u ends
+                end_b = acq_ptr[b + 1]
+                t = end[u] + need_c if const else end[u]
+                lo, hi = acq_ptr[b], end_b
+                while lo < hi:  # first node of b starting at or after t
                     mid = (lo + hi) >> 1
-                    if start[mid] < end[u]:
+                    if start[mid] < t:
                         lo = mid + 1
                     else:
                         hi = mid
-                for x in range(lo, acq_ptr[b + 1]):
-                    if allowed[x] and start[x] >= end[u] + _need_us(last[u], first[x], code, v, non_agile_us, agile):
-                        dst[cnt] = x
-                        cnt += 1
-                        break
+                x = nxt[lo]
+                if not const:
+                    while x < end_b and start[x] < end[u] + _need_us(last[u], first[x], code, v, non_agile_us,
+                                                                      agile):
+                        x = nxt[x + 1]
+                if x < end_b:
+                    dst[cnt] = x
+                    cnt += 1
         indptr[u + 1] = cnt
     return indptr, dst[:cnt].copy()
 
