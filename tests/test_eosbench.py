@@ -4,6 +4,7 @@ optimum), the command line and its one-line refusals."""
 
 from __future__ import annotations
 
+import dataclasses
 import itertools
 import json
 import math
@@ -22,7 +23,7 @@ from eosp.eosbench.read import read_scenario
 from eosp.eosbench.schedules import read_schedule, schedule_json
 from eosp.eosbench.transition import C_SMALL, Rules, documented_s, to_us, transition_s
 from eosp.kinds.eosbench.passes import build_passes, graph
-from eosp.kinds.eosbench.solve import EosBenchConfig, solve
+from eosp.kinds.eosbench.solve import EosBenchConfig, _cap_term, solve
 
 T0 = datetime(2025, 11, 18, 12, 0, 0)
 
@@ -312,6 +313,47 @@ def test_pass_arcs_follow_their_definition_under_any_mask(tmp_path, seed, readin
         g = graph(p, rules, agile, allowed, release)
         got = [sorted(g.dst[g.indptr[u]:g.indptr[u + 1]].tolist()) for u in range(p.n_nodes)]
         assert got == [sorted(x) for x in reference_arcs(p, rules, agile, allowed, release)]
+
+
+def best_capped_path(p, pos: np.ndarray, cap: int) -> float:
+    """The most utility a path of at most `cap` observations collects in pass p under the code reading, by
+    enumeration (each observation starting 11.66 s or more after the previous one ends, distinct acquisitions)."""
+    gap = to_us(np.array([C_SMALL]))[0]
+    order = np.argsort(p.start_us[1:], kind="stable") + 1
+    best = 0.0
+
+    def extend(last: int, used: frozenset, value: float, left: int) -> None:
+        nonlocal best
+        best = max(best, value)
+        if not left:
+            return
+        for x in order.tolist():
+            a = int(p.node_acq[x])
+            if a in used or pos[a] <= 0 or (last and p.start_us[x] < p.end_us[last] + gap):
+                continue
+            extend(x, used | {a}, value + float(pos[a]), left - 1)
+
+    extend(0, frozenset(), 0.0, cap)
+    return best
+
+
+@settings(max_examples=30, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(seed=st.integers(0, 10_000), cap=st.integers(1, 3))
+def test_the_capped_pass_term_bounds_every_capped_path(tmp_path, seed, cap):
+    rng = np.random.default_rng(seed)
+    wins = [{"task": t, "sat": 0, "start": float(rng.integers(0, 80)), "length": int(rng.integers(6, 12)),
+             "pitch0": float(rng.uniform(-30, 30))} for t in range(5)]
+    scen = read_scenario(write(tmp_path, scenario_json(wins, n_sat=1, n_task=5, dur=[5.0] * 5)))
+    for p in build_passes(scen):
+        p = dataclasses.replace(p, cap=cap)
+        pos = np.round(rng.uniform(-1, 5, len(p.tasks)), 1)
+        pos = np.maximum(pos, 0.0)
+        if not (pos > 0).any():
+            continue
+        term, nodes, proven = _cap_term(p, pos, lambda allowed: graph(p, Rules("code"), True, allowed), 10.0)
+        assert proven
+        assert best_capped_path(p, pos, cap) <= term + 1e-9  # a bound on every path the cap allows
+        assert term <= best_capped_path(p, pos, len(p.tasks)) + 1e-9  # never looser than the cap dropped
 
 
 def tiny(seed: int) -> dict:

@@ -18,13 +18,16 @@ bisection until the best path fits; observations of the same satellite in other 
 conflict with; a path is checked pair by pair under their every-pair rule and repaired.  The schedule returned
 is checked by :func:`eosp.eosbench.check.check` under the configured reading.
 
-Bound.  For task prices lam >= 0, every pass's term is the smaller of (a) its optimum under utilities
-priority - lam with the cap dropped, over the code reading's graph (11.66 s transitions, the documented reading's
-minimum, so the term bounds both readings; FIFO, so the exact label search over earliest arcs is the pass
-optimum; transitions to other passes dropped), and (b) the sum of its `cap` largest positive utilities (the
-power and storage caps with transitions dropped); sum of terms + sum of lam bounds the profit of any schedule
-valid under either reading.  A pass whose label search stops at its time limit keeps term (b) or, without a cap,
-the sum of its positive utilities.  Prices move by the fleet's projected subgradient step.
+Bound.  For task prices lam >= 0 and pos = max(priority - lam, 0), every pass's term is the smallest of
+(a) its optimum under utilities pos with the cap dropped, over the code reading's graph (11.66 s transitions, the
+documented reading's minimum, so the term bounds both readings; FIFO, so the exact label search over earliest arcs
+is the pass optimum; transitions to other passes dropped); (b) the sum of its `cap` largest positive utilities
+(the power and storage caps with transitions dropped); and (c), for any mu >= 0, (a) under utilities pos - mu,
+plus mu * cap: a path P of at most cap observations has sum pos <= sum (pos - mu)^+ + mu |P|, and P's nodes of
+pos > mu are themselves a path (dropping an observation never breaks a constant transition); (a) is (c) at mu = 0
+and the term takes the least over a few mu.  Sum of terms + sum of lam bounds the profit of any schedule valid
+under either reading.  A pass whose label search stops at its time limit keeps term (b) or, without a cap, the sum
+of its positive utilities.  Prices move by the fleet's projected subgradient step.
 """
 
 from __future__ import annotations
@@ -44,6 +47,8 @@ from eosp.kinds.eosbench.passes import NO_CAP, Pass, best_path, build_passes, gr
 from eosp.kinds.fleet.prices import Prices
 from eosp.problem import Result
 from eosp.solvers.base import UtilityConfig
+
+CUTS = 8  # cutting planes of a capped pass's bound term
 
 
 @dataclass
@@ -285,24 +290,63 @@ def descend(st: State, order: list[int], deadline: float | None) -> None:
                         queued.add(q)
 
 
+def _cap_term(p: Pass, pos: np.ndarray, build, time_limit: float) -> tuple[float, np.ndarray, bool]:
+    """min over mu >= 0 of g(mu) = opt(pos - mu) + mu * cap (see the module docstring), the path at the best mu, and
+    whether that value is proven (every label search it rests on finished).  g is convex and piecewise linear in
+    mu with slope cap - |path(mu)|, so its minimum is found by cutting planes on one variable: the tangent lines at
+    the two ends of the bracket meet at the next mu; the search stops when the value there is on those lines
+    (mu is optimal), after a few cuts, or at an unfinished search (the best proven g so far stands)."""
+    def at(mu: float) -> tuple[float, int, np.ndarray, bool]:
+        allowed = np.r_[True, pos[p.node_acq[1:]] > mu]
+        if not allowed[1:].any():
+            return mu * p.cap, p.cap, np.zeros(0, np.int64), True
+        nodes, val, done = best_path(build(allowed), np.maximum(pos - mu, 0.0), time_limit)
+        return val + mu * p.cap, p.cap - len(nodes), nodes, done
+
+    g0, s0, nodes, done = at(0.0)
+    if not done:
+        return math.inf, nodes, False
+    best, best_nodes = g0, nodes
+    if s0 >= 0 or p.cap >= NO_CAP:  # the cap does not bind at mu = 0: g is smallest there
+        return best, best_nodes, True
+    lo, hi = (0.0, g0, s0), (float(pos.max()), float(pos.max()) * p.cap, p.cap)
+    if hi[1] < best:
+        best, best_nodes = hi[1], np.zeros(0, np.int64)
+    for _ in range(CUTS):
+        mu = (hi[1] - lo[1] + lo[2] * lo[0] - hi[2] * hi[0]) / (lo[2] - hi[2])
+        if not lo[0] < mu < hi[0]:
+            break
+        line = lo[1] + lo[2] * (mu - lo[0])
+        g, slope, nodes, done = at(mu)
+        if not done:
+            break
+        if g < best:
+            best, best_nodes = g, nodes
+        if g >= line - 1e-9 or slope == 0:  # on both tangents: mu minimises g
+            break
+        lo, hi = ((mu, g, slope), hi) if slope < 0 else (lo, (mu, g, slope))
+    return best, best_nodes, True
+
+
 def bound_round(st: State, lam: np.ndarray, graphs: list) -> tuple[float, np.ndarray, bool]:
     """L(lam) (see the module docstring), the count of passes taking each task, and whether every pass term came
     from a finished label search or a cap."""
     total = float(lam.sum())
     taken = np.zeros(len(st.scenario.tasks))
     proven = True
+    code = Rules("code", st.rules.agility)
     for k, p in enumerate(st.passes):
         u = st.prio[p.tasks] - lam[p.tasks]
         pos = np.maximum(u, 0.0)
         if not (pos > 0).any():
             continue
         top = np.sort(pos)[::-1][:p.cap] if p.cap < NO_CAP else None
-        allowed = np.r_[True, pos[p.node_acq[1:]] > 0]
-        g = graph(p, Rules("code", st.rules.agility), True, allowed) if st.agile[k] else \
-            graph(p, st.rules, False, allowed)
-        st.pass_solves += 1
-        nodes, val, done = best_path(g, pos, st.cfg.pass_time_limit)
-        exact = val if done else math.inf
+
+        def build(allowed: np.ndarray, k: int = k, p: Pass = p):
+            st.pass_solves += 1
+            return graph(p, code, True, allowed) if st.agile[k] else graph(p, st.rules, False, allowed)
+
+        exact, nodes, _ = _cap_term(p, pos, build, st.cfg.pass_time_limit)
         capped = float(top.sum()) if top is not None else math.inf
         if math.isinf(exact) and math.isinf(capped):  # an unfinished search without a cap: every positive utility
             total += float(pos.sum())
@@ -389,17 +433,16 @@ def solve(scenario: Scenario, cfg: EosBenchConfig) -> Result:
     prices = Prices.zero(len(scenario.tasks))
     bound, kind = conflict_free(st), "conflict-free"
     rng = np.random.default_rng(cfg.seed)
-    rounds = 0
+    rounds, best_dual = 0, math.inf
     while cfg.rounds is None or rounds < cfg.rounds:
         if deadline is not None and time.perf_counter() > deadline and rounds > 0:
             break
         dual, taken, proven = bound_round(st, prices.lam, [])
         rounds += 1
+        prices.stalled(dual < best_dual - 1e-9)  # the step shrinks when the dual stalls, whatever bound stands
+        best_dual = min(best_dual, dual)
         if proven and dual < bound - 1e-9:
             bound, kind = dual, "lagrangian"
-            prices.stalled(True)
-        else:
-            prices.stalled(False)
         if bound <= best_value + 1e-9:  # proven optimal: nothing left to search
             break
         prices.step_towards(taken, dual if math.isfinite(dual) else bound, best_value)
