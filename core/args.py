@@ -24,7 +24,12 @@ from typing import Any
 class Parser(argparse.ArgumentParser):
     """The parser of the CLI and of every job: a bad option is one line ``PROG: error: --option: reason``
     (exit 2), without argparse's usage block, which only ``--help`` shows (and ``eosp`` with no arguments).
-    Sub-commands get the same class (``eosp solve`` is their PROG)."""
+    Sub-commands get the same class (``eosp solve`` is their PROG).  No abbreviations: ``--moves`` is not taken
+    for ``--moves-per-round`` (an option a solver lacks is an error, never another option's prefix)."""
+
+    def __init__(self, *args, **kwargs) -> None:
+        kwargs.setdefault("allow_abbrev", False)
+        super().__init__(*args, **kwargs)
 
     def error(self, message: str) -> typing.NoReturn:
         message = re.sub(r"^argument ([^:]*?)(?:/[^:]*)?: ", r"\1: ", message)  # 'argument --x/-y: ...' -> '--x: ...'

@@ -64,8 +64,11 @@ class EosBenchConfig(UtilityConfig):
     agility: str = choice("Standard-Agility", *PROFILES)
     """Agility profile of the documented transitions (their scheduler's default: Standard-Agility)."""
     rounds: int | None = ranged(None, 1)
-    """Price rounds, each followed by a large-neighbourhood move (a deterministic budget); unset: as many as the
+    """Price rounds, each followed by `moves_per_round` large-neighbourhood moves (a deterministic budget); unset: as many as the
     time limit allows."""
+    moves_per_round: int = ranged(4, 1)
+    """Large-neighbourhood moves after each price round (a price round costs several moves' time: on 10 satellites
+    x 500 tasks, 4 moves a round served more than 1 at 30 s)."""
     pass_time_limit: float = ranged(2.0, 0)
     """Seconds the label search may spend on one pass."""
     span_s: float = ranged(5400.0, 1)
@@ -448,10 +451,13 @@ def solve(scenario: Scenario, cfg: EosBenchConfig) -> Result:
         prices.step_towards(taken, dual if math.isfinite(dual) else bound, best_value)
         if deadline is not None and time.perf_counter() > deadline:
             break
-        _lns(st, rng, prices.lam, deadline)
-        polish(st)
-        if st.value > best_value + 1e-9:
-            best_value, best_paths, best_served = st.value, list(st.paths), st.served.copy()
+        for _ in range(cfg.moves_per_round):
+            if deadline is not None and time.perf_counter() > deadline:
+                break
+            _lns(st, rng, prices.lam, deadline)
+            polish(st)
+            if st.value > best_value + 1e-9:
+                best_value, best_paths, best_served = st.value, list(st.paths), st.served.copy()
     st.paths, st.served = best_paths, best_served
     polish(st)
     sched = to_schedule(st)
