@@ -22,8 +22,9 @@ from eosp.eosbench.model import Schedule
 from eosp.eosbench.read import read_scenario
 from eosp.eosbench.schedules import read_schedule, schedule_json
 from eosp.eosbench.transition import C_SMALL, Rules, documented_s, to_us, transition_s
+from eosp.kinds.eosbench import solve as eosbench_solve
 from eosp.kinds.eosbench.passes import build_passes, graph
-from eosp.kinds.eosbench.solve import EosBenchConfig, _cap_term, solve
+from eosp.kinds.eosbench.solve import EosBenchConfig, State, _cap_term, pack, solve, solve_pass, to_schedule
 
 T0 = datetime(2025, 11, 18, 12, 0, 0)
 
@@ -354,6 +355,41 @@ def test_the_capped_pass_term_bounds_every_capped_path(tmp_path, seed, cap):
         assert proven
         assert best_capped_path(p, pos, cap) <= term + 1e-9  # a bound on every path the cap allows
         assert term <= best_capped_path(p, pos, len(p.tasks)) + 1e-9  # never looser than the cap dropped
+
+
+@pytest.mark.parametrize("seed", range(12))
+def test_the_packing_of_paths_met_is_the_best_packing(tmp_path, monkeypatch, seed):
+    """pack: the best choice of one committed path (or none) a pass, each task once, by enumeration over the
+    columns (its fill left out: one orbit a satellite, no neighbouring passes, so the packing is the schedule);
+    with the fill, a valid schedule at least as good."""
+    data = dense(n_task=8, n_sat=3, seed=seed, orbits=1)
+    rng = np.random.default_rng(seed)
+    for m in data["missions"]:  # profits far apart: the most tasks is not the most profit
+        m["priority"] = float(rng.choice([1.0, 2.0, 9.0, 20.0]))
+    for sat in data["satellites"]:  # three observations an orbit: the passes contend for the tasks
+        sat["satellite_specs"]["max_power_W"] = 150.0
+    scen = read_scenario(write(tmp_path, data))
+    rules = Rules("code")
+    st = State(scen, rules, build_passes(scen), EosBenchConfig(transition="code"))
+    for _ in range(6):  # paths of every pass under random utilities: the columns
+        for k, p in enumerate(st.passes):
+            st.commit(k, solve_pass(st, k, rng.uniform(0.1, 1.0, len(p.tasks)), None))
+        for k in range(len(st.passes)):
+            st.commit(k, np.zeros(0, np.int64))
+    by_pass = [[np.frombuffer(t, dtype=np.int32) for (q, t) in st.columns if q == k] for k in range(len(st.passes))]
+    best = 0.0
+    for pick in itertools.product(*[[None, *cols] for cols in by_pass]):
+        tasks = np.concatenate([c for c in pick if c is not None] or [np.zeros(0, np.int32)])
+        if len(np.unique(tasks)) == len(tasks):
+            best = max(best, float(st.prio[tasks].sum()))
+    empty = (list(st.paths), st.served.copy())
+    with monkeypatch.context() as m:
+        m.setattr(eosbench_solve, "polish", lambda st: None)
+        assert best > 0 and pack(st, None)
+        assert st.value == pytest.approx(best)
+    st.paths, st.served = empty
+    assert pack(st, None) and st.value >= best - 1e-9
+    assert check(scen, to_schedule(st), rules).valid
 
 
 def tiny(seed: int) -> dict:
