@@ -17,8 +17,8 @@ not fall.  A pass's cap on observations (power, storage) is kept by a price on i
 bisection until the best path fits; observations of the same satellite in other passes mask the nodes they
 conflict with; a path is checked pair by pair under their every-pair rule and repaired.  Every few rounds and
 at the end, the paths committed so far are packed (:func:`pack`: a set packing solved by HiGHS, one path a pass,
-each task once), kept when it serves more.  The schedule returned
-is checked by :func:`eosp.eosbench.check.check` under the configured reading.
+each task once), kept when it serves more.  The schedule returned is checked by
+:func:`eosp.eosbench.check.check` under the configured reading.
 
 Bound.  For task prices lam >= 0 and pos = max(priority - lam, 0), every pass's term is the smallest of
 (a) its optimum under utilities pos with the cap dropped, over the code reading's graph (11.66 s transitions, the
