@@ -4,6 +4,7 @@ anchors by size, for the sizes this machine cannot generate.
 Usage::
 
     python experiments/eosbench_workbook.py THEIR_REPO/Scenario_Level_Results.xlsx [--sheets st-s10-t500 ...]
+        [--horizons 12H ...]
 
 Each sheet of their workbook is one scenario family (``st-s10-t500``: agile, standard, 10 satellites, 500 tasks;
 ``n-`` the non-agile twin; ``sp-co-s200`` constellation configurations; ``sp-re``/``sp-ma`` resource and
@@ -91,12 +92,14 @@ def fmt(x: str, digits: int) -> str:
         return ""
 
 
-def table(book: dict[str, list[dict[str, str]]], names: list[str]) -> list[str]:
+def table(book: dict[str, list[dict[str, str]]], names: list[str], horizons: list[str] | None = None) -> list[str]:
     lines = ["| family | satellites x tasks, distribution, horizon, configuration | best TP (who) | "
              + " | ".join(f"{m} TP (s)" for m in SHOWN) + " |",
              "|---|---|---|" + "---|" * len(SHOWN)]
     for name in names:
         for key, algs in blocks(book[name]):
+            if horizons and (key.get("horizon") or key.get("H")) not in horizons:
+                continue
             tp = {a: float(r["TP"]) for a, r in algs.items() if fmt(r.get("TP", ""), 1)}
             if not tp:
                 continue
@@ -119,6 +122,7 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("workbook", help="their Scenario_Level_Results.xlsx")
     ap.add_argument("--sheets", nargs="*", default=None, help="sheets to print (default: every sheet but Total)")
+    ap.add_argument("--horizons", nargs="*", default=None, help="horizons to print (default: all), e.g. 12H 24H")
     ns = ap.parse_args(argv)
     try:
         book = sheets(ns.workbook)
@@ -130,7 +134,7 @@ def main(argv: list[str] | None = None) -> int:
     if unknown:
         print(f"{ns.workbook}: no sheet {', '.join(unknown)} (it has {', '.join(book)})", file=sys.stderr)
         return 2
-    print("\n".join(table(book, names)))
+    print("\n".join(table(book, names, ns.horizons)))
     return 0
 
 
