@@ -36,6 +36,7 @@ from __future__ import annotations
 
 import math
 import time
+from collections import deque
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -106,6 +107,15 @@ class State:
         for i, p in enumerate(self.passes):
             self.by_sat.setdefault(p.satellite, []).append(i)
         self.span = np.array([[p.start_us[1:].min(), p.end_us[1:].max()] for p in self.passes]).reshape(-1, 2)
+        # the passes seeing each task (CSR by task, passes in increasing order)
+        tasks = np.concatenate([p.tasks for p in self.passes]) if self.passes else np.zeros(0, np.int32)
+        of = np.repeat(np.arange(len(self.passes)), [len(p.tasks) for p in self.passes])
+        by_task = np.argsort(tasks, kind="stable")
+        self.task_ptr = np.searchsorted(tasks[by_task], np.arange(len(self.scenario.tasks) + 1))
+        self.task_passes = of[by_task]
+
+    def passes_of(self, task: int) -> np.ndarray:
+        return self.task_passes[self.task_ptr[task]:self.task_ptr[task + 1]]
 
     @property
     def value(self) -> float:
@@ -284,18 +294,18 @@ def polish(st: State) -> None:
 
 def descend(st: State, order: list[int], deadline: float | None) -> None:
     """Coordinate descent: passes solved again until none improves (or the deadline)."""
-    queue = list(order)
+    queue = deque(order)
     queued = set(queue)
     while queue:
         if deadline is not None and time.perf_counter() > deadline:
             return
-        k = queue.pop(0)
+        k = queue.popleft()
         queued.discard(k)
         before = set(st.path_tasks(k, st.paths[k]).tolist())
         if improve(st, k, deadline):
             freed = before - set(st.path_tasks(k, st.paths[k]).tolist())
             for t in freed:  # passes holding a task this one gave up may now take it
-                for q in np.flatnonzero([t in set(pp.tasks.tolist()) for pp in st.passes]).tolist():
+                for q in st.passes_of(t).tolist():
                     if q not in queued:
                         queue.append(q)
                         queued.add(q)
