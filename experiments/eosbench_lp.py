@@ -96,7 +96,7 @@ def main(argv: list[str] | None = None) -> int:
         lp = h.getInfo().objective_function_value
         duals = np.minimum(np.abs(np.asarray(h.getSolution().row_dual[:n])), st.prio)
         lam = duals if r == 0 else 0.5 * centre + 0.5 * duals
-        value, _, proven = eb.bound_round(st, lam, [])
+        value, _, proven = eb.bound_round(st, lam)
         if proven and value < best_l:
             centre, best_l = lam.copy(), value
         added = 0

@@ -24,7 +24,9 @@ from eosp.eosbench.schedules import read_schedule, schedule_json
 from eosp.eosbench.transition import C_SMALL, Rules, documented_s, to_us, transition_s
 from eosp.kinds.eosbench import solve as eosbench_solve
 from eosp.kinds.eosbench.passes import build_passes, graph
-from eosp.kinds.eosbench.solve import EosBenchConfig, State, _cap_term, pack, solve, solve_pass, to_schedule
+from eosp.kinds.eosbench.dual import PriceLP
+from eosp.kinds.eosbench.solve import (EosBenchConfig, State, _cap_term, bound_round, pack, solve, solve_pass,
+                                       to_schedule)
 
 T0 = datetime(2025, 11, 18, 12, 0, 0)
 
@@ -351,7 +353,8 @@ def test_the_capped_pass_term_bounds_every_capped_path(tmp_path, seed, cap):
         pos = np.maximum(pos, 0.0)
         if not (pos > 0).any():
             continue
-        term, nodes, proven = _cap_term(p, pos, lambda allowed: graph(p, Rules("code"), True, allowed), 10.0)
+        term, nodes, proven, fit = _cap_term(p, pos, lambda allowed: graph(p, Rules("code"), True, allowed), 10.0)
+        assert len(fit) <= cap and float(pos[p.node_acq[fit]].sum()) <= best_capped_path(p, pos, cap) + 1e-9
         assert proven
         assert best_capped_path(p, pos, cap) <= term + 1e-9  # a bound on every path the cap allows
         assert term <= best_capped_path(p, pos, len(p.tasks)) + 1e-9  # never looser than the cap dropped
@@ -392,6 +395,32 @@ def test_the_packing_of_paths_met_is_the_best_packing(tmp_path, monkeypatch, see
     assert check(scen, to_schedule(st), rules).valid
 
 
+@pytest.mark.parametrize("seed", [0, 5])
+def test_no_prices_bound_below_the_lp_of_the_relaxed_paths(tmp_path, seed):
+    """dual.PriceLP: its LP over relaxed pass paths (those of the bound rounds) is a lower bound on L(lam) for every
+    lam, and its smoothed duals give an L no lower than it either."""
+    data = dense(n_task=8, n_sat=3, seed=seed, orbits=2)
+    for sat in data["satellites"]:
+        sat["satellite_specs"]["max_power_W"] = 150.0
+    scen = read_scenario(write(tmp_path, data))
+    st = State(scen, Rules("code"), build_passes(scen), EosBenchConfig(transition="code"))
+    lp = PriceLP(st.prio, len(st.passes))
+    rng = np.random.default_rng(seed)
+    lam = np.zeros(len(scen.tasks))
+    for _ in range(8):
+        cols: list = []
+        value, _, proven = bound_round(st, lam, cols)
+        for k, tasks in cols:
+            assert len(tasks) <= st.passes[k].cap
+            lp.add(k, tasks)
+        lam = lp.next_prices(lam, value if proven else math.inf, None)
+    lp_value = lp._h.getInfo().objective_function_value
+    assert lp_value > 0
+    for _ in range(20):
+        assert bound_round(st, rng.uniform(0, 12, len(scen.tasks)))[0] >= lp_value - 1e-6
+    assert bound_round(st, lam)[0] >= lp_value - 1e-6
+
+
 def tiny(seed: int) -> dict:
     """Four 5 s tasks, each seen by each of two satellites through one 6-8 s window in the first 40 s (2-4 starts)
     on one of two orbits, one observation an orbit (50 W cap, 50 W each): few enough candidates for the
@@ -405,9 +434,10 @@ def tiny(seed: int) -> dict:
 
 @pytest.mark.parametrize("seed", [1, 2, 4, 7])
 @pytest.mark.parametrize("reading", ["code", "documented"])
-def test_the_bound_holds_on_random_scenarios(tmp_path, seed, reading):
+@pytest.mark.parametrize("price_step", ["uniform", "lp"])
+def test_the_bound_holds_on_random_scenarios(tmp_path, seed, reading, price_step):
     scen = read_scenario(write(tmp_path, tiny(seed)))
-    res = solve(scen, EosBenchConfig(time_limit=None, rounds=4, transition=reading))
+    res = solve(scen, EosBenchConfig(time_limit=None, rounds=4, transition=reading, price_step=price_step))
     assert check(scen, res.schedule, Rules(reading)).valid
     assert res.bound + 1e-9 >= brute_force(scen, Rules(reading)) >= res.value - 1e-9
 

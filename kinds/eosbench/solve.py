@@ -46,6 +46,7 @@ from eosp.eosbench.check import check, verdict
 from eosp.eosbench.model import Scenario, Schedule
 from eosp.eosbench.transition import PROFILES, READINGS, Rules, to_us, transition_s
 from eosp.errors import InputError
+from eosp.kinds.eosbench.dual import PriceLP
 from eosp.kinds.eosbench.passes import NO_CAP, Pass, best_path, build_passes, graph
 from eosp.kinds.fleet.prices import Prices
 from eosp.problem import Result
@@ -72,6 +73,10 @@ class EosBenchConfig(UtilityConfig):
     rounds: int | None = ranged(None, 1)
     """Price rounds, each followed by `moves_per_round` large-neighbourhood moves (a deterministic budget); unset: as many as the
     time limit allows."""
+    price_step: str = choice("uniform", "uniform", "lp")
+    """The prices of the next round: uniform (Polyak's subgradient step, every price by the same amount per unit of
+    its subgradient) or lp (the smoothed duals of a linear program over the pass paths of the bound rounds so far,
+    eosp.kinds.eosbench.dual: a tighter bound after more rounds, at an LP solve a round)."""
     moves_per_round: int = ranged(4, 1)
     """Large-neighbourhood moves after each price round (a price round costs several moves' time: on 10 satellites
     x 500 tasks, 4 moves a round served more than 1 at 30 s)."""
@@ -311,25 +316,33 @@ def descend(st: State, order: list[int], deadline: float | None) -> None:
                         queued.add(q)
 
 
-def _cap_term(p: Pass, pos: np.ndarray, build, time_limit: float) -> tuple[float, np.ndarray, bool]:
-    """min over mu >= 0 of g(mu) = opt(pos - mu) + mu * cap (see the module docstring), the path at the best mu, and
-    whether that value is proven (every label search it rests on finished).  g is convex and piecewise linear in
-    mu with slope cap - |path(mu)|, so its minimum is found by cutting planes on one variable: the tangent lines at
-    the two ends of the bracket meet at the next mu; the search stops when the value there is on those lines
-    (mu is optimal), after a few cuts, or at an unfinished search (the best proven g so far stands)."""
+def _cap_term(p: Pass, pos: np.ndarray, build, time_limit: float
+              ) -> tuple[float, np.ndarray, bool, np.ndarray]:
+    """min over mu >= 0 of g(mu) = opt(pos - mu) + mu * cap (see the module docstring), the path at the best mu,
+    whether that value is proven (every label search it rests on finished), and the most valuable path of at most
+    `cap` observations among those the search met (a column of :mod:`eosp.kinds.eosbench.dual`).  g is convex and
+    piecewise linear in mu with slope cap - |path(mu)|, so its minimum is found by cutting planes on one variable:
+    the tangent lines at the two ends of the bracket meet at the next mu; the search stops when the value there is
+    on those lines (mu is optimal), after a few cuts, or at an unfinished search (the best proven g so far
+    stands)."""
+    fit, fit_value = np.zeros(0, np.int64), 0.0
+
     def at(mu: float) -> tuple[float, int, np.ndarray, bool]:
+        nonlocal fit, fit_value
         allowed = np.r_[True, pos[p.node_acq[1:]] > mu]
         if not allowed[1:].any():
             return mu * p.cap, p.cap, np.zeros(0, np.int64), True
         nodes, val, done = best_path(build(allowed), np.maximum(pos - mu, 0.0), time_limit)
+        if len(nodes) <= p.cap and float(pos[p.node_acq[nodes]].sum()) > fit_value:
+            fit, fit_value = nodes, float(pos[p.node_acq[nodes]].sum())
         return val + mu * p.cap, p.cap - len(nodes), nodes, done
 
     g0, s0, nodes, done = at(0.0)
     if not done:
-        return math.inf, nodes, False
+        return math.inf, nodes, False, fit
     best, best_nodes = g0, nodes
     if s0 >= 0 or p.cap >= NO_CAP:  # the cap does not bind at mu = 0: g is smallest there
-        return best, best_nodes, True
+        return best, best_nodes, True, fit
     lo, hi = (0.0, g0, s0), (float(pos.max()), float(pos.max()) * p.cap, p.cap)
     if hi[1] < best:
         best, best_nodes = hi[1], np.zeros(0, np.int64)
@@ -346,12 +359,14 @@ def _cap_term(p: Pass, pos: np.ndarray, build, time_limit: float) -> tuple[float
         if g >= line - 1e-9 or slope == 0:  # on both tangents: mu minimises g
             break
         lo, hi = ((mu, g, slope), hi) if slope < 0 else (lo, (mu, g, slope))
-    return best, best_nodes, True
+    return best, best_nodes, True, fit
 
 
-def bound_round(st: State, lam: np.ndarray, graphs: list) -> tuple[float, np.ndarray, bool]:
+def bound_round(st: State, lam: np.ndarray, paths: list | None = None) -> tuple[float, np.ndarray, bool]:
     """L(lam) (see the module docstring), the count of passes taking each task, and whether every pass term came
-    from a finished label search or a cap."""
+    from a finished label search or a cap; with `paths`, (pass, tasks) of paths of at most `cap` observations of
+    each pass in the relaxation: the best its term's search met, and the path of its term cut to its `cap` most
+    valuable observations (:mod:`eosp.kinds.eosbench.dual`'s columns)."""
     total = float(lam.sum())
     taken = np.zeros(len(st.scenario.tasks))
     proven = True
@@ -367,7 +382,13 @@ def bound_round(st: State, lam: np.ndarray, graphs: list) -> tuple[float, np.nda
             st.pass_solves += 1
             return graph(p, code, True, allowed) if st.agile[k] else graph(p, st.rules, False, allowed)
 
-        exact, nodes, _ = _cap_term(p, pos, build, st.cfg.pass_time_limit)
+        exact, nodes, _, fit = _cap_term(p, pos, build, st.cfg.pass_time_limit)
+        if paths is not None:
+            if len(fit):
+                paths.append((k, p.tasks[p.node_acq[fit]]))
+            if len(nodes) > p.cap:  # the path at the best mu, cut to its cap most valuable observations
+                acq = p.node_acq[nodes]
+                paths.append((k, p.tasks[acq[np.argsort(-pos[acq], kind="stable")[:p.cap]]]))
         capped = float(top.sum()) if top is not None else math.inf
         if math.isinf(exact) and math.isinf(capped):  # an unfinished search without a cap: every positive utility
             total += float(pos.sum())
@@ -525,13 +546,16 @@ def solve(scenario: Scenario, cfg: EosBenchConfig) -> Result:
     timings["construction"] = time.perf_counter() - t0 - timings["passes"]
     best_value, best_paths, best_served = st.value, list(st.paths), st.served.copy()
     prices = Prices.zero(len(scenario.tasks))
+    lp = PriceLP(st.prio, len(passes)) if cfg.price_step == "lp" else None
     bound, kind = conflict_free(st), "conflict-free"
     rng = np.random.default_rng(cfg.seed)
     rounds, best_dual = 0, math.inf
     while cfg.rounds is None or rounds < cfg.rounds:
         if deadline is not None and time.perf_counter() > deadline and rounds > 0:
             break
-        dual, taken, proven = bound_round(st, prices.lam, [])
+        lam = prices.lam
+        columns: list | None = [] if lp is not None else None
+        dual, taken, proven = bound_round(st, lam, columns)
         rounds += 1
         prices.stalled(dual < best_dual - 1e-9)  # the step shrinks when the dual stalls, whatever bound stands
         best_dual = min(best_dual, dual)
@@ -539,7 +563,15 @@ def solve(scenario: Scenario, cfg: EosBenchConfig) -> Result:
             bound, kind = dual, "lagrangian"
         if bound <= best_value + 1e-9:  # proven optimal: nothing left to search
             break
-        prices.step_towards(taken, dual if math.isfinite(dual) else bound, best_value)
+        if lp is None:
+            prices.step_towards(taken, dual if math.isfinite(dual) else bound, best_value)
+        else:
+            for k, tasks in columns:
+                lp.add(k, tasks)
+            for k, tasks in list(st.columns)[lp.committed:]:  # the paths the moves committed: valid, so relaxed too
+                lp.add(k, np.frombuffer(tasks, dtype=np.int32))
+            lp.committed = len(st.columns)
+            prices.lam = lp.next_prices(lam, dual if proven else math.inf, deadline)
         if deadline is not None and time.perf_counter() > deadline:
             break
         for _ in range(cfg.moves_per_round):
