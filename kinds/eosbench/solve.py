@@ -362,11 +362,14 @@ def _cap_term(p: Pass, pos: np.ndarray, build, time_limit: float
     return best, best_nodes, True, fit
 
 
-def bound_round(st: State, lam: np.ndarray, paths: list | None = None) -> tuple[float, np.ndarray, bool]:
+def bound_round(st: State, lam: np.ndarray, paths: list | None = None, deadline: float | None = None
+                ) -> tuple[float, np.ndarray, bool]:
     """L(lam) (see the module docstring), the count of passes taking each task, and whether every pass term came
     from a finished label search or a cap; with `paths`, (pass, tasks) of paths of at most `cap` observations of
     each pass in the relaxation: the best its term's search met, and the path of its term cut to its `cap` most
-    valuable observations (:mod:`eosp.kinds.eosbench.dual`'s columns)."""
+    valuable observations (:mod:`eosp.kinds.eosbench.dual`'s columns).  Past `deadline` (a ``time.perf_counter()``
+    instant) a pass's term is (b), or without a cap the sum of its positive utilities, without a label search: still
+    a bound, a weaker one."""
     total = float(lam.sum())
     taken = np.zeros(len(st.scenario.tasks))
     proven = True
@@ -382,7 +385,12 @@ def bound_round(st: State, lam: np.ndarray, paths: list | None = None) -> tuple[
             st.pass_solves += 1
             return graph(p, code, True, allowed) if st.agile[k] else graph(p, st.rules, False, allowed)
 
-        exact, nodes, _, fit = _cap_term(p, pos, build, st.cfg.pass_time_limit)
+        limit = st.cfg.pass_time_limit if deadline is None else min(st.cfg.pass_time_limit,
+                                                                     deadline - time.perf_counter())
+        if limit > 0:
+            exact, nodes, _, fit = _cap_term(p, pos, build, max(0.05, limit))
+        else:  # past the deadline: the cap's term, or every positive utility
+            exact, nodes, fit = math.inf, np.zeros(0, np.int64), np.zeros(0, np.int64)
         if paths is not None:
             if len(fit):
                 paths.append((k, p.tasks[p.node_acq[fit]]))
@@ -555,7 +563,7 @@ def solve(scenario: Scenario, cfg: EosBenchConfig) -> Result:
             break
         lam = prices.lam
         columns: list | None = [] if lp is not None else None
-        dual, taken, proven = bound_round(st, lam, columns)
+        dual, taken, proven = bound_round(st, lam, columns, deadline)
         rounds += 1
         prices.stalled(dual < best_dual - 1e-9)  # the step shrinks when the dual stalls, whatever bound stands
         best_dual = min(best_dual, dual)
