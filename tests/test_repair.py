@@ -92,7 +92,8 @@ def test_window_rounds_keep_random_schedules_feasible_and_never_worse(family, se
     assert long_span > span or long_tried == 0
     if budget < 10**9:  # the arcs budget stops the round (after the window that crossed it)
         assert tried == 200 or arcs >= budget
-    assert pol.value(out) >= pol.value(nodes) - 1e-9
+    # never worse, up to the rounding of sums in another order (values reach 2e6 in utility mode: 2.6e-8 seen)
+    assert pol.value(out) >= pol.value(nodes) - 1e-12 * max(1.0, abs(pol.value(nodes)))
     assert len(set(inst.node_acq[out].tolist())) == n
     assert list(pol.nodes_of(inst.node_acq[out])) == list(out)
     verdict = check(inst, from_internal_nodes(inst, out))
