@@ -466,9 +466,9 @@ def pack(st: State, limit: float | None, nodes: int | None = None) -> bool:
     Why: the moves meet many good paths of each pass that no single schedule held together; on 10 satellites x
     500 tasks the packing of those met in 30 s served 19-30 more than the moves' best (solved to optimality in
     half a second)."""
-    from eosp.kinds.fleet.master import quiet_highs
-
     import highspy
+
+    from eosp.kinds.fleet.master import quiet_highs, run_from
 
     keys = list(st.columns)
     if not keys:
@@ -497,18 +497,13 @@ def pack(st: State, limit: float | None, nodes: int | None = None) -> bool:
     for k, path in enumerate(st.paths):
         if len(path):
             x0[where[(k, np.sort(st.path_tasks(k, path)).tobytes())]] = 1.0
-    sol = highspy.HighsSolution()
-    sol.col_value = x0.tolist()
-    sol.value_valid = True
-    h.setSolution(sol)
-    h.run()
-    x = np.asarray(h.getSolution().col_value, dtype=np.float64)
-    if len(x) != m:
+    chosen = run_from(h, x0)
+    if not chosen:
         return False
     before = (st.value, list(st.paths), st.served.copy())
     for k in range(len(st.passes)):
         st.commit(k, np.zeros(0, np.int64))
-    for i in np.flatnonzero(x > 0.5).tolist():
+    for i in chosen:
         st.commit(keys[i][0], st.columns[keys[i]])
     for k in range(len(st.passes)):  # the every-pair rule with the neighbouring passes the packing does not see
         if len(st.paths[k]) and not _neighbour_mask(st, k)[st.paths[k]].all():

@@ -60,6 +60,22 @@ def quiet_highs():
     return h
 
 
+def run_from(h, x0: np.ndarray) -> list[int]:
+    """Run the binary program `h` (HiGHS) from the solution `x0` (0/1 per column; the solver keeps it if it finds
+    none better); the columns set in the best solution found, [] when there is none."""
+    import highspy
+
+    sol = highspy.HighsSolution()
+    sol.col_value = np.asarray(x0, dtype=np.float64).tolist()
+    sol.value_valid = True
+    h.setSolution(sol)
+    h.run()
+    x = np.asarray(h.getSolution().col_value, dtype=np.float64)
+    if len(x) != len(x0):
+        return []
+    return np.flatnonzero(x > 0.5).tolist()
+
+
 @dataclass
 class Centre:
     """The prices of the lowest L seen (the stability centre of the smoothed prices)."""
@@ -235,12 +251,4 @@ class Master:
             i = self.seen.get((p, np.unique(path_tasks(self.prob, p, path)).tobytes())) if len(path) else None
             if i is not None:
                 x0[i] = 1.0
-        sol = hs.HighsSolution()
-        sol.col_value = x0.tolist()
-        sol.value_valid = True
-        h.setSolution(sol)
-        h.run()
-        x = np.asarray(h.getSolution().col_value, dtype=np.float64)
-        if len(x) != m:
-            return []
-        return np.flatnonzero(x > 0.5).tolist()
+        return run_from(h, x0)
