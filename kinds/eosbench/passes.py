@@ -29,6 +29,7 @@ import numpy as np
 
 from eosp.eosbench.model import US, Scenario
 from eosp.eosbench.transition import BREAKS, C_SMALL, OFFSETS, PROFILES, SMALL_DG, Rules
+from eosp.graphs.build import first_at_or_after
 from eosp.graphs.discrete import DiscreteGraph
 from eosp.planning.labels import label_search
 
@@ -179,18 +180,6 @@ BREAKS_NB = BREAKS.copy()
 OFFSETS_NB = OFFSETS.copy()
 
 
-@numba.njit(cache=True, inline="always")
-def _first_from(start, lo, hi, t):
-    """The first x in [lo, hi) with start[x] >= t (hi if none; start sorted on the range)."""
-    while lo < hi:
-        mid = (lo + hi) >> 1
-        if start[mid] < t:
-            lo = mid + 1
-        else:
-            hi = mid
-    return lo
-
-
 @numba.njit(cache=True)
 def _arcs(acq_ptr, nodes, allowed, release, code, v, non_agile_us, agile):
     """CSR arcs over the allowed nodes (`nodes`: start, end, first and last attitudes): from the source to each
@@ -224,7 +213,7 @@ def _arcs(acq_ptr, nodes, allowed, release, code, v, non_agile_us, agile):
     cnt = 0
     for i in range(n_live):
         b = live[i]
-        lo = _first_from(start, acq_ptr[b], acq_ptr[b + 1], release)
+        lo = first_at_or_after(start, acq_ptr[b], acq_ptr[b + 1], release)
         if lo < acq_ptr[b + 1] and nxt[lo] < acq_ptr[b + 1]:
             dst[cnt] = nxt[lo]
             cnt += 1
@@ -239,7 +228,7 @@ def _arcs(acq_ptr, nodes, allowed, release, code, v, non_agile_us, agile):
                 if b == acq:
                     continue
                 end_b = acq_ptr[b + 1]
-                x = nxt[_first_from(start, acq_ptr[b], end_b, end[u] + need_c if const else end[u])]
+                x = nxt[first_at_or_after(start, acq_ptr[b], end_b, end[u] + need_c if const else end[u])]
                 if not const:
                     while x < end_b and start[x] < end[u] + _need_us(last[u], first[x], code, v, non_agile_us,
                                                                       agile):
