@@ -29,37 +29,7 @@ from eosp.eosbench.read import read_scenario
 from eosp.eosbench.transition import READINGS, Rules
 from eosp.errors import InputError
 from eosp.kinds.eosbench import solve as eb
-from eosp.kinds.fleet.master import quiet_highs
-
-
-def columns_lp(st: eb.State):
-    """A HiGHS LP with a row per task and per pass and the committed paths as columns; returns it and the
-    function that adds a path (False when held already)."""
-    import highspy
-
-    n, P = len(st.scenario.tasks), len(st.passes)
-    h = quiet_highs()
-    h.setOptionValue("threads", 1)
-    h.changeObjectiveSense(highspy.ObjSense.kMaximize)
-    h.addRows(n + P, np.full(n + P, -highspy.kHighsInf), np.ones(n + P), 0, np.zeros(0, np.int32),
-              np.zeros(0, np.int32), np.zeros(0))
-    held = set()
-
-    def add(k: int, path: np.ndarray) -> bool:
-        p = st.passes[k]
-        if not 0 < len(path) <= p.cap:
-            return False
-        tasks = np.unique(p.tasks[p.node_acq[path]])
-        if (k, tasks.tobytes()) in held:
-            return False
-        held.add((k, tasks.tobytes()))
-        idx = np.r_[tasks, n + k].astype(np.int32)
-        h.addCol(float(st.prio[tasks].sum()), 0.0, highspy.kHighsInf, len(idx), idx, np.ones(len(idx)))
-        return True
-
-    for k, path in st.columns.items():
-        add(k[0], path)
-    return h, add, held
+from eosp.kinds.eosbench.dual import PriceLP
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -86,24 +56,23 @@ def main(argv: list[str] | None = None) -> int:
     eb.State.__post_init__ = init
     st = states[-1]
     print(f"solver: TP {res.value:.1f}, bound {res.bound:.1f} ({res.bound_kind}), {len(st.columns)} paths committed")
-    h, add, held = columns_lp(st)
-    n = len(scen.tasks)
+    lp = PriceLP(st.prio, len(st.passes))
+    for (k, tasks) in st.columns:  # the committed paths: the first columns
+        lp.add(k, np.frombuffer(tasks, dtype=np.int32))
     alone = eb.State(scen, Rules(ns.transition), st.passes, st.cfg)  # its pass solves see no other pass
-    centre, best_l = np.zeros(n), math.inf
+    lam, value, proven = np.zeros(len(scen.tasks)), math.inf, False
     t0 = time.perf_counter()
     for r in range(ns.rounds):
-        h.run()
-        lp = h.getInfo().objective_function_value
-        duals = np.minimum(np.abs(np.asarray(h.getSolution().row_dual[:n])), st.prio)
-        lam = duals if r == 0 else 0.5 * centre + 0.5 * duals
+        lam = lp.next_prices(lam, value if proven else math.inf, None)  # smoothed towards the lowest L's prices
         value, _, proven = eb.bound_round(st, lam)
-        if proven and value < best_l:
-            centre, best_l = lam.copy(), value
         added = 0
-        for prices in (lam, duals):
+        for prices in (lam, lp.last_duals):
             for k, p in enumerate(st.passes):
-                added += add(k, eb.solve_pass(alone, k, st.prio[p.tasks] - prices[p.tasks], None))
-        print(f"round {r}: LP over {len(held)} columns {lp:.1f}, L {value:.1f}, best L {best_l:.1f}, "
+                path = eb.solve_pass(alone, k, st.prio[p.tasks] - prices[p.tasks], None)
+                if 0 < len(path) <= p.cap:
+                    added += lp.add(k, p.tasks[p.node_acq[path]])
+        best = min(value if proven else math.inf, lp.centre_value)
+        print(f"round {r}: LP over {len(lp.held)} columns {lp.value:.1f}, L {value:.1f}, best L {best:.1f}, "
               f"{added} new columns, {time.perf_counter() - t0:.1f} s", flush=True)
         if not added:
             break

@@ -35,21 +35,18 @@ class PriceLP:
     def __init__(self, prio: np.ndarray, n_passes: int) -> None:
         import highspy
 
-        from eosp.kinds.fleet.master import quiet_highs
+        from eosp.kinds.fleet.master import packing_highs
 
         self._hs = highspy
         self.prio = prio
         n = len(prio)
-        h = quiet_highs()
-        h.setOptionValue("threads", 1)
-        h.changeObjectiveSense(highspy.ObjSense.kMaximize)
-        h.addRows(n + n_passes, np.full(n + n_passes, -highspy.kHighsInf), np.ones(n + n_passes), 0,
-                  np.zeros(0, np.int32), np.zeros(0, np.int32), np.zeros(0))
-        self._h = h
+        self._h = packing_highs(n + n_passes)
         self.held: set = set()
         self.committed = 0  # how many of the solver's committed paths (State.columns, in insertion order) were added
         self.centre = np.zeros(n)
         self.centre_value = math.inf
+        self.value = math.nan  # the LP's last optimum
+        self.last_duals = np.zeros(n)
 
     def add(self, k: int, tasks: np.ndarray) -> bool:
         """The column of pass k serving `tasks` (once each); False when held already."""
@@ -62,20 +59,30 @@ class PriceLP:
         self._h.addCol(float(self.prio[tasks].sum()), 0.0, self._hs.kHighsInf, len(idx), idx, np.ones(len(idx)))
         return True
 
-    def next_prices(self, lam: np.ndarray, value: float, deadline: float | None) -> np.ndarray:
-        """The prices of the next round, given that L(`lam`) = `value` (inf when not proven): the smoothed duals
-        of the LP over the columns held, or the centre when the LP is not solved (by `deadline`, at most
-        :data:`LP_LIMIT_S`; without a deadline it is solved to the end, the same on every machine)."""
-        if value < self.centre_value:
-            self.centre, self.centre_value = lam.copy(), value
+    def duals(self, deadline: float | None) -> np.ndarray | None:
+        """The task rows' duals of the LP over the columns held (clipped to the priorities; its value in
+        :attr:`value`), or None when it is not solved (by `deadline`, at most :data:`LP_LIMIT_S`; without a deadline
+        it is solved to the end, the same on every machine)."""
         h = self._h
         if deadline is not None:
             left = min(LP_LIMIT_S, deadline - time.perf_counter())
             h.setOptionValue("time_limit", float(h.getRunTime()) + max(0.01, left))
         h.run()
         if h.getModelStatus() != self._hs.HighsModelStatus.kOptimal:
+            return None
+        self.value = float(h.getInfo().objective_function_value)
+        return np.minimum(np.abs(np.asarray(h.getSolution().row_dual[:len(self.prio)], dtype=np.float64)), self.prio)
+
+    def next_prices(self, lam: np.ndarray, value: float, deadline: float | None) -> np.ndarray:
+        """The prices of the next round, given that L(`lam`) = `value` (inf when not proven): the LP's duals
+        (:meth:`duals`, kept in :attr:`last_duals`) smoothed towards the centre, or the centre when the LP is not
+        solved."""
+        if value < self.centre_value:
+            self.centre, self.centre_value = lam.copy(), value
+        duals = self.duals(deadline)
+        if duals is None:
             return self.centre.copy()
-        duals = np.minimum(np.abs(np.asarray(h.getSolution().row_dual[:len(self.prio)], dtype=np.float64)), self.prio)
+        self.last_duals = duals
         if not math.isfinite(self.centre_value):
             return duals
         return SMOOTHING * self.centre + (1.0 - SMOOTHING) * duals

@@ -29,7 +29,8 @@ plus mu * cap: a path P of at most cap observations has sum pos <= sum (pos - mu
 pos > mu are themselves a path (dropping an observation never breaks a constant transition); (a) is (c) at mu = 0
 and the term takes the least over a few mu.  Sum of terms + sum of lam bounds the profit of any schedule valid
 under either reading.  A pass whose label search stops at its time limit keeps term (b) or, without a cap, the sum
-of its positive utilities.  Prices move by the fleet's projected subgradient step.
+of its positive utilities.  Prices move by the fleet's projected subgradient step, or with ``--price-step lp`` to
+the smoothed duals of a linear program over the passes' paths (:mod:`eosp.kinds.eosbench.dual`).
 """
 
 from __future__ import annotations
@@ -468,7 +469,7 @@ def pack(st: State, limit: float | None, nodes: int | None = None) -> bool:
     half a second)."""
     import highspy
 
-    from eosp.kinds.fleet.master import quiet_highs, run_from
+    from eosp.kinds.fleet.master import packing_highs, run_from
 
     keys = list(st.columns)
     if not keys:
@@ -480,12 +481,7 @@ def pack(st: State, limit: float | None, nodes: int | None = None) -> bool:
         cost[i], starts[i] = float(st.prio[t].sum()), len(index)
         index.extend(t.tolist())
         index.append(n + k)
-    h = quiet_highs()
-    h.setOptionValue("threads", 1)
-    h.changeObjectiveSense(highspy.ObjSense.kMaximize)
-    rows = n + len(st.passes)
-    h.addRows(rows, np.full(rows, -highspy.kHighsInf), np.ones(rows), 0, np.zeros(0, np.int32), np.zeros(0, np.int32),
-              np.zeros(0))
+    h = packing_highs(n + len(st.passes))
     h.addCols(m, cost, np.zeros(m), np.ones(m), len(index), starts, np.asarray(index, np.int32), np.ones(len(index)))
     h.changeColsIntegrality(m, np.arange(m, dtype=np.int32), np.full(m, highspy.HighsVarType.kInteger))
     if limit is not None:

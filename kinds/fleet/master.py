@@ -60,6 +60,19 @@ def quiet_highs():
     return h
 
 
+def packing_highs(rows: int):
+    """A quiet, one-thread HiGHS model that maximises, with `rows` rows ``sum of its columns <= 1`` and no column
+    yet: a set packing's (one row per task and per pass; the columns, each a pass's schedule, come later)."""
+    import highspy
+
+    h = quiet_highs()
+    h.setOptionValue("threads", 1)
+    h.changeObjectiveSense(highspy.ObjSense.kMaximize)
+    h.addRows(rows, np.full(rows, -highspy.kHighsInf), np.ones(rows), 0, np.zeros(0, np.int32), np.zeros(0, np.int32),
+              np.zeros(0))
+    return h
+
+
 def run_from(h, x0: np.ndarray) -> list[int]:
     """Run the binary program `h` (HiGHS) from the solution `x0` (0/1 per column; the solver keeps it if it finds
     none better); the columns set in the best solution found, [] when there is none."""
@@ -109,14 +122,7 @@ class Master:
         import highspy
 
         self._hs = highspy
-        n, P = len(self.prob.weight), len(self.prob.passes)
-        h = quiet_highs()
-        h.setOptionValue("threads", 1)
-        h.changeObjectiveSense(highspy.ObjSense.kMaximize)
-        inf = highspy.kHighsInf
-        h.addRows(n + P, np.full(n + P, -inf), np.ones(n + P), 0, np.zeros(0, np.int32), np.zeros(0, np.int32),
-                  np.zeros(0))
-        self._h = h
+        self._h = packing_highs(len(self.prob.weight) + len(self.prob.passes))
 
     @property
     def columns(self) -> int:
