@@ -500,19 +500,72 @@ def build_passes(fleet: Fleet, opps: Opportunities, los: LineOfSight) -> list[Pa
 
 
 def _subgraph(graph: DiscreteGraph, keep_acq: np.ndarray) -> tuple[DiscreteGraph, np.ndarray]:
-    """The graph restricted to the acquisitions in `keep_acq` (bool [k]); (graph, kept old node ids)."""
-    keep_node = np.r_[True, keep_acq[graph.node_acq[1:]]]
-    new_id = np.cumsum(keep_node) - 1
-    src = graph.src()
-    arc_ok = keep_node[src] & keep_node[graph.dst]
-    counts = np.bincount(new_id[src[arc_ok]], minlength=int(keep_node.sum()))
-    indptr = np.r_[0, np.cumsum(counts)].astype(np.int64)
-    dst = new_id[graph.dst[arc_ok]].astype(np.int32)
-    acq_new = np.cumsum(keep_acq) - 1
-    node_acq = np.r_[-1, acq_new[graph.node_acq[1:][keep_node[1:]]]].astype(np.int32)
-    per_acq = np.bincount(node_acq[1:], minlength=int(keep_acq.sum()))
-    acq_ptr = np.r_[1, 1 + np.cumsum(per_acq)].astype(np.int64)
-    return DiscreteGraph(node_acq, graph.node_time[keep_node], indptr, dst, acq_ptr), np.flatnonzero(keep_node)
+    """The graph restricted to the acquisitions in `keep_acq` (bool [k]): the source and the nodes of the kept
+    acquisitions, renumbered in order, with the arcs between them in their order; (graph, kept old node ids).
+
+    One kernel (:func:`_restrict`): a sweep solves thousands of small passes, and the same steps as a dozen numpy
+    calls cost 77 us a pass on a 200-satellite day, more than the pass's label search."""
+    node_acq, node_time, indptr, dst, acq_ptr, kept = _restrict(graph.node_acq, graph.node_time, graph.indptr,
+                                                                graph.dst, keep_acq)
+    return DiscreteGraph(node_acq, node_time, indptr, dst, acq_ptr), kept
+
+
+@numba.njit(cache=True)
+def _restrict(node_acq, node_time, indptr, dst, keep_acq):
+    """:func:`_subgraph`'s arrays: node_acq (int32), node_time, indptr (int64), dst (int32), acq_ptr (int64) of
+    the restricted graph, and the old ids of its nodes (int64)."""
+    n = node_acq.shape[0]
+    new_id = np.full(n, -1, np.int64)
+    m = 0
+    for v in range(n):
+        if v == 0 or keep_acq[node_acq[v]]:
+            new_id[v] = m
+            m += 1
+    acq_new = np.empty(keep_acq.shape[0], np.int64)
+    k = 0
+    for a in range(keep_acq.shape[0]):
+        acq_new[a] = k
+        if keep_acq[a]:
+            k += 1
+    kept = np.empty(m, np.int64)
+    out_acq = np.empty(m, np.int32)
+    out_time = np.empty(m, node_time.dtype)
+    out_ptr = np.zeros(m + 1, np.int64)
+    n_arcs = 0
+    for v in range(n):
+        i = new_id[v]
+        if i < 0:
+            continue
+        kept[i] = v
+        out_acq[i] = -1 if v == 0 else acq_new[node_acq[v]]
+        out_time[i] = node_time[v]
+        for e in range(indptr[v], indptr[v + 1]):
+            if new_id[dst[e]] >= 0:
+                n_arcs += 1
+        out_ptr[i + 1] = n_arcs
+    out_dst = np.empty(n_arcs, np.int32)
+    j = 0
+    for v in range(n):
+        if new_id[v] < 0:
+            continue
+        for e in range(indptr[v], indptr[v + 1]):
+            w = new_id[dst[e]]
+            if w >= 0:
+                out_dst[j] = w
+                j += 1
+    out_acq_ptr = np.empty(k + 1, np.int64)
+    out_acq_ptr[0] = 1
+    c = 1
+    b = 0
+    for i in range(1, m):  # nodes grouped by acquisition, in acquisition order (the canonical order)
+        while out_acq[i] > b:
+            b += 1
+            out_acq_ptr[b] = c
+        c += 1
+    while b < k:
+        b += 1
+        out_acq_ptr[b] = c
+    return out_acq, out_time, out_ptr, out_dst, out_acq_ptr, kept
 
 
 @dataclass(frozen=True, eq=False)

@@ -89,13 +89,22 @@ def max_open(graph: DiscreteGraph) -> int:
     first(j) <= t_j <= t_w < last(j), so within the last W = max(last - first)
     seconds; consecutive visits of a path are at least the shortest arc apart.
     """
-    first = graph.node_time[graph.acq_ptr[:-1]]
-    last = graph.node_time[graph.acq_ptr[1:] - 1]
-    span = float(np.max(last - first)) if last.size else 0.0
-    gap = _min_inner_gap(graph.node_time, graph.indptr, graph.dst)
+    span, gap = _span_and_gap(graph.node_time, graph.acq_ptr, graph.indptr, graph.dst)
     if not np.isfinite(gap):  # no arc between two acquisitions: paths of one node
         return 1
     return int(math.floor(span / max(gap, 1e-9))) + 2
+
+
+@numba.njit(cache=True)
+def _span_and_gap(node_time, acq_ptr, indptr, dst):
+    """(longest window: max over acquisitions of last - first node time, 0 with none; :func:`_min_inner_gap`), in
+    one call: the label search of every small pass of a fleet's sweeps starts with it."""
+    span = 0.0
+    for a in range(acq_ptr.shape[0] - 1):
+        d = node_time[acq_ptr[a + 1] - 1] - node_time[acq_ptr[a]]
+        if d > span:
+            span = d
+    return span, _min_inner_gap(node_time, indptr, dst)
 
 
 @numba.njit(cache=True)

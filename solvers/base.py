@@ -80,7 +80,7 @@ class SolverConfig:
         one-shot solver given a time limit is refused.  A one-line ValueError otherwise."""
         cls = type(self)
         # the type is part of the key: True == 1 == 1.0 as dictionary keys, yet only one of them is an int
-        values = tuple((f.name, type(v), v) for f in fields(self) for v in (getattr(self, f.name),))
+        values = tuple((name, type(v), v) for name in field_names(cls) for v in (getattr(self, name),))
         try:
             _check_fields(cls, values)  # the same values were checked before: a fleet solves 100,000s of passes
         except TypeError:  # an unhashable value (a wrong type): checked directly, for its message
@@ -147,6 +147,13 @@ def _type_hints(cls: type) -> dict[str, Any]:
     """A config class's resolved annotations, once per class: resolving them is most of a small solve's cost
     (the fleet solver solves hundreds of small passes a round)."""
     return typing.get_type_hints(cls)
+
+
+@functools.cache
+def field_names(cls: type) -> tuple[str, ...]:
+    """The names of a solver config class's fields, once (``dataclasses.fields`` costs microseconds a call, and a
+    fleet's sweeps build and check a config for every pass they solve)."""
+    return tuple(f.name for f in fields(cls))
 
 
 @functools.lru_cache(maxsize=4096)
@@ -227,7 +234,7 @@ def make_config(name: str, **options: Any) -> SolverConfig:
     """The config of solver `name` with `options` set; an unknown option is a one-line ValueError that
     names it and the valid ones, a bad value one that names the field."""
     cls = solver_config_class(name)
-    valid = [f.name for f in fields(cls)]
+    valid = field_names(cls)
     unknown = [k for k in options if k not in valid]
     if unknown:
         raise ValueError(f"solver {name!r} has no option {', '.join(map(repr, unknown))}; "

@@ -150,3 +150,45 @@ def test_a_lean_driver_finds_the_schedule_of_a_driver_holding_every_graph(pair, 
     assert (away.value, away.bound, away.info["pass_solves"]) == (here.value, here.bound, here.info["pass_solves"])
     assert not lean.built  # the driver built no graph: every solve went to the pool
     assert validate(full.fleet, away.schedule, full.geo).valid
+
+
+def restricted_by_definition(g, keep_acq):
+    """A graph restricted to some acquisitions, node by node: the source and the kept acquisitions' nodes in their
+    order, each kept acquisition renumbered by its rank, the arcs between kept nodes in their order."""
+    kept = [v for v in range(g.n_nodes) if v == 0 or keep_acq[g.node_acq[v]]]
+    new = {v: i for i, v in enumerate(kept)}
+    rank = np.cumsum(keep_acq) - 1
+    node_acq = [-1] + [int(rank[g.node_acq[v]]) for v in kept[1:]]
+    indptr, dst = [0], []
+    for v in kept:
+        dst += [new[int(w)] for w in g.dst[g.indptr[v]:g.indptr[v + 1]] if int(w) in new]
+        indptr.append(len(dst))
+    acq_ptr = [1 + sum(1 for a in node_acq[1:] if a < b) for b in range(int(keep_acq.sum()) + 1)]
+    return kept, node_acq, indptr, dst, acq_ptr
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_a_priced_pass_keeps_the_graph_between_its_positive_tasks(pair, seed):
+    """The priced problem's graph (one kernel, :func:`eosp.fleet.passgraph._subgraph`) is the pass graph restricted
+    to the tasks of positive utility, by definition, on every pass of the crowded fleet (uint16 arcs) under random
+    masks; and the label search's bound on its open sets (:func:`eosp.planning.labels.max_open`) is its formula."""
+    from eosp.fleet.passgraph import _subgraph
+    from eosp.planning.labels import max_open
+
+    full, _ = pair
+    rng = np.random.default_rng(seed)
+    for pg in full.passes:
+        g = pg.graph
+        for q in (0.2, 0.6, 1.0):
+            keep = rng.random(pg.n_tasks) < q
+            if not keep.any():
+                continue
+            sub, nodes = _subgraph(g, keep)
+            kept, node_acq, indptr, dst, acq_ptr = restricted_by_definition(g, keep)
+            assert nodes.tolist() == kept and sub.node_acq.tolist() == node_acq
+            assert sub.indptr.tolist() == indptr and sub.dst.tolist() == dst and sub.acq_ptr.tolist() == acq_ptr
+            assert np.array_equal(sub.node_time, g.node_time[kept])
+            span = max(sub.node_time[sub.acq_ptr[a + 1] - 1] - sub.node_time[sub.acq_ptr[a]] for a in range(sub.n_acq))
+            gaps = [sub.node_time[w] - sub.node_time[v] for v in range(1, sub.n_nodes)
+                    for w in sub.dst[sub.indptr[v]:sub.indptr[v + 1]]]
+            assert max_open(sub) == (int(np.floor(span / max(min(gaps), 1e-9))) + 2 if gaps else 1)
