@@ -73,6 +73,7 @@ class ExactConfig(SolverConfig):
 
 
 SMALL_INSTANCE = 12  # acquisitions: up to this many, the label sweep runs alone first
+ALONE_LABELS = 1 << 16  # above it, live labels the sweep alone may hold before the incumbent and bound take over
 
 
 def solve(inst: Instance, cfg: ExactConfig | None = None) -> Solution:
@@ -88,8 +89,11 @@ def solve(inst: Instance, cfg: ExactConfig | None = None) -> Solution:
     def left() -> float | None:
         return None if time_limit is None else max(0.0, time_limit - (time.perf_counter() - t0))
 
-    if inst.n_acq <= SMALL_INSTANCE:
-        res = label_search(g, w, beam=0, time_limit=left(), max_labels=max_labels, on_limit="stop")
+    # the sweep alone first: up to SMALL_INSTANCE acquisitions with the whole label memory, above with at most
+    # ALONE_LABELS live labels (a sweep that needs more stops there, having cost little, and the steps run)
+    alone = max_labels if inst.n_acq <= SMALL_INSTANCE else min(max_labels, ALONE_LABELS)
+    if alone > 0:
+        res = label_search(g, w, beam=0, time_limit=left(), max_labels=alone, on_limit="stop")
         if res.complete:
             INCUMBENT.offer(res.nodes, res.value)
             info = {"solver": "exact", "start": "label_search", "start_value": float(res.value),

@@ -414,8 +414,9 @@ def test_the_demo_comparison_of_the_shipped_model_is_bounded_by_the_proven_optim
 
 @pytest.mark.parametrize("family,n,seed", TINY)
 def test_the_small_instance_sweep_and_the_full_exact_path_agree_with_brute_force(family, n, seed, monkeypatch):
-    """Up to SMALL_INSTANCE acquisitions the exact solver runs the label sweep alone; with the shortcut off it
-    runs greedy, RAMP, the Lagrangian bound and the cut sweep: both reach the brute-force optimum."""
+    """Up to SMALL_INSTANCE acquisitions the exact solver runs the label sweep alone; with the shortcut off (and
+    no sweep alone above it either) it runs greedy, RAMP, the Lagrangian bound and the cut sweep: both reach the
+    brute-force optimum."""
     import eosp.solvers.exact as exact
 
     inst = tiny_instance(family, n, seed)
@@ -424,6 +425,28 @@ def test_the_small_instance_sweep_and_the_full_exact_path_agree_with_brute_force
     short = run_solver("exact", inst, mode="utility")
     assert short.info["start"] == "label_search" and short.value == pytest.approx(best, rel=1e-12)
     monkeypatch.setattr(exact, "SMALL_INSTANCE", 0)
+    monkeypatch.setattr(exact, "ALONE_LABELS", 0)
     full = run_solver("exact", inst, mode="utility")
     assert full.info["start"] in ("greedy", "ramp") and full.value == pytest.approx(best, rel=1e-12)
     assert_valid(inst, short, "utility")
+
+
+@pytest.mark.parametrize("family,n,seed", [("clusters", 30, 2), ("conflict", 14, 1), ("uniform", 20, 0)])
+def test_the_sweep_alone_above_the_small_instances_stops_at_its_label_budget(family, n, seed, monkeypatch):
+    """Above SMALL_INSTANCE acquisitions the label sweep also runs alone first, with at most ALONE_LABELS live
+    labels: within them it proves the optimum the full steps prove; out of them (a budget of 4 labels) it stops
+    and the steps (greedy, RAMP, the Lagrangian bound, the cut sweep) find the same optimum."""
+    import eosp.solvers.exact as exact
+
+    inst = generated(family, n, seed, 2.0)
+    assert inst.n_acq > exact.SMALL_INSTANCE
+    for mode in MODES:
+        alone = run_solver("exact", inst, mode=mode)
+        assert alone.info["start"] == "label_search" and alone.info["status"] == "optimal"
+        assert alone.info["labels"] <= exact.ALONE_LABELS
+        with monkeypatch.context() as m:
+            m.setattr(exact, "ALONE_LABELS", 4)
+            steps = run_solver("exact", inst, mode=mode)
+        assert steps.info["start"] in ("greedy", "ramp") and steps.info["status"] == "optimal"
+        assert alone.value == pytest.approx(steps.value, rel=1e-12)
+        assert_valid(inst, alone, mode)
