@@ -553,18 +553,12 @@ def _restrict(node_acq, node_time, indptr, dst, keep_acq):
             if w >= 0:
                 out_dst[j] = w
                 j += 1
-    out_acq_ptr = np.empty(k + 1, np.int64)
+    out_acq_ptr = np.zeros(k + 1, np.int64)  # nodes grouped by acquisition in acquisition order (canonical)
     out_acq_ptr[0] = 1
-    c = 1
-    b = 0
-    for i in range(1, m):  # nodes grouped by acquisition, in acquisition order (the canonical order)
-        while out_acq[i] > b:
-            b += 1
-            out_acq_ptr[b] = c
-        c += 1
-    while b < k:
-        b += 1
-        out_acq_ptr[b] = c
+    for i in range(1, m):
+        out_acq_ptr[out_acq[i] + 1] += 1
+    for b in range(k):
+        out_acq_ptr[b + 1] += out_acq_ptr[b]
     return out_acq, out_time, out_ptr, out_dst, out_acq_ptr, kept
 
 
