@@ -80,6 +80,7 @@ def acq_last_time(graph: DiscreteGraph) -> np.ndarray:
 
 
 STOP_DONE, STOP_GROW, STOP_CHECK = 0, 1, 2  # why _sweep returned
+FIRST_LABELS = 1 << 16  # the label store's first size (at least; 4 a node beyond): a search within it never grows it
 
 
 def max_open(graph: DiscreteGraph) -> int:
@@ -417,7 +418,7 @@ def label_search(graph: DiscreteGraph, weights: np.ndarray, *, beam: int = 0, bo
     order = topological_order(graph)
     sg = SweepGraph(order, graph.indptr, graph.dst, graph.node_acq, graph.node_time, w, acq_last_time(graph))
     m = max_open(graph)
-    cap = min(max_labels, max(1 << 16, 4 * n_nodes))
+    cap = min(max_labels, max(FIRST_LABELS, 4 * n_nodes))
     # [slots used, head of the free list, incumbent label, free slots]
     state = np.array([1, -1, 0 if b.incumbent <= 0.0 else -1, 0], np.int64)
     labels = Labels(np.empty(cap, np.float64), np.empty(cap, np.int32), np.empty(cap, np.int32),

@@ -58,7 +58,7 @@ from eosp.solvers.base import INCUMBENT, Solution, SolverConfig, objective_weigh
 from eosp.solvers.bound import completion_bound, lagrangian
 from eosp.solvers.greedy import GreedyConfig
 from eosp.solvers.greedy import solve as greedy
-from eosp.planning.labels import Bounds, label_search
+from eosp.planning.labels import FIRST_LABELS, Bounds, label_search
 from eosp.solvers.ramp import RampConfig
 from eosp.solvers.ramp import solve as ramp
 
@@ -77,7 +77,8 @@ class ExactConfig(SolverConfig):
 
 
 SMALL_INSTANCE = 12  # acquisitions: up to this many, the label sweep runs alone first
-ALONE_LABELS = 1 << 16  # above it, live labels the sweep alone may hold before the incumbent and bound take over
+ALONE_LABELS = FIRST_LABELS  # above it, live labels the sweep alone may hold before the incumbent and bound take
+# over: the label store's first size, so a sweep that stops there has allocated nothing more
 
 
 def solve(inst: Instance, cfg: ExactConfig | None = None) -> Solution:
