@@ -96,12 +96,16 @@ def timelines(fleet: Fleet, los: LineOfSight, sat: np.ndarray, task: np.ndarray,
     for k in range(len(fleet.satellites)):
         m = np.flatnonzero(sat == k)
         m = m[np.lexsort((end[m], start[m]))]
-        tl = Timeline()
-        if len(m):
-            l0, l1 = los.los(k, task[m], start[m]), los.los(k, task[m], end[m])
-            tl = Timeline(start[m].tolist(), end[m].tolist(), task[m].tolist(), list(l0), list(l1))
-        tls.append(tl)
+        tls.append(timeline(los, k, task[m], start[m], end[m]))
     return tls
+
+
+def timeline(los: LineOfSight, sat: int, task: np.ndarray, start: np.ndarray, end: np.ndarray) -> Timeline:
+    """Satellite `sat`'s timeline of observations given in time order (task rows, start and end in seconds)."""
+    if len(task) == 0:
+        return Timeline()
+    l0, l1 = los.los(sat, task, start), los.los(sat, task, end)
+    return Timeline(start.tolist(), end.tolist(), task.tolist(), list(l0), list(l1))
 
 
 def recheck_slews(los: LineOfSight, tl: Timeline, sat: int) -> None:
@@ -131,8 +135,8 @@ def intervals(los: LineOfSight, tl: Timeline, sat: int) -> tuple[Intervals, Inte
     return Intervals(st, en), Intervals(w0, st.copy())
 
 
-def repair_battery(fleet: Fleet, los: LineOfSight, tls: list[Timeline], sats=None, sun: SunCache | None = None,
-                   deadline: float | None = None) -> int | None:
+def repair_battery(fleet: Fleet, los: LineOfSight, tls: list[Timeline] | dict[int, Timeline], sats=None,
+                   sun: SunCache | None = None, deadline: float | None = None) -> int | None:
     """Drop the least valuable observations until every battery stays above zero; returns drops, or None when
     `deadline` (a ``time.perf_counter()`` instant) came first (the timelines are then half repaired).
 
@@ -154,6 +158,60 @@ def repair_battery(fleet: Fleet, los: LineOfSight, tls: list[Timeline], sats=Non
             dropped += 1
             recheck_slews(los, tl, sat)
     return dropped
+
+
+class Rows(NamedTuple):
+    """Observations of some satellites as flat rows, each satellite's in time order: ``sats[i]``'s are the rows
+    ``offsets[i]:offsets[i + 1]`` of task rows `task`, starts and ends (s).  What a battery repair sends to
+    the worker that owns the satellites: a few arrays, not a list of timelines."""
+
+    sats: np.ndarray
+    offsets: np.ndarray
+    task: np.ndarray
+    start: np.ndarray
+    end: np.ndarray
+
+    @classmethod
+    def of(cls, tls: list[Timeline]) -> Rows:
+        """The satellites of `tls` (one timeline per satellite) that have an observation."""
+        sats = np.array([k for k, tl in enumerate(tls) if tl.task], dtype=np.int64)
+        cols = [np.concatenate([np.asarray(getattr(tls[k], c)) for k in sats.tolist()]) if len(sats) else
+                np.zeros(0, dt) for c, dt in (("task", np.int64), ("start", np.float64), ("end", np.float64))]
+        return cls(sats, np.r_[0, np.cumsum([len(tls[k].task) for k in sats.tolist()])].astype(np.int64), *cols)
+
+    def take(self, idx: np.ndarray) -> np.ndarray:
+        """The positions of the rows of the satellites ``sats[idx]``, in that order."""
+        lo, hi = self.offsets[idx], self.offsets[idx + 1]
+        first = np.r_[0, np.cumsum(hi - lo)[:-1]].astype(np.int64)  # where each satellite's rows go
+        return np.repeat(lo - first, hi - lo) + np.arange(int((hi - lo).sum()), dtype=np.int64)
+
+    def part(self, idx: np.ndarray) -> Rows:
+        """The satellites ``sats[idx]`` alone."""
+        lo, hi = self.offsets[idx], self.offsets[idx + 1]
+        take = self.take(idx)
+        return Rows(self.sats[idx], np.r_[0, np.cumsum(hi - lo)].astype(np.int64), self.task[take],
+                    self.start[take], self.end[take])
+
+
+def repair_rows(fleet: Fleet, los: LineOfSight, rows: Rows, sun: SunCache,
+                deadline: float | None = None) -> np.ndarray | None:
+    """:func:`repair_battery` of the satellites of `rows`: whether each row is kept (one bool per row), or None
+    when the deadline came first.  Each satellite's repair reads its own rows only, so the result is the same
+    wherever it runs and however the satellites are split."""
+    tls = {int(k): timeline(los, int(k), rows.task[a:b], rows.start[a:b], rows.end[a:b])
+           for k, a, b in zip(rows.sats.tolist(), rows.offsets[:-1].tolist(), rows.offsets[1:].tolist())}
+    if repair_battery(fleet, los, tls, sats=list(tls), sun=sun, deadline=deadline) is None:
+        return None
+    kept = np.ones(len(rows.task), dtype=bool)
+    for i, k in enumerate(rows.sats.tolist()):
+        a, b = int(rows.offsets[i]), int(rows.offsets[i + 1])
+        left = list(zip(tls[k].task, tls[k].start))  # what is left: a subsequence of the satellite's rows
+        if len(left) < b - a:
+            j = 0
+            for r in range(a, b):
+                kept[r] = j < len(left) and left[j] == (rows.task[r], rows.start[r])
+                j += bool(kept[r])
+    return kept
 
 
 def to_schedule(fleet: Fleet, tls: list[Timeline]) -> Schedule:

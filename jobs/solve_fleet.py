@@ -88,7 +88,7 @@ class PassWorker:
         fleet, opps = ray.get(fleet_ref[0])
         los = LineOfSight(fleet, Geometry(fleet))
         off = opps.pass_offsets()
-        self.cfg = cfg
+        self.cfg, self.fleet, self.los, self.sun = cfg, fleet, los, None
         self.weight = fleet.tasks.weight.astype(np.float64)
         self._build = lambda p: build_pass(fleet, opps, los, p, off)
         self.graphs = {p: self._build(p) for p in passes}
@@ -147,6 +147,17 @@ class PassWorker:
         offsets = np.r_[0, np.cumsum([len(x) for x in paths])].astype(np.int64)
         nodes = np.concatenate(paths).astype(np.int64) if paths else np.zeros(0, np.int64)
         return passes, value, bound, offsets, nodes, secs
+
+    def repair_rows(self, rows, left_s: float | None):
+        """The battery repair of some of this actor's satellites (:func:`eosp.fleet.timeline.repair_rows`: whether
+        each row is kept; None when stopped `left_s` seconds from now), their sunlight computed here once."""
+        from eosp.fleet.battery import SunCache
+        from eosp.fleet.timeline import repair_rows
+
+        if self.sun is None:
+            self.sun = SunCache(self.los.geo)
+        return repair_rows(self.fleet, self.los, rows, self.sun,
+                           None if left_s is None else time.perf_counter() + left_s)
 
     def solve_utilities(self, passes: np.ndarray, util: np.ndarray, util_offsets: np.ndarray,
                         left_s: float | None) -> tuple:
@@ -221,6 +232,9 @@ class RayPassPool:
         self.kill_round = int(os.environ.get("EOSP_FAULT_KILL_ACTOR_ROUND", "0") or 0)
         self.sweeps = 0  # calls of solve_utilities (coordinate-descent sweeps sent to the actors)
         self.kill_sweep = int(os.environ.get("EOSP_FAULT_KILL_ACTOR_SWEEP", "0") or 0)
+        self.repairs = 0  # calls of repair_rows (battery repairs sent to the actors)
+        self.kill_repair = int(os.environ.get("EOSP_FAULT_KILL_ACTOR_REPAIR", "0") or 0)
+        self.pass_sat = np.array([pg.satellite for pg in prob.passes], dtype=np.int64)
         self.on_sent = None  # tests: called with ("round" or "sweep", its count) once a call's work is sent
 
     # ------------------------------------------------------------------ faults
@@ -304,7 +318,8 @@ class RayPassPool:
     def _test_faults(self, kind: str, count: int) -> None:
         import ray
 
-        if count == (self.kill_round if kind == "round" else self.kill_sweep) and self.actors[0] is not None:
+        kill = {"round": self.kill_round, "sweep": self.kill_sweep, "repair": self.kill_repair}[kind]
+        if count == kill and self.actors[0] is not None:
             ray.kill(self.actors[0], no_restart=False)  # a worker lost mid-round or mid-sweep (tests)
         if self.on_sent is not None:
             self.on_sent(kind, count)
@@ -369,6 +384,12 @@ class RayPassPool:
             self.round_solve_s = max(busy)
             return out
 
+        def idle() -> bool:
+            """Whether every actor has finished its part of this round (a sweep sent now would not wait behind
+            it); never blocks."""
+            return len(ray.wait(refs, num_returns=len(refs), timeout=0)[0]) == len(refs)
+
+        collect.idle = idle
         return collect
 
     def solve_utilities(self, passes: list[int], util: np.ndarray, offsets: np.ndarray,
@@ -422,6 +443,52 @@ class RayPassPool:
             for i, (p, b) in enumerate(zip(got.tolist(), bound.tolist())):
                 out[p] = PassResult(nodes[offs[i]:offs[i + 1]], float(value[i]), None if b != b else b)
         return out
+
+    def repair_rows(self, rows, deadline: float | None) -> np.ndarray | None:
+        """The battery repair of the satellites of `rows` (:func:`eosp.fleet.timeline.repair_rows`), each on the
+        actor that owns its passes, those of a lost actor here; whether each row is kept, or None when the deadline
+        came first.  A satellite's repair reads its own rows only: the same result whoever runs it."""
+        import ray
+        from ray.exceptions import RayActorError
+
+        from eosp.fleet.timeline import repair_rows
+
+        self.repairs += 1
+        owner_sat = np.full(len(self.prob.fleet.satellites), -1, dtype=np.int64)
+        owner_sat[self.pass_sat] = self.owner  # whole satellites per actor
+        live = self.live()
+        owner = owner_sat[rows.sats]
+        parts = [(k, idx) for k in live if len(idx := np.flatnonzero(owner == k))]
+        here = np.flatnonzero(~np.isin(owner, live))
+        left = None if deadline is None else max(0.0, deadline - time.perf_counter())
+        refs = [self.actors[k].repair_rows.remote(rows.part(idx), left) for k, idx in parts]
+        self._test_faults("repair", self.repairs)
+        kept = np.ones(len(rows.task), dtype=bool)
+
+        def locally(idx: np.ndarray) -> bool:
+            got = repair_rows(self.prob.fleet, self.prob.los, rows.part(idx), self.prob.sun, deadline)
+            if got is not None:
+                kept[rows.take(idx)] = got
+            return got is not None
+
+        if len(here) and not locally(here):
+            return None
+        timeout = None if deadline is None else max(0.0, deadline - time.perf_counter())
+        ready, _ = ray.wait(refs, num_returns=len(refs), timeout=timeout)
+        if len(ready) < len(refs):
+            return None  # the deadline came first
+        for ref, (k, idx) in zip(refs, parts):
+            try:
+                got = ray.get(ref)
+            except RayActorError:
+                self._lost(k)
+                if not locally(idx):
+                    return None
+                continue
+            if got is None:
+                return None
+            kept[rows.take(idx)] = got
+        return kept
 
     def summary(self) -> list[dict]:
         """:meth:`PassWorker.summary` of every live actor (and, alike, of the graphs the driver built for lost

@@ -413,3 +413,42 @@ def test_pass_view_and_arc_cost():
     need = los.between(v.satellite, v.task[:-1], v.end_s[:-1], v.task[1:], v.start_s[1:])
     assert need.shape == (len(v.rows) - 1,)
     assert np.all(need >= fleet.satellites.attitude.settling_s[v.satellite])
+
+
+def test_a_battery_repair_split_by_satellites_keeps_what_the_whole_repair_keeps():
+    """repair_rows (what a worker runs on the satellites it owns) keeps, satellite by satellite, the observations
+    repair_battery keeps on the whole schedule, however the satellites are split; what it keeps holds for the
+    checker's battery, and weak batteries lose observations."""
+    from eosp.fleet.battery import SunCache
+    from eosp.fleet.generate import FleetGenConfig, generate
+    from eosp.fleet.greedy import solve
+    from eosp.fleet.opportunities import compute
+    from eosp.fleet.reasons import schedule_timelines
+    from eosp.fleet.slew import LineOfSight
+    from eosp.fleet.timeline import Rows, repair_battery, repair_rows, to_schedule
+
+    fleet = generate(FleetGenConfig(satellites=5, tasks=300, hours=4.0, window_min_h=1.0, window_max_h=3.0, seed=2))
+    geo = Geometry(fleet)
+    los = LineOfSight(fleet, geo)
+    sched = solve(fleet, compute(fleet, geo))
+    b = fleet.satellites.battery
+    weak = dataclasses.replace(b, initial_wh=0.05 * b.capacity_wh, sunlit_w=0.3 * b.sunlit_w)
+    weak = dataclasses.replace(fleet, satellites=dataclasses.replace(fleet.satellites, battery=weak))
+    tls = schedule_timelines(weak, sched, los)
+    rows = Rows.of(tls)
+    sats = rows.sats
+    kept = repair_rows(weak, los, rows, SunCache(geo))
+    dropped = repair_battery(weak, los, tls)
+    assert dropped > 0 and int((~kept).sum()) == dropped
+    for i, k in enumerate(sats.tolist()):
+        a, b_ = rows.offsets[i], rows.offsets[i + 1]
+        assert rows.task[a:b_][kept[a:b_]].tolist() == tls[k].task
+        assert rows.start[a:b_][kept[a:b_]].tolist() == tls[k].start
+    assert validate(weak, to_schedule(weak, tls), geo).valid
+    rng = np.random.default_rng(0)
+    for _ in range(3):  # the satellites split between two workers at random, each with its own sunlight cache
+        side = rng.random(len(sats)) < 0.5
+        split = np.ones(len(rows.task), dtype=bool)
+        for idx in (np.flatnonzero(side), np.flatnonzero(~side)):
+            split[rows.take(idx)] = repair_rows(weak, los, rows.part(idx), SunCache(geo))
+        assert np.array_equal(split, kept)

@@ -93,11 +93,12 @@ def test_two_nodes_give_the_single_process_schedule_and_a_killed_actor_costs_not
 @pytest.mark.parametrize("lean", [False, True])
 def test_ray_sweeps_with_one_and_two_actors_give_the_in_process_schedule(clustered_fleet_dir, two_nodes,
                                                                          monkeypatch, lean):
-    """The coordinate descent's sweeps on Ray actors (one actor, then one on each node, then with actor 0 killed in
-    the first sweep sent to them): for fixed rounds and seed the schedule, value, bound and solve count of this
-    process alone, the second price round sent to the actors before the first round's recovery.  Every sweep of 2 passes or more goes to the pool (this fleet's are smaller than the default
-    threshold).  Lean: the driver holds no arc (every sweep and wave of the construction on the actors, paths
-    re-walked from the geometry) and builds none while no actor is lost."""
+    """The coordinate descent's sweeps and the battery repairs on Ray actors (one actor, then one on each node,
+    then with actor 0 killed in the first sweep, then in the first repair sent to them): for fixed rounds and seed
+    the schedule, value, bound and solve count of this process alone, the second price round sent to the actors
+    before the first round's recovery.  Every sweep of 2 passes or more and every repair goes to the pool (this
+    fleet's are smaller than the default thresholds).  Lean: the driver holds no arc (every sweep and wave of the
+    construction on the actors, paths re-walked from the geometry) and builds none while no actor is lost."""
     import ray
 
     from eosp.kinds.fleet import coordinator as coord_mod
@@ -105,6 +106,7 @@ def test_ray_sweeps_with_one_and_two_actors_give_the_in_process_schedule(cluster
     from eosp.kinds.fleet.solve import solve
 
     monkeypatch.setattr(coord_mod, "SWEEP_IN_PROCESS", 2)
+    monkeypatch.setattr(coord_mod, "REPAIR_AWAY", 1)
     fleet, opps = read_fleet(clustered_fleet_dir)
     full = Problem.build(fleet, opps)
     driver = Problem.build(fleet, opps, full.geo, lean=True) if lean else full
@@ -127,20 +129,22 @@ def test_ray_sweeps_with_one_and_two_actors_give_the_in_process_schedule(cluster
     alone, _ = run(1, pool=False)
     for workers in (1, 2):
         got, pool = run(workers)
-        assert pool.sweeps >= 1 and pool.faults == 0
+        assert pool.sweeps >= 1 and pool.repairs >= 1 and pool.faults == 0
         assert got == alone, workers
         assert not driver.built
         assert run.prefetched >= 1  # round 2 was sent to the actors before round 1's recovery, and taken
-    monkeypatch.setenv("EOSP_FAULT_KILL_ACTOR_SWEEP", "1")
-    hurt, pool = run(2)
-    assert pool.faults >= 1
-    assert hurt == alone
+    for fault in ("SWEEP", "REPAIR"):
+        monkeypatch.setenv(f"EOSP_FAULT_KILL_ACTOR_{fault}", "1")
+        hurt, pool = run(2)
+        assert pool.faults >= 1, fault
+        assert hurt == alone, fault
+        monkeypatch.delenv(f"EOSP_FAULT_KILL_ACTOR_{fault}")
 
 
 def test_four_actors_on_four_nodes_give_the_in_process_schedule(clustered_fleet_dir, two_nodes, monkeypatch):
     """Two more nodes join (four CPUs in all) and four actors, the driver lean, solve with fixed rounds: every sweep
     of 2 passes or more on the actors, filled batches included (the descent's batches change with the worker count
-    nowhere); the schedule, value, bound and solve count of this process alone.  The nodes leave afterwards."""
+    nowhere), and every battery repair; the schedule, value, bound and solve count of this process alone.  The nodes leave afterwards."""
     import ray
 
     from eosp.kinds.fleet import coordinator as coord_mod
@@ -156,6 +160,7 @@ def test_four_actors_on_four_nodes_give_the_in_process_schedule(clustered_fleet_
         rows = sorted(zip(sol.schedule.satellite.tolist(), sol.schedule.task.tolist(), sol.schedule.start_us.tolist()))
         return rows, sol.value, sol.bound, sol.info["pass_solves"]
 
+    monkeypatch.setattr(coord_mod, "REPAIR_AWAY", 1)
     cfg = FleetConfig(pass_solver="exact", rounds=ROUNDS, time_limit=None, workers=4, seed=4)
     alone = result(solve(fleet, opps, FleetConfig(pass_solver="exact", rounds=ROUNDS, time_limit=None, workers=1,
                                                   seed=4), problem=full))
@@ -168,12 +173,50 @@ def test_four_actors_on_four_nodes_give_the_in_process_schedule(clustered_fleet_
         pool = job_mod.RayPassPool(driver, cfg)
         assert len(set(pool.nodes)) == 4  # one actor on each node
         assert result(solve(fleet, opps, cfg, problem=driver, pool=pool)) == alone
-        assert pool.sweeps >= 1 and pool.faults == 0 and not driver.built
+        assert pool.sweeps >= 1 and pool.repairs >= 1 and pool.faults == 0 and not driver.built
     finally:
         if pool is not None:
             pool.close()
         for node in added:
             two_nodes.remove_node(node)
+
+
+def test_actors_repair_the_batteries_of_their_satellites_as_the_driver_does(two_nodes, monkeypatch):
+    """A battery repair sent to the actors (each repairs the satellites whose passes it owns) keeps what the
+    driver's own repair keeps, and with actor 0 killed as the repair is sent (its satellites then repaired on the
+    driver; its first repair computes its sunlight, long enough for the kill to land), the same again; weak
+    batteries make the repair drop observations."""
+    import dataclasses
+
+    import ray
+
+    from eosp.fleet.battery import SunCache
+    from eosp.fleet.greedy import solve
+    from eosp.fleet.reasons import schedule_timelines
+    from eosp.fleet.timeline import Rows, repair_rows
+    from eosp.kinds.fleet.problem import Problem
+
+    fleet = generate(FleetGenConfig(satellites=5, tasks=300, hours=4.0, window_min_h=1.0, window_max_h=3.0, seed=2))
+    opps = compute(fleet, Geometry(fleet))
+    b = fleet.satellites.battery
+    weak = dataclasses.replace(b, initial_wh=0.05 * b.capacity_wh, sunlit_w=0.3 * b.sunlit_w)
+    weak = dataclasses.replace(fleet, satellites=dataclasses.replace(fleet.satellites, battery=weak))
+    prob = Problem.build(weak, opps)
+    rows = Rows.of(schedule_timelines(weak, solve(fleet, opps), prob.los))
+    here = repair_rows(weak, prob.los, rows, SunCache(prob.geo))
+    assert 0 < int((~here).sum()) < len(here)
+    if not ray.is_initialized():
+        ray.init(address=two_nodes.address)
+    for fault in ("", "1"):
+        monkeypatch.setenv("EOSP_FAULT_KILL_ACTOR_REPAIR", fault)
+        pool = job_mod.RayPassPool(prob, FleetConfig(pass_solver="exact", workers=2))
+        try:
+            assert len({int(pool.owner[p]) for p in range(len(prob.passes))}) == 2
+            assert np.array_equal(pool.repair_rows(rows, None), here)
+            assert pool.faults == (1 if fault else 0)
+            assert np.array_equal(pool.repair_rows(rows, None), here)  # and once more, the actor back or not
+        finally:
+            pool.close()
 
 
 def test_a_killed_driver_resumes_from_its_run_dir(clustered_fleet_dir, tmp_path):

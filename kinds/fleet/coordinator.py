@@ -40,7 +40,7 @@ import numpy as np
 
 from eosp.fleet.check import validate
 from eosp.fleet.energy import EnergyWindows
-from eosp.fleet.timeline import Timeline, repair_battery, timelines, to_schedule
+from eosp.fleet.timeline import Rows, Timeline, repair_rows, timelines, to_schedule
 from eosp.fleet.model import Schedule
 from eosp.kinds.fleet.config import FleetConfig
 from eosp.interrupt import HeldInterrupt
@@ -59,8 +59,11 @@ ENERGY_STEPS = 12  # bisection steps of an energy window's multiplier (Coordinat
 CHECK_SLACK_S = 0.2  # seconds added to it (the time the first steps after the deadline take)
 INTEGER_MAX_S = 30.0  # seconds the master's integer solution may take at most (Coordinator.integer_round)
 INTEGER_NODES = 200  # its branch-and-bound nodes when the solve has no time limit (--rounds): machine-independent
-SWEEP_IN_PROCESS = 32  # a descent sweep of fewer passes is solved on the driver, not sent to the pool (a Ray
-# round trip costs milliseconds, a small pass under true weights 0.02-0.6 ms: docs/results.md)
+REPAIR_AWAY = 4  # a battery repair of fewer satellites runs on the driver, not on the pool (a round trip costs
+# milliseconds, a satellite's simulation about one)
+SWEEP_IN_PROCESS = 8  # a descent sweep of fewer passes is solved on the driver, not sent to the pool (a Ray
+# round trip costs milliseconds, a small pass under true weights 0.02-0.6 ms: docs/results.md; at 200 satellites on
+# two actors 8 made a quarter more rounds than 32 did)
 
 
 def csr_take(ptr: np.ndarray, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -189,7 +192,7 @@ class Coordinator:
         if self.frozen is None:
             self.frozen = np.zeros(len(self.prob.passes), dtype=bool)
         self.sun = self.prob.sun  # sunlight, computed once for every battery simulation
-        self.battery_ok: dict[int, tuple] = {}  # satellite -> the timeline last found to hold its battery
+        self.battery_ok: dict[int, bytes] = {}  # satellite -> its tasks and starts last found to hold its battery
         self.best_bound = self.conflict_free()
 
     # ------------------------------------------------------------------ pass solves
@@ -344,7 +347,7 @@ class Coordinator:
                        deadline: float | None) -> dict[int, PassResult] | None:
         """The passes of :meth:`_solve_batch` the memo did not have, solved (here or on the pool)."""
         self.pass_solves += len(batch)
-        if not self.prob.lean and (len(batch) < SWEEP_IN_PROCESS or self._pending is not None):
+        if not self.prob.lean and (len(batch) < SWEEP_IN_PROCESS or self._pool_busy()):
             return {p: solve_pass(self.prob, p, util[offsets[i]:offsets[i + 1]], self.cfg, deadline)
                     for i, p in enumerate(batch)}
         t = time.perf_counter()
@@ -353,6 +356,15 @@ class Coordinator:
             return self.pool.solve_utilities(batch, util, offsets, deadline)
         finally:
             self._pool_s += time.perf_counter() - t
+
+    def _pool_busy(self) -> bool:
+        """Whether a prefetched price round still holds the pool (a sweep sent now would wait behind it).  Why ask:
+        on 2 cores at 200 satellites the actors finish the round in a fifth of the driver's recovery, and every
+        sweep of the recovery and of the moves was then solved on the driver beside idle actors."""
+        if self._pending is None:
+            return False
+        idle = getattr(self._pending[2], "idle", None)
+        return idle is None or not idle()
 
     def construct(self, order: np.ndarray, util_shift: np.ndarray | None = None,
                   primal: Primal | None = None, deadline: float | None = None, whole: bool = False) -> Primal:
@@ -663,35 +675,69 @@ class Coordinator:
         batteries are checked and repaired again).  Returns the number dropped (also counted in
         :attr:`repair_drops`), or None when `deadline` came first: `primal` is then not repaired and must not be
         kept.  `whole` (the first schedule): the repair runs to its end whatever the deadline (the re-solves
-        still stop at it)."""
+        still stop at it).  Only the satellites whose observations changed since their battery was last seen to
+        hold are simulated, on the pool when it offers it (:meth:`_repair_rows`)."""
         total = 0
         for attempt in range(2):  # the last attempt only repairs: what it returns holds
-            tls = self.timelines(primal)
-            keys = [tuple(zip(tl.task, tl.start)) for tl in tls]
-            todo = [k for k, key in enumerate(keys) if self.battery_ok.get(k) != key]  # satellites not seen as is
-            dropped = repair_battery(self.prob.fleet, self.prob.los, tls, sats=todo, sun=self.sun,
-                                     deadline=None if whole else deadline)
-            if dropped is None:
+            rows = self.rows(primal)
+            keys = [rows.task[a:b].tobytes() + rows.start[a:b].tobytes()
+                    for a, b in zip(rows.offsets[:-1].tolist(), rows.offsets[1:].tolist())]
+            todo = np.array([i for i, k in enumerate(rows.sats.tolist()) if self.battery_ok.get(k) != keys[i]],
+                            dtype=np.int64)  # satellites not seen as they are
+            part = rows.part(todo)
+            kept = self._repair_rows(part, None if whole else deadline)
+            if kept is None:
                 return None
-            for k in todo:
-                self.battery_ok[k] = tuple(zip(tls[k].task, tls[k].start))
+            for i, k in enumerate(part.sats.tolist()):
+                a, b = int(part.offsets[i]), int(part.offsets[i + 1])
+                ok = kept[a:b]
+                self.battery_ok[k] = part.task[a:b][ok].tobytes() + part.start[a:b][ok].tobytes()
+            dropped = int((~kept).sum())
             if not dropped:
                 break
             total += dropped
             self.repair_drops += dropped
-            keep = {(k, t) for k, tl in enumerate(tls) for t in tl.task}
-            freed = []
-            for p, pg in enumerate(self.prob.passes):
+            drop_task = part.task[~kept]
+            drop_sat = np.repeat(part.sats, np.diff(part.offsets))[~kept]
+            drop_pass = primal.served[drop_task]
+            self.barred[drop_sat, drop_task] = True
+            for p in np.unique(drop_pass).tolist():  # ascending, as the passes always were
                 path = primal.paths[p]
-                tasks = path_tasks(self.prob, p, path)
-                ok = np.array([(pg.satellite, t) in keep for t in tasks.tolist()], dtype=bool)
-                if not ok.all():
-                    self.barred[pg.satellite, tasks[~ok]] = True
-                    self._assign(primal, p, path[ok] if self.frozen[p] else self.prob.rewalk(p, path[ok]))
-                    freed += tasks[~ok].tolist()
+                ok = ~np.isin(path_tasks(self.prob, p, path), drop_task[drop_pass == p])
+                self._assign(primal, p, path[ok] if self.frozen[p] else self.prob.rewalk(p, path[ok]))
             if attempt < 1:  # one round of re-solves of the passes that could take the dropped tasks
-                self.descend(primal, sorted({q for t in freed for q in self.prob.task_passes[t].tolist()}), deadline)
+                self.descend(primal, sorted({q for t in drop_task.tolist() for q in self.prob.task_passes[t].tolist()}),
+                             deadline)
         return total
+
+    def _repair_rows(self, rows: Rows, deadline: float | None) -> np.ndarray | None:
+        """:func:`eosp.fleet.timeline.repair_rows` of `rows`: on the pool when it offers ``repair_rows`` (Ray's
+        actors, each repairing the satellites it owns), is free (no prefetched round still on it) and there are
+        at least :data:`REPAIR_AWAY` satellites; else here.  The same result either way (a satellite's repair reads
+        its own rows only)."""
+        away = getattr(self.pool, "repair_rows", None)
+        if away is not None and len(rows.sats) >= REPAIR_AWAY and not self._pool_busy():
+            t = time.perf_counter()
+            self._pool_calls += 1
+            try:
+                return away(rows, deadline)
+            finally:
+                self._pool_s += time.perf_counter() - t
+        return repair_rows(self.prob.fleet, self.prob.los, rows, self.sun, deadline)
+
+    def rows(self, primal: Primal) -> Rows:
+        """The schedule `primal` as rows by satellite (:class:`eosp.fleet.timeline.Rows`: each satellite with an
+        observation, its observations in time order)."""
+        prob = self.prob
+        got = [prob.passes[p].rows[path - 1] for p, path in enumerate(primal.paths) if len(path)]
+        idx = np.concatenate(got) if got else np.zeros(0, np.int64)
+        sat, task = prob.opps.satellite[idx].astype(np.int64), prob.opps.task[idx].astype(np.int64)
+        st = prob.opps.start[idx].astype(np.float64) * prob.fleet.horizon.action_step_s
+        en = st + prob.fleet.tasks.duration_s[task]
+        order = np.lexsort((en, st, sat))
+        sat, task, st, en = sat[order], task[order], st[order], en[order]
+        first = np.flatnonzero(np.r_[True, sat[1:] != sat[:-1]]) if len(sat) else np.zeros(0, np.int64)
+        return Rows(sat[first], np.r_[first, len(sat)].astype(np.int64), task, st, en)
 
     def timelines(self, primal: Primal) -> list[Timeline]:
         """The schedule `primal` as one timeline per satellite (:mod:`eosp.fleet.timeline`)."""

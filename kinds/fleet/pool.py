@@ -28,9 +28,12 @@ class PassPool(Protocol):
     """Solves passes under task prices and energy prices.  A pool whose workers run beside the driver may also
     offer ``submit_priced(passes, prices, pass_prices, deadline)``: :meth:`solve_priced` sent now, returning a
     function that waits for its result (Ray's actors; the coordinator then solves the next price round while it
-    recovers a schedule, :meth:`eosp.kinds.fleet.coordinator.Coordinator.prefetch`); it then says, as
-    ``round_solve_s``, the seconds of solves of its busiest worker in the last round it returned (the master LP's
-    time limit: the time since such a round was sent counts the recovery it ran beside)."""
+    recovers a schedule, :meth:`eosp.kinds.fleet.coordinator.Coordinator.prefetch`; the function may offer
+    ``idle()``: whether the workers have finished that round, so that a sweep sent now would not wait behind it);
+    it then says, as ``round_solve_s``, the seconds of solves of its busiest worker in the last round it returned
+    (the master LP's time limit: the time since such a round was sent counts the recovery it ran beside).  Such a
+    pool may also offer ``repair_rows(rows, deadline)``: the battery repair of some satellites
+    (:func:`eosp.fleet.timeline.repair_rows`, its result), each on the worker that owns it."""
 
     def solve_priced(self, passes: list[int], prices: np.ndarray, pass_prices: np.ndarray,
                      deadline: float | None) -> dict[int, PassResult] | None:
