@@ -245,6 +245,29 @@ def test_a_sweeps_utilities_are_each_pass_utility(crowded, seed):
             assert np.array_equal(util[offsets[i]:offsets[i + 1]], coord._utility(primal, p))
 
 
+@pytest.mark.parametrize("seed", [0, 1])
+def test_a_rounds_serve_counts_and_energies_are_each_paths(crowded, seed):
+    """What a price round counts from its paths (gathered from flat vectors at once): how many paths serve each
+    task, exactly, and each path's energy, to rounding, as path_tasks and path_wh give them pass by pass; on
+    random paths of every pass (tasks served by several passes included) and on a schedule's paths."""
+    from eosp.kinds.fleet.problem import path_tasks, path_wh
+
+    rng = np.random.default_rng(seed)
+    for prob in crowded:
+        coord = Coordinator(prob, FleetConfig(rounds=1, time_limit=None))
+        paths = []  # nodes of distinct acquisitions, as a path's are
+        for pg in prob.passes:
+            nodes = rng.permutation(np.arange(1, len(pg.graph.node_acq)))[:rng.integers(0, 4)]
+            paths.append(np.sort(nodes[np.unique(pg.graph.node_acq[nodes], return_index=True)[1]]))
+        for ps in (paths, start(coord, seed).paths):
+            count, wh = coord._path_stats(ps)
+            want = np.zeros(len(prob.weight))
+            for p, path in enumerate(ps):
+                want[path_tasks(prob, p, path)] += 1
+            assert np.array_equal(count, want) and want.max() >= 1
+            assert np.allclose(wh, [path_wh(pg, path) for pg, path in zip(prob.passes, ps)], rtol=1e-12, atol=0)
+
+
 def test_a_sweeps_batch_shares_no_open_task():
     """Passes 0-4 over tasks {0,1}, {1,2}, {3}, {0}, {4}.  With every task open the batch is 0, 2, 4 (1 and 3 share
     a task with 0); with task 1 served (by some pass) 1 joins (it shares only task 1 with 0), 3 still shares the open
