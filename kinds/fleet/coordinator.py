@@ -364,8 +364,9 @@ class Coordinator:
 
     def _pool_busy(self) -> bool:
         """Whether a prefetched price round still holds the pool (a sweep sent now would wait behind it).  Why ask:
-        on 2 cores at 200 satellites the actors finish the round in a fifth of the driver's recovery, and every
-        sweep of the recovery and of the moves was then solved on the driver beside idle actors."""
+        the actors finish the round while the driver recovers, and before, every sweep of the recovery and of the
+        moves was solved on the driver for the rest of the round, the actors idle (a 200-satellite day on two
+        actors: no sweep sent in 99 rounds)."""
         if self._pending is None:
             return False
         idle = getattr(self._pending[2], "idle", None)
