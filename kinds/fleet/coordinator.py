@@ -40,7 +40,7 @@ import numpy as np
 
 from eosp.fleet.check import validate
 from eosp.fleet.energy import EnergyWindows
-from eosp.fleet.timeline import Rows, Timeline, repair_rows, timelines, to_schedule
+from eosp.fleet.timeline import Rows, Timeline, repair_rows, timeline, to_schedule
 from eosp.fleet.model import Schedule
 from eosp.kinds.fleet.config import FleetConfig
 from eosp.interrupt import HeldInterrupt
@@ -754,14 +754,12 @@ class Coordinator:
         return Rows(sat[first], np.r_[first, len(sat)].astype(np.int64), task, st, en)
 
     def timelines(self, primal: Primal) -> list[Timeline]:
-        """The schedule `primal` as one timeline per satellite (:mod:`eosp.fleet.timeline`)."""
-        prob = self.prob
-        rows = [prob.passes[p].rows[path - 1] for p, path in enumerate(primal.paths) if len(path)]
-        rows = np.concatenate(rows) if rows else np.zeros(0, np.int64)
-        task = prob.opps.task[rows]
-        st = prob.opps.start[rows].astype(np.float64) * prob.fleet.horizon.action_step_s
-        en = st + prob.fleet.tasks.duration_s[task]
-        return timelines(prob.fleet, prob.los, prob.opps.satellite[rows], task, st, en)
+        """The schedule `primal` as one timeline per satellite (:mod:`eosp.fleet.timeline`), from its :meth:`rows`."""
+        rows = self.rows(primal)
+        tls = [Timeline() for _ in range(len(self.prob.fleet.satellites))]
+        for k, a, b in zip(rows.sats.tolist(), rows.offsets[:-1].tolist(), rows.offsets[1:].tolist()):
+            tls[k] = timeline(self.prob.los, k, rows.task[a:b], rows.start[a:b], rows.end[a:b])
+        return tls
 
     def schedule(self, primal: Primal) -> Schedule:
         return to_schedule(self.prob.fleet, self.timelines(primal))
