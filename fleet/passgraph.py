@@ -576,11 +576,24 @@ class PricedPass:
 def priced_instance(pg: PassGraph, value: np.ndarray) -> PricedPass | None:
     """The pass's problem with utility `value[a]` per local acquisition; tasks whose value is not
     positive are left out.  None when no task is left."""
+    priced = priced_graph(pg, value)
+    return None if priced is None else priced_pass(pg, value, *priced)
+
+
+def priced_graph(pg: PassGraph, value: np.ndarray) -> tuple[DiscreteGraph, np.ndarray, np.ndarray] | None:
+    """The graph of :func:`priced_instance` alone, with its `nodes` and `acqs` maps (None when no task is left):
+    what a solver that needs no instance takes (the fleet's exact pass solves, most of which end with the sweep
+    alone, :func:`eosp.solvers.exact.sweep_alone`)."""
     keep = value > 0
     if not keep.any():
         return None
     graph, nodes = (pg.graph, np.arange(pg.graph.n_nodes)) if keep.all() else _subgraph(pg.graph, keep)
-    acqs = np.flatnonzero(keep)
+    return graph, nodes, np.flatnonzero(keep)
+
+
+def priced_pass(pg: PassGraph, value: np.ndarray, graph: DiscreteGraph, nodes: np.ndarray,
+                acqs: np.ndarray) -> PricedPass:
+    """:func:`priced_instance` from its :func:`priced_graph`."""
     t = graph.node_time
     first = t[graph.acq_ptr[:-1]]
     last = t[graph.acq_ptr[1:] - 1] + pg.duration[acqs]

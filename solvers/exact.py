@@ -58,9 +58,13 @@ from eosp.solvers.base import INCUMBENT, Solution, SolverConfig, objective_weigh
 from eosp.solvers.bound import completion_bound, lagrangian
 from eosp.solvers.greedy import GreedyConfig
 from eosp.solvers.greedy import solve as greedy
-from eosp.planning.labels import FIRST_LABELS, Bounds, label_search
+from eosp.graphs.discrete import DiscreteGraph
+from eosp.planning.labels import FIRST_LABELS, Bounds, SearchResult, label_search
 from eosp.solvers.ramp import RampConfig
 from eosp.solvers.ramp import solve as ramp
+
+
+MAX_LABELS = 20_000_000  # the exact sweep's label memory unless configured (about 1 GB at a few open acquisitions)
 
 
 @dataclass
@@ -70,7 +74,7 @@ class ExactConfig(SolverConfig):
 
     lagrangian_iterations: int = ranged(400, 0)
     """Subgradient iterations of the Lagrangian bound."""
-    max_labels: int = ranged(20_000_000, 1)
+    max_labels: int = ranged(MAX_LABELS, 1)
     """Label memory of the exact sweep; reaching it stops the sweep like the time limit."""
 
     NAME = "exact"
@@ -84,26 +88,42 @@ ALONE_LABELS = FIRST_LABELS  # above it, live labels the sweep alone may hold be
 def solve(inst: Instance, cfg: ExactConfig | None = None) -> Solution:
     cfg = cfg or ExactConfig()
     cfg.validate()
+    t0 = time.perf_counter()
+    res = sweep_alone(inst.unpruned("the exact solver"), objective_weights(inst, cfg.mode), cfg.time_limit,
+                      cfg.max_labels)
+    if res is not None:
+        INCUMBENT.offer(res.nodes, res.value)
+        info = {"solver": "exact", "start": "label_search", "start_value": float(res.value),
+                "labels": res.labels, "pruned": res.pruned, "dominated": res.dominated}
+        return _done(res.nodes, res.value, res.value, "optimal", info, t0)
+    return solve_steps(inst, cfg, t0)
+
+
+def sweep_alone(graph: DiscreteGraph, w: np.ndarray, time_limit: float | None,
+                max_labels: int) -> SearchResult | None:
+    """The first step of :func:`solve`, on a graph and its acquisitions' weights `w`: the label sweep with nothing
+    to cut against, with the whole label memory up to :data:`SMALL_INSTANCE` acquisitions and at most
+    :data:`ALONE_LABELS` live labels above; its result when it finished (the optimum), else None.  Taken apart so
+    that the fleet's pass solves run it on a pass graph without building an instance first (most passes end
+    here; those that do not go on with :func:`solve_steps`)."""
+    alone = max_labels if len(w) <= SMALL_INSTANCE else min(max_labels, ALONE_LABELS)
+    if alone <= 0:
+        return None
+    res = label_search(graph, w, beam=0, time_limit=time_limit, max_labels=alone, on_limit="stop")
+    return res if res.complete else None
+
+
+def solve_steps(inst: Instance, cfg: ExactConfig, t0: float) -> Solution:
+    """:func:`solve` once the sweep alone did not finish (started at `t0`, whose time counts): the incumbent,
+    the bound, the sweep cut by both."""
     mode, time_limit = cfg.mode, cfg.time_limit
     lagrangian_iterations, max_labels = cfg.lagrangian_iterations, cfg.max_labels
-    t0 = time.perf_counter()
     unitary = mode == "unitary"
     w = objective_weights(inst, mode)
     g = inst.unpruned("the exact solver")
 
     def left() -> float | None:
         return None if time_limit is None else max(0.0, time_limit - (time.perf_counter() - t0))
-
-    # the sweep alone first: up to SMALL_INSTANCE acquisitions with the whole label memory, above with at most
-    # ALONE_LABELS live labels (a sweep that needs more stops there, having cost little, and the steps run)
-    alone = max_labels if inst.n_acq <= SMALL_INSTANCE else min(max_labels, ALONE_LABELS)
-    if alone > 0:
-        res = label_search(g, w, beam=0, time_limit=left(), max_labels=alone, on_limit="stop")
-        if res.complete:
-            INCUMBENT.offer(res.nodes, res.value)
-            info = {"solver": "exact", "start": "label_search", "start_value": float(res.value),
-                    "labels": res.labels, "pruned": res.pruned, "dominated": res.dominated}
-            return _done(res.nodes, res.value, res.value, "optimal", info, t0)
 
     starts = [greedy(inst, GreedyConfig(mode=mode))]
     INCUMBENT.offer(starts[0].nodes, starts[0].value)  # what Ctrl-C writes while RAMP runs

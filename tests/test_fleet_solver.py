@@ -73,6 +73,38 @@ def test_exact_pass_optimum_equals_brute_force_over_every_start(seed):
         assert res.bound == pytest.approx(res.value)
 
 
+@pytest.mark.parametrize("seed", [1, 2])
+def test_a_pass_solve_from_its_graph_is_the_exact_solvers_on_its_instance(seed, monkeypatch):
+    """The fleet's exact pass solves run the sweep alone on the priced pass graph, with no instance built: the
+    same path and value as the exact solver on the pass's priced instance, and when the sweep alone cannot finish
+    (no label budget for it) the solver's steps on that instance give the same optimum, proven."""
+    import eosp.solvers.exact as exact
+    from eosp.fleet.passgraph import priced_instance
+    from eosp.kinds.fleet.config import FleetConfig
+    from eosp.kinds.fleet.problem import solve_pass_graph
+    from eosp.solvers.base import run_solver
+
+    prob, cfg = build(40, seed), FleetConfig()
+    rng = np.random.default_rng(seed)
+    cases = [(pg, np.where(rng.random(pg.n_tasks) < share, prob.weight[pg.tasks] * rng.uniform(0.5, 1.0, pg.n_tasks),
+                           0.0)) for pg in prob.passes if pg.n_tasks >= 2 for share in (0.1, 0.3, 0.6, 1.0)]
+    assert sum((value > 0).sum() > exact.SMALL_INSTANCE for _, value in cases) >= 2  # both sides of SMALL_INSTANCE
+    assert sum(1 <= (value > 0).sum() <= exact.SMALL_INSTANCE for _, value in cases) >= 2
+    for pg, value in cases:
+        res = solve_pass_graph(pg, value, cfg)
+        pp = priced_instance(pg, value)
+        if pp is None:
+            assert len(res.nodes) == 0 and res.value == 0.0
+            continue
+        sol = run_solver("exact", pp.instance, mode="utility", time_limit=cfg.pass_time_limit)
+        assert np.array_equal(res.nodes, pp.nodes[sol.nodes]) and res.value == sol.value == res.bound
+        with monkeypatch.context() as m:
+            m.setattr(exact, "SMALL_INSTANCE", 0)
+            m.setattr(exact, "ALONE_LABELS", 0)
+            steps = solve_pass_graph(pg, value, cfg)
+        assert steps.value == pytest.approx(res.value, rel=1e-12) and steps.bound == pytest.approx(res.value)
+
+
 def test_fleet_schedule_is_valid_each_task_once_and_under_its_bound(problem):
     from eosp.fleet.greedy import solve as greedy
     from eosp.kinds.fleet.config import FleetConfig

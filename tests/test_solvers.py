@@ -450,3 +450,32 @@ def test_the_sweep_alone_above_the_small_instances_stops_at_its_label_budget(fam
         assert steps.info["start"] in ("greedy", "ramp") and steps.info["status"] == "optimal"
         assert alone.value == pytest.approx(steps.value, rel=1e-12)
         assert_valid(inst, alone, mode)
+
+
+@pytest.mark.parametrize("family,n,seed,step", [("synthetic", 10, 0, None), ("synthetic", 12, 3, None),
+                                                ("clusters", 30, 2, 2.0), ("conflict", 14, 1, 2.0),
+                                                ("uniform", 20, 0, 2.0), ("clusters", 40, 0, 1.0)])
+def test_the_compiled_plain_sweep_is_the_loops_sweep(family, n, seed, step):
+    """The plain dynamic program (no bound, no beam) runs in one compiled call; the loop it stands in for (the
+    same sweep with an empty Bounds, which cuts nothing) gives the same path, value, label count and counters,
+    also when its label store starts at 8 labels and grows, and when the label memory runs out (then the loop
+    runs and stops as before)."""
+    from eosp.planning import labels as L
+
+    inst = synthetic_instance(n, seed) if step is None else generated(family, n, seed, step)
+    g = inst.unpruned()
+    for mode in MODES:
+        w = np.asarray(objective_weights(inst, mode), dtype=np.float64)
+        fast, loop = label_search(g, w), label_search(g, w, bounds=Bounds())
+        assert np.array_equal(fast.nodes, loop.nodes) and fast.value == loop.value and fast.complete
+        assert (fast.labels, fast.pruned, fast.dominated, fast.extensions) == \
+               (loop.labels, loop.pruned, loop.dominated, loop.extensions)
+        why, used, nodes, counters = L._search_alone(g.indptr, g.dst, g.node_acq, g.node_time, g.acq_ptr, w,
+                                                     20_000_000, 250_000, 8)
+        assert why == L.STOP_DONE and used == loop.labels and np.array_equal(nodes, loop.nodes)
+        assert (counters[1], counters[2], counters[3]) == (loop.pruned, loop.dominated, loop.extensions)
+        small = max(2, loop.labels // 2)  # out of label memory: not finished, the loop's stop
+        why, *_ = L._search_alone(g.indptr, g.dst, g.node_acq, g.node_time, g.acq_ptr, w, small, 250_000, 8)
+        assert why == L.STOP_GROW
+        cut, cut_loop = (label_search(g, w, max_labels=small, on_limit="stop", bounds=b) for b in (None, Bounds()))
+        assert not cut.complete and np.array_equal(cut.nodes, cut_loop.nodes) and cut.value == cut_loop.value

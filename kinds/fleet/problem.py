@@ -14,8 +14,8 @@ from eosp.fleet.energy import EnergyWindows, energy_windows
 from eosp.fleet.geometry import Geometry
 from eosp.fleet.model import Fleet, Schedule
 from eosp.fleet.opportunities import Opportunities
-from eosp.fleet.passgraph import (PassGraph, bound_problem, build_pass, build_passes, lean_pass, priced_instance,
-                                  walk)
+from eosp.fleet.passgraph import (PassGraph, bound_problem, build_pass, build_passes, lean_pass, priced_graph,
+                                  priced_pass, walk)
 from eosp.fleet.slew import LineOfSight
 from eosp.graphs.prune import fifo_violations
 from eosp.kinds.fleet.config import FleetConfig
@@ -155,13 +155,25 @@ def solve_pass_graph(pg: PassGraph, value: np.ndarray, cfg: FleetConfig,
                      deadline: float | None = None) -> PassResult:
     """One pass graph with utility `value[a]` per local task: what a worker holding the graph runs; the solver
     stops by `deadline` (:func:`pass_limit`)."""
+    from eosp.solvers import exact
     from eosp.solvers.base import run_solver
 
-    pp = priced_instance(pg, value)
-    if pp is None:
+    priced = priced_graph(pg, value)
+    if priced is None:
         return PassResult(np.zeros(0, np.int64), 0.0, 0.0)
-    opts = {"time_limit": pass_limit(cfg, deadline)} if cfg.pass_solver in ("exact", "ramp") else {}
-    sol = run_solver(cfg.pass_solver, pp.instance, mode="utility", **opts)
+    limit = pass_limit(cfg, deadline)
+    if cfg.pass_solver == "exact":  # the sweep alone first, on the graph (most passes end there), as exact.solve
+        t0 = time.perf_counter()
+        graph, nodes, acqs = priced
+        res = exact.sweep_alone(graph, value[acqs].astype(np.float64), limit, exact.MAX_LABELS)
+        if res is not None:
+            return PassResult(nodes[res.nodes], res.value, res.value)
+        pp = priced_pass(pg, value, *priced)
+        sol = exact.solve_steps(pp.instance, exact.ExactConfig(mode="utility", time_limit=limit), t0)
+    else:
+        pp = priced_pass(pg, value, *priced)
+        sol = run_solver(cfg.pass_solver, pp.instance, mode="utility",
+                         **({"time_limit": limit} if cfg.pass_solver == "ramp" else {}))
     bound = None
     if cfg.pass_solver == "exact":
         bound = sol.value if sol.info.get("status") == "optimal" else float(sol.info.get("bound", math.inf))
