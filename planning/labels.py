@@ -412,13 +412,14 @@ def label_search(graph: DiscreteGraph, weights: np.ndarray, *, beam: int = 0, bo
     w = np.asarray(weights, dtype=np.float64)
     n_nodes = graph.n_nodes
     if bounds is None and beam == 0 and not repeats and max_labels > 0:  # the plain DP: one call, most end there
-        why, n_labels, nodes, counters = _search_alone(graph.indptr, graph.dst, graph.node_acq, graph.node_time,
-                                                       graph.acq_ptr, w, max_labels, check_every,
-                                                       4 * n_nodes + 1024)
-        if why == STOP_DONE:
+        deadline = math.inf if time_limit is None else t0 + time_limit
+        complete, frontier, n_labels, nodes, counters = _search_alone(
+            graph.indptr, graph.dst, graph.node_acq, graph.node_time, graph.acq_ptr, w,
+            Limits(max_labels, check_every, 4 * n_nodes + 1024, deadline))
+        if complete or on_limit == "stop":  # else the loop below runs it again, finishing with one label a node
             value = float(np.sum(w[graph.node_acq[nodes]])) if nodes.size else 0.0
-            return SearchResult(nodes, value, True, -math.inf, int(n_labels), int(counters[1]), int(counters[2]),
-                                int(counters[3]), time.perf_counter() - t0)
+            return SearchResult(nodes, value, complete, frontier, int(n_labels), int(counters[1]),
+                                int(counters[2]), int(counters[3]), time.perf_counter() - t0)
     b = bounds or Bounds()
     lam = np.zeros(w.shape[0]) if b.lam is None else np.asarray(b.lam, dtype=np.float64)
     cbound = np.full(n_nodes, np.inf) if b.cbound is None else np.asarray(b.cbound, dtype=np.float64)
@@ -485,17 +486,36 @@ def _grown(a, cap):
     return out
 
 
+class Limits(NamedTuple):
+    """What stops :func:`_search_alone`: label slots (`max_labels`; the store starts at `first` and doubles), and
+    the clock (`deadline`, a ``time.perf_counter()`` instant, math.inf for none), read every `max_work`
+    extensions."""
+
+    max_labels: int
+    max_work: int
+    first: int
+    deadline: float
+
+
 @numba.njit(cache=True)
-def _search_alone(indptr, dst, node_acq, node_time, acq_ptr, weight, max_labels, max_work, first):
+def _now():
+    with numba.objmode(t="float64"):
+        t = time.perf_counter()
+    return t
+
+
+@numba.njit(cache=True)
+def _search_alone(indptr, dst, node_acq, node_time, acq_ptr, weight, limits):
     """:func:`label_search` with no bound, no beam and no repeats, from the graph's arrays to the best path in one
-    compiled call: (stop reason, label slots used, path, counters).  Anything but STOP_DONE (the label store or
-    `max_work` extensions ran out: the caller's loop then stops at the store's limit or reads the clock) means
-    "not finished": the caller runs its own loop from the start, which does the same sweep.  `first`: the label
-    store's first size (grown by doubling, as the loop grows it; the labels are the same whatever it is).
+    compiled call: (complete, frontier bound, label slots used, path, counters).  At a limit (the label slots,
+    the clock) it stops as the loop of :func:`label_search` does with ``on_limit="stop"``: not complete, the
+    best label's path, the best bound of a label not swept (:func:`_max_frontier_bound`).  The same sweep
+    (:func:`_sweep`), the same labels, at the same points the same checks.
 
     Why: a fleet's price round solves thousands of passes of a few dozen nodes, and the store's set-up, the
     sweep order and the call of :func:`_sweep` with its three tuples cost 50 us a pass in Python against a few
     us of sweeping (200-satellite day: 65 us a pass, 14 of them the call)."""
+    max_labels, max_work, first, deadline = limits
     n_nodes = node_time.shape[0]
     t = node_time.astype(np.float64)
     t[0] = -np.inf
@@ -517,17 +537,28 @@ def _search_alone(indptr, dst, node_acq, node_time, acq_ptr, weight, max_labels,
                     state, np.zeros(1), np.zeros(4, np.int64))
     labels.val[0], labels.par[0], labels.lnode[0], labels.lnext[0], labels.ssize[0] = 0.0, -1, 0, -1, 0
     labels.head[0], labels.cnt[0] = 0, 1
+    complete = True
+    frontier = -np.inf
     pos, why = _sweep(0, sg, cut, 0, max_work, labels)
-    while why == STOP_GROW:
-        v = order[pos]
-        need = state[0] + labels.cnt[v] * (indptr[v + 1] - indptr[v])
-        if need > max_labels:
-            break
-        cap = min(max_labels, max(need, 2 * cap))
-        labels = Labels(_grown(labels.val, cap), _grown(labels.par, cap), _grown(labels.lnode, cap),
-                        _grown(labels.lnext, cap), _grown(labels.sets, cap), _grown(labels.ssize, cap),
-                        labels.head, labels.cnt, labels.wval, state, labels.inc, labels.counters)
-        pos, why = _sweep(pos, sg, cut, 0, max_work, labels)
+    while why != STOP_DONE:
+        if why == STOP_GROW:
+            v = order[pos]
+            need = state[0] + labels.cnt[v] * (indptr[v + 1] - indptr[v])
+            if need <= max_labels:
+                cap = min(max_labels, max(need, 2 * cap))
+                labels = Labels(_grown(labels.val, cap), _grown(labels.par, cap), _grown(labels.lnode, cap),
+                                _grown(labels.lnext, cap), _grown(labels.sets, cap), _grown(labels.ssize, cap),
+                                labels.head, labels.cnt, labels.wval, state, labels.inc, labels.counters)
+                if _now() <= deadline:  # the loop reads the clock at every stop
+                    pos, why = _sweep(pos, sg, cut, 0, max_work, labels)
+                    continue
+        elif _now() <= deadline:  # STOP_CHECK within the time
+            pos, why = _sweep(pos, sg, cut, 0, max_work, labels)
+            continue
+        complete = False  # out of label memory or of time
+        frontier = _max_frontier_bound(pos, order, labels.head, labels.lnext, labels.val, cut.cbound, cut.lam,
+                                       labels.sets, labels.ssize)
+        break
     n = 0
     q = state[2]
     while q > 0:
@@ -539,7 +570,7 @@ def _search_alone(indptr, dst, node_acq, node_time, acq_ptr, weight, max_labels,
         n -= 1
         path[n] = labels.lnode[q]
         q = labels.par[q]
-    return why, state[0], path, labels.counters
+    return complete, frontier, state[0], path, labels.counters
 
 
 @numba.njit(cache=True)

@@ -285,3 +285,35 @@ def test_a_sweeps_batch_shares_no_open_task():
     every = np.ones(5, dtype=bool)
     assert np.flatnonzero(coord_mod.disjoint(queued[[1, 3, 4]], ptr, idx, claimed, every)).tolist() == [0, 1, 2]
     assert np.flatnonzero(coord_mod.wave(queued[[3, 0, 1]], ptr, idx, claimed)).tolist() == [0]
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_the_recovery_takes_the_paths_in_order_as_one_pass_after_another(crowded, seed):
+    """The recovery's first step (each pass in a random order takes its path's tasks no pass before it took, the
+    rest re-walked) assigns the passes no earlier path touches at once: the same paths, owners and value, to the
+    bit, as the plain loop over the passes, with frozen passes and tasks barred from satellites."""
+    rng = np.random.default_rng(seed)
+    for prob in crowded:
+        n = len(prob.passes)
+        first = Coordinator(prob, FleetConfig(rounds=1, time_limit=None))
+        frozen = np.zeros(n, dtype=bool)
+        frozen[rng.permutation(n)[: n // 6]] = True
+        coord = Coordinator(prob, FleetConfig(rounds=1, time_limit=None), initial=start(first, seed),
+                            frozen=frozen)
+        sats = np.array([pg.satellite for pg in prob.passes])
+        coord.barred[sats[rng.integers(0, n, 40)], rng.integers(0, len(prob.weight), 40)] = True
+        paths = [solve_pass(prob, p, prob.weight[pg.tasks] * rng.uniform(0.2, 1.0, pg.n_tasks), coord.cfg).nodes
+                 for p, pg in enumerate(prob.passes)]
+        order = [p for p in rng.permutation(n).tolist() if not frozen[p] and len(paths[p])]
+        want = coord.empty()
+        for p in order:  # the plain loop
+            path = paths[p]
+            free = coord._available(want, p)[prob.passes[p].graph.node_acq[path]]
+            coord._assign(want, p, path if free.all() else prob.rewalk(p, path[free]))
+        got = coord.empty()
+        coord._take_in_order(got, order, [paths[p] for p in order])
+        assert np.array_equal(got.served, want.served) and got.value == want.value
+        assert all(np.array_equal(a, b) for a, b in zip(got.paths, want.paths))
+        cut = sum(len(want.paths[p]) < len(paths[p]) for p in order)
+        assert cut >= 3 and sum(len(want.paths[p]) == len(paths[p]) for p in order) >= 3  # both kinds met
+        consistent(prob, got)

@@ -458,8 +458,8 @@ def test_the_sweep_alone_above_the_small_instances_stops_at_its_label_budget(fam
 def test_the_compiled_plain_sweep_is_the_loops_sweep(family, n, seed, step):
     """The plain dynamic program (no bound, no beam) runs in one compiled call; the loop it stands in for (the
     same sweep with an empty Bounds, which cuts nothing) gives the same path, value, label count and counters,
-    also when its label store starts at 8 labels and grows, and when the label memory runs out (then the loop
-    runs and stops as before)."""
+    also when its label store starts at 8 labels and grows, and stopped at the same point with the same frontier
+    bound when the label memory or the time runs out."""
     from eosp.planning import labels as L
 
     inst = synthetic_instance(n, seed) if step is None else generated(family, n, seed, step)
@@ -470,12 +470,13 @@ def test_the_compiled_plain_sweep_is_the_loops_sweep(family, n, seed, step):
         assert np.array_equal(fast.nodes, loop.nodes) and fast.value == loop.value and fast.complete
         assert (fast.labels, fast.pruned, fast.dominated, fast.extensions) == \
                (loop.labels, loop.pruned, loop.dominated, loop.extensions)
-        why, used, nodes, counters = L._search_alone(g.indptr, g.dst, g.node_acq, g.node_time, g.acq_ptr, w,
-                                                     20_000_000, 250_000, 8)
-        assert why == L.STOP_DONE and used == loop.labels and np.array_equal(nodes, loop.nodes)
+        done, frontier, used, nodes, counters = L._search_alone(g.indptr, g.dst, g.node_acq, g.node_time, g.acq_ptr,
+                                                                w, L.Limits(20_000_000, 250_000, 8, math.inf))
+        assert done and frontier == -math.inf and used == loop.labels and np.array_equal(nodes, loop.nodes)
         assert (counters[1], counters[2], counters[3]) == (loop.pruned, loop.dominated, loop.extensions)
-        small = max(2, loop.labels // 2)  # out of label memory: not finished, the loop's stop
-        why, *_ = L._search_alone(g.indptr, g.dst, g.node_acq, g.node_time, g.acq_ptr, w, small, 250_000, 8)
-        assert why == L.STOP_GROW
-        cut, cut_loop = (label_search(g, w, max_labels=small, on_limit="stop", bounds=b) for b in (None, Bounds()))
-        assert not cut.complete and np.array_equal(cut.nodes, cut_loop.nodes) and cut.value == cut_loop.value
+        small = max(2, loop.labels // 2)  # out of label memory, or of time at the first look at the clock
+        for limits in ({"max_labels": small}, {"time_limit": 0.0, "check_every": 1}):
+            cut, cut_loop = (label_search(g, w, on_limit="stop", bounds=b, **limits) for b in (None, Bounds()))
+            assert not cut.complete and not cut_loop.complete and cut.frontier_bound == cut_loop.frontier_bound
+            assert np.array_equal(cut.nodes, cut_loop.nodes) and cut.value == cut_loop.value
+            assert (cut.labels, cut.extensions) == (cut_loop.labels, cut_loop.extensions)
