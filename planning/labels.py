@@ -514,7 +514,7 @@ def _search_alone(indptr, dst, node_acq, node_time, acq_ptr, weight, limits):
 
     Why: a fleet's price round solves thousands of passes of a few dozen nodes, and the store's set-up, the
     sweep order and the call of :func:`_sweep` with its three tuples cost 50 us a pass in Python against a few
-    us of sweeping (200-satellite day: 65 us a pass, 14 of them the call)."""
+    us of sweeping (a pass of 38 nodes of a 200-satellite day: 65 us, 15 of them the call)."""
     max_labels, max_work, first, deadline = limits
     n_nodes = node_time.shape[0]
     t = node_time.astype(np.float64)

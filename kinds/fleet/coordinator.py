@@ -715,7 +715,7 @@ class Coordinator:
                 primal.paths[order[i]] = paths[i]
         for i, p in enumerate(order):
             if clean[i]:  # what _assign adds for a path taken whole into an empty pass, in the loop's order
-                primal.value += float(w[tasks[ends[i]:ends[i + 1]]].sum() - 0.0)
+                primal.value += float(w[tasks[ends[i]:ends[i + 1]]].sum())
                 continue
             path = paths[i]
             free = self._available(primal, p)[self.prob.passes[p].graph.node_acq[path]]
