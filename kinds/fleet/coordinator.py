@@ -457,12 +457,18 @@ class Coordinator:
         """Of one path per pass: how many paths serve each task (float64 per task), and each path's energy (the sum
         of its observations' least energy, :func:`eosp.kinds.fleet.problem.path_wh`): gathered from the flat
         node and task vectors at once, not pass by pass (at 200 satellites 13,152 passes a round)."""
-        lens = np.fromiter((len(x) for x in paths), np.int64, len(paths))
-        nodes = np.concatenate(paths).astype(np.int64) if lens.sum() else np.zeros(0, np.int64)
-        owner = np.repeat(np.arange(len(paths)), lens)
-        pos = self._task_ptr[owner] + self._node_acq[self._node_ptr[owner] + nodes]
+        owner, _, pos = self._flat(np.arange(len(paths)), paths)
         count = np.bincount(self._task_idx[pos], minlength=len(self.prob.weight)).astype(np.float64)
         return count, np.bincount(owner, weights=self._task_wh[pos], minlength=len(paths))
+
+    def _flat(self, passes: np.ndarray, paths: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Paths of `passes` as flat vectors, a row per node: its pass, the path's index in `paths`, and its
+        observation's place in the passes' task CSR (``_task_idx[pos]`` its task, ``_task_wh[pos]`` its energy)."""
+        lens = np.fromiter((len(x) for x in paths), np.int64, len(paths))
+        nodes = np.concatenate(paths).astype(np.int64) if lens.sum() else np.zeros(0, np.int64)
+        owner = np.repeat(np.asarray(passes, dtype=np.int64), lens)
+        pos = self._task_ptr[owner] + self._node_acq[self._node_ptr[owner] + nodes]
+        return owner, np.repeat(np.arange(len(paths)), lens), pos
 
     def prefetch(self, deadline: float | None) -> None:
         """Send the next price round's passes to the pool now, at the prices the last round set, when the pool
@@ -696,17 +702,14 @@ class Coordinator:
         summed in the same order, as the loop."""
         if not order:
             return
-        lens = np.fromiter((len(x) for x in paths), np.int64, len(paths))
-        owner = np.repeat(np.asarray(order, dtype=np.int64), lens)
-        rank = np.repeat(np.arange(len(order)), lens)
-        pos = self._task_ptr[owner] + self._node_acq[self._node_ptr[owner] + np.concatenate(paths).astype(np.int64)]
+        owner, rank, pos = self._flat(np.asarray(order, dtype=np.int64), paths)
         tasks = self._task_idx[pos]
         first = np.full(len(self.prob.weight), len(order), dtype=np.int64)
         np.minimum.at(first, tasks, rank)  # the first pass in `order` whose path holds each task
         bad = (first[tasks] != rank) | (primal.served[tasks] >= 0) | self.barred[self._pass_sat[owner], tasks]
         clean = np.ones(len(order), dtype=bool)
         clean[rank[bad]] = False
-        ends = np.r_[0, np.cumsum(lens)]
+        ends = np.r_[0, np.cumsum([len(x) for x in paths])]
         w = self.prob.weight
         with HeldInterrupt():
             whole = clean[rank]
