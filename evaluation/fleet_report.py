@@ -55,6 +55,7 @@ class View:
 
     label: str
     schedule: Schedule
+    info: dict = field(default_factory=dict)  # how it was made: the schedule file's metadata (provenance_cells)
     valid: bool | None = None  # None: not checked (no geometry)
     metrics: dict = field(default_factory=dict)
     violations: list = field(default_factory=list)
@@ -213,6 +214,42 @@ def _reasons(fleet, opps, v: View, geo, los, sun, notes: list) -> dict | None:
             "cand": r.candidates.tolist()}
 
 
+# what a schedule file says of how it was made (written at solve time, docs/formats.md): the page's columns
+PROVENANCE = (("solver", "solver"), ("time_limit", "time limit (s)"), ("rounds", "rounds"),
+              ("warm_start", "warm start"), ("bound", "bound"), ("gap", "gap"))
+_PROVENANCE_HEAD = "".join(f"<th>{h}</th>" for _, h in PROVENANCE)
+
+
+def schedule_info(metadata: dict) -> dict:
+    """A schedule file's metadata (text values, each written as JSON) as values; what is not JSON stays text."""
+    out = {}
+    for k, v in metadata.items():
+        try:
+            out[k] = json.loads(v)
+        except (TypeError, ValueError):
+            out[k] = v
+    return out
+
+
+def provenance_cells(info: dict) -> str:
+    """The summary's cells of how a schedule was made: solver, its time limit, rounds, warm start, bound and gap
+    ("-" where the file does not say: a schedule written by another tool, or a solver without that notion)."""
+    def cell(key: str) -> str:
+        x = info.get(key)
+        if x is None or x == "":
+            return "<td class='na'>-</td>"
+        if key == "gap" and isinstance(x, (int, float)):
+            text = f"{x:.2%}"
+        elif key == "bound" and isinstance(x, float):
+            text = f"{x:.6f}"
+        elif key == "time_limit" and isinstance(x, (int, float)):
+            text = f"{x:g}"
+        else:
+            text = str(x)
+        return f"<td data-k='{key}'>{html.escape(text)}</td>"
+    return "".join(cell(k) for k, _ in PROVENANCE)
+
+
 def _summary(views: list[View]) -> str:
     rows = []
     for v in views:
@@ -226,7 +263,7 @@ def _summary(views: list[View]) -> str:
             return "-" if x is None or v.valid is None else f"{x:.{nd}f}"
         rows.append(f"<tr data-schedule='{html.escape(v.label, quote=True)}' data-valid='{str(v.valid).lower()}'>"
                     f"<td>{html.escape(v.label)}</td><td>{len(v.schedule)}</td><td>{f('WCR')}</td><td>{f('CR')}</td>"
-                    f"<td>{f('TAT', 1)}</td><td>{f('PC', 1)}</td><td>{verdict}</td></tr>")
+                    f"<td>{f('TAT', 1)}</td><td>{f('PC', 1)}</td>{provenance_cells(v.info)}<td>{verdict}</td></tr>")
     lists = []
     for v in views:  # every violation in words (the Gantt marks those with a satellite and a time)
         if v.violations:
@@ -236,13 +273,15 @@ def _summary(views: list[View]) -> str:
                          f"data-count='{len(v.violations)}'><summary>{html.escape(v.label)}: {len(v.violations)} "
                          f"violation(s)</summary><ol>{items}{more}</ol></details>")
     return ("<table class='summary'><thead><tr><th>schedule</th><th>observations</th><th>WCR</th><th>CR</th>"
-            "<th>TAT (s)</th><th>PC (Wh)</th><th>checker</th></tr></thead><tbody>" + "".join(rows) +
+            f"<th>TAT (s)</th><th>PC (Wh)</th>{_PROVENANCE_HEAD}<th>checker</th></tr></thead><tbody>" + "".join(rows) +
             "</tbody></table>" + "".join(lists))
 
 
-def build_page(fleet: Fleet, opps, schedules: dict[str, Schedule], title: str | None = None) -> str:
-    """The page as one HTML string (self-contained: the script, the data and the coastlines inline)."""
-    views = [View(label, s) for label, s in schedules.items()]
+def build_page(fleet: Fleet, opps, schedules: dict[str, Schedule], title: str | None = None,
+               infos: dict[str, dict] | None = None) -> str:
+    """The page as one HTML string (self-contained: the script, the data and the coastlines inline); `infos`: each
+    schedule's metadata by label (:func:`schedule_info`), for the summary's solver, time limit, bound and gap."""
+    views = [View(label, s, (infos or {}).get(label, {})) for label, s in schedules.items()]
     title = title or f"{fleet.case_id or 'fleet'}: a constellation day"
     data, notes = build_data(fleet, opps, views, title)
     h = fleet.horizon
@@ -273,7 +312,7 @@ def _page(data: dict, notes: list[str], summary: str, title: str, meta: str, lat
 
 # --------------------------------------------------------------------------- ONERA fleets (no orbits, downloads)
 
-def build_onera_page(f, schedules: dict, title: str | None = None) -> str:
+def build_onera_page(f, schedules: dict, title: str | None = None, infos: dict[str, dict] | None = None) -> str:
     """The page of an ONERA fleet (:mod:`eosp.onera.model`): a task row per request (at its first observation's
     target, worth its best value alone, its kind as the group), observations and the mandatory downloads on
     the Gantt with the transition before each, no tracks, sunlight, battery or reasons (the instances have no
@@ -334,9 +373,11 @@ def build_onera_page(f, schedules: dict, title: str | None = None) -> str:
         served = ", ".join(f"{k} {v}" for k, v in res.served.items()) if res.valid else "-"
         rows.append(f"<tr data-schedule='{html.escape(label, quote=True)}' data-valid='{str(res.valid).lower()}'>"
                     f"<td>{html.escape(label)}</td><td>{int(is_obs.sum())}</td><td>{int((di >= 0).sum())}</td>"
-                    f"<td>{res.value:.4f}</td><td>{served}</td><td>{verdict}</td></tr>")
+                    f"<td>{res.value:.4f}</td><td>{served}</td>{provenance_cells((infos or {}).get(label, {}))}"
+                    f"<td>{verdict}</td></tr>")
     summary = ("<table class='summary'><thead><tr><th>schedule</th><th>observations</th><th>downloads</th>"
-               "<th>value</th><th>requests served by kind</th><th>checker</th></tr></thead><tbody>" + "".join(rows) +
+               f"<th>value</th><th>requests served by kind</th>{_PROVENANCE_HEAD}<th>checker</th></tr></thead><tbody>"
+               + "".join(rows) +
                "</tbody></table>")
     notes = ["ONERA instances have no orbits (a satellite is an id; each observation carries its own window): no "
              "ground tracks, sunlight or battery are drawn, and missed requests get no reasons (the insertion "
@@ -353,15 +394,30 @@ def check_report_out(out, overwrite: bool = False) -> Path:
     return check_output(out, REPORT_KIND, overwrite, suffixes=(".html", ".htm"))
 
 
-def write_page(fleet, opps, schedules: dict, out, overwrite: bool = False, title: str | None = None) -> Path:
+def write_page(fleet, opps, schedules: dict, out, overwrite: bool = False, title: str | None = None,
+               infos: dict[str, dict] | None = None) -> Path:
     """Build the page (of an aeossp fleet, or of an ONERA fleet when `opps` is None and `fleet` is one) and
     write it atomically; an existing page is replaced only when eosp wrote it and `overwrite` is given."""
     out = check_report_out(out, overwrite)
-    text = build_page(fleet, opps, schedules, title) if isinstance(fleet, Fleet) else \
-        build_onera_page(fleet, schedules, title)
+    text = build_page(fleet, opps, schedules, title, infos) if isinstance(fleet, Fleet) else \
+        build_onera_page(fleet, schedules, title, infos)
     with atomic_path(out, suffix=".html") as tmp:
         tmp.write_text(text, encoding="utf-8")
     return out
+
+
+def report_page(fleet, opps, schedules: dict, out: str, ns, t0: float) -> str:
+    """`eosp report` of a constellation day (an aeossp or an ONERA fleet): `schedules` by label, each a
+    (schedule, the file's metadata) pair; the page written, and the command's line.  `t0`: when the command
+    started reading."""
+    import time
+
+    scheds = {label: s for label, (s, _) in schedules.items()}
+    infos = {label: schedule_info(md) for label, (_, md) in schedules.items()}
+    page = write_page(fleet, opps, scheds, out, overwrite=ns.overwrite, title=ns.title or None, infos=infos)
+    n_tasks = len(fleet.tasks) if hasattr(fleet, "tasks") else len(fleet.requests)
+    return (f"{page}: {len(schedules)} schedule(s) of {len(fleet.satellites)} satellites and {n_tasks} tasks "
+            f"({page.stat().st_size / 1e6:.1f} MB, {time.perf_counter() - t0:.1f} s)")
 
 
 _STYLE = """

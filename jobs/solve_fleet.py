@@ -693,7 +693,8 @@ def run(job: SolveFleetJob) -> dict:
         wall = time.perf_counter() - t0
         peak["solve"] = peak_rss_gb()
         info = {"value": sol.value, "bound": sol.bound, "gap": sol.gap, "solver": "fleet", "seconds": round(wall, 3),
-                "pass_solver": job.fleet.pass_solver, "rounds": sol.info["rounds"]}
+                "pass_solver": job.fleet.pass_solver, "rounds": sol.info["rounds"],
+                "time_limit": job.fleet.time_limit, "warm_start": job.fleet.warm_start}
         write_schedule(sol.schedule, fleet, run_dir / "schedule.parquet", overwrite=True, info=info)
         with atomic_path(run_dir / "summary.csv") as tmp:
             with open(tmp, "w", newline="") as fh:

@@ -48,6 +48,29 @@ def pytest_collection_modifyitems(config, items):
             item.add_marker(pytest.mark.ray)
 
 
+@pytest.fixture
+def default_sigint():
+    """Python's own SIGINT handler for the test, the one before it given back after.  A shell that starts the suite
+    in the background (`make test &`, a detached terminal, many CI runners) hands Python an ignored SIGINT, and
+    Python then installs no handler: the tests that raise SIGINT in this process and assert what Ctrl-C does to a
+    program (a KeyboardInterrupt) set what a foreground terminal gives."""
+    import signal
+
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
+
+
+def sigint_as_a_terminal_gives() -> None:
+    """`preexec_fn` of a child that is sent SIGINT: the default disposition (death, or Python's KeyboardInterrupt),
+    not the ignored one a background shell leaves to the test run."""
+    import signal
+
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
 @pytest.fixture(scope="session")
 def chromium():
     """The path of a headless Chromium for the page tests (tests/browser.py finds or installs one); the test is

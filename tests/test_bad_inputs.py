@@ -977,14 +977,14 @@ def test_ctrl_c_of_a_real_search_writes_its_best_schedule(base, tmp_path, solver
     from eosp.config import family_config
     from eosp.instances.generator import generate
     from eosp.instances.interchange import write_instance
+    from tests.conftest import sigint_as_a_terminal_gives
 
     r = fresh(base, tmp_path)
     write_instance(generate(family_config("conflict", 60, 5)), r / "big")
     p = subprocess.Popen([sys.executable, "-m", "eosp.cli", "solve", str(r / "big"), "--solver", solver,
                           "--time-limit", "60", "--out", str(r / "o.jsonl")], stdout=subprocess.PIPE,
                          stderr=subprocess.PIPE, text=True,
-                         # a test run in the background inherits an ignored SIGINT: the solve must not
-                         preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+                         preexec_fn=sigint_as_a_terminal_gives)
     t0 = time.monotonic()
     opened_instance(p.pid, r / "big", timeout=120)  # past the imports (seconds on a loaded machine): solving now
     time.sleep(3.0)
@@ -1364,8 +1364,10 @@ def _interrupt(argv: list, after: float | Path, cwd: Path | None = None) -> tupl
     import subprocess
     import time
 
+    from tests.conftest import sigint_as_a_terminal_gives
+
     p = subprocess.Popen([str(a) for a in argv], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                         start_new_session=True, cwd=cwd)
+                         start_new_session=True, cwd=cwd, preexec_fn=sigint_as_a_terminal_gives)
     if isinstance(after, Path):
         t0 = time.monotonic()
         while not after.exists() and p.poll() is None and time.monotonic() - t0 < 180:
@@ -1513,6 +1515,7 @@ if __name__ == "__main__":
         print("  not clean:", b)
 
 
+@pytest.mark.usefixtures("default_sigint")
 def test_ctrl_c_at_any_moment_of_the_onera_search_leaves_a_whole_plan(tmp_path):
     """The plan is edited in place (insert, propagate the start times, journal the edit): a Ctrl-C that lands
     inside an edit must wait for its end (eosp.interrupt.HeldInterrupt).  SIGINT at many moments of the greedy and

@@ -231,3 +231,44 @@ def test_onera_fleet_page_in_headless_chromium(tmp_path, chromium, capsys):
     assert sorted(r[0] for r in got["rows"] if r[1] == "observed") == sorted(str(f.requests.id[k])
                                                                              for k in np.flatnonzero(val > 0))
     assert got["heading"] == "Per request kind" and sorted(got["groups"]) == ["one-shot", "periodic", "stereo", "video"]
+
+
+def test_the_page_says_how_each_schedule_was_made_in_headless_chromium(tmp_path, chromium, capsys):
+    """`eosp solve` writes into the schedule file its solver, time limit, rounds, warm start, bound and gap; the page
+    states them per schedule beside the checker's verdict (read back from the rendered page); a schedule file
+    without them (an aeossp solution.json) shows '-'."""
+    import json
+
+    import pyarrow.parquet as pq
+
+    from tests.browser import Browser
+
+    fl = tmp_path / "fl"
+    assert main(["import", str(FIXTURES / "full_completion_valid"), "--out", str(fl)]) == 0
+    day, greedy = tmp_path / "day.parquet", tmp_path / "greedy.parquet"
+    assert main(["solve", str(fl), "--solver", "fleet", "--time-limit", "20", "--rounds", "2", "--out", str(day)]) == 0
+    assert main(["solve", str(fl), "--solver", "greedy", "--out", str(greedy)]) == 0
+    sol = tmp_path / "sol.json"
+    assert main(["export-schedule", str(fl), str(greedy), "--format", "aeossp", "--out", str(sol)]) == 0
+    md = {k.decode(): json.loads(v) for k, v in pq.read_schema(day).metadata.items()
+          if k.decode() in ("solver", "time_limit", "rounds", "warm_start", "bound", "gap")}
+    assert md["solver"] == "fleet" and md["time_limit"] == 20 and md["rounds"] >= 0 and md["warm_start"]
+    page = tmp_path / "page.html"
+    assert main(["report", str(fl), str(day), str(greedy), str(sol), "--out", str(page)]) == 0
+    capsys.readouterr()
+    with Browser(chromium, tmp_path / "chromium.log") as b:
+        b.open(page)
+        got = b.evaluate("""(async () => Array.from(document.querySelectorAll('table.summary tbody tr')).map(r => ({
+            label: r.dataset.schedule, valid: r.dataset.valid,
+            cells: Object.fromEntries(Array.from(r.querySelectorAll('td[data-k]')).map(c => [c.dataset.k, c.textContent])),
+            dashes: r.querySelectorAll('td.na').length,
+            head: Array.from(r.closest('table').querySelectorAll('th')).map(h => h.textContent)})))()""")
+        errors = b.errors()
+    assert errors == [] and [r["label"] for r in got] == ["day", "greedy", "sol"]
+    assert all(r["valid"] == "true" for r in got)
+    assert got[0]["head"][-7:] == ["solver", "time limit (s)", "rounds", "warm start", "bound", "gap", "checker"]
+    c = got[0]["cells"]
+    assert c["solver"] == "fleet" and c["time_limit"] == "20" and c["rounds"] == str(md["rounds"])
+    assert c["warm_start"] == md["warm_start"] and c["bound"] == f"{md['bound']:.6f}" and c["gap"] == f"{md['gap']:.2%}"
+    assert got[1]["cells"] == {"solver": "greedy"} and got[1]["dashes"] == 5
+    assert got[2]["cells"] == {} and got[2]["dashes"] == 6

@@ -7,6 +7,8 @@ import pytest
 
 from eosp.interrupt import HeldInterrupt
 
+pytestmark = pytest.mark.usefixtures("default_sigint")
+
 
 def test_a_ctrl_c_inside_the_block_waits_for_its_end():
     steps = []
@@ -58,3 +60,18 @@ def test_outside_the_main_thread_the_block_is_plain():
     t.start()
     t.join()
     assert seen == [False] and signal.getsignal(signal.SIGINT) is signal.default_int_handler
+
+
+def test_the_interrupt_tests_pass_in_a_run_started_with_sigint_ignored(tmp_path):
+    """A run started in the background inherits an ignored SIGINT (Python then installs no handler): one of the tests
+    above, in a child pytest started so, passes all the same (the `default_sigint` fixture)."""
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[1]
+    r = subprocess.run([sys.executable, "-m", "pytest", "-q", "-p", "no:xdist", "-p", "no:cacheprovider",
+                        f"{Path(__file__).name}::test_a_ctrl_c_inside_the_block_waits_for_its_end"],
+                       cwd=root / "tests", capture_output=True, text=True, timeout=120,
+                       preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_IGN))
+    assert r.returncode == 0 and "1 passed" in r.stdout, r.stdout + r.stderr

@@ -144,17 +144,6 @@ PAGE = ("One self-contained HTML page of a constellation day: Gantt per satellit
         "targets, every task with the reason it was missed, summaries, differences.")  # eosp report's description
 
 
-def report_page(fleet, opps, schedules: dict, out: str, ns: argparse.Namespace, t0: float) -> str:
-    """The planner's page of a fleet's day (:mod:`eosp.evaluation.fleet_report`, an aeossp or an ONERA fleet);
-    `t0`: when the command started reading."""
-    from eosp.evaluation.fleet_report import write_page
-
-    page = write_page(fleet, opps, schedules, out, overwrite=ns.overwrite, title=ns.title or None)
-    n_tasks = len(fleet.tasks) if hasattr(fleet, "tasks") else len(fleet.requests)
-    return (f"{page}: {len(schedules)} schedule(s) of {len(fleet.satellites)} satellites and {n_tasks} tasks "
-            f"({page.stat().st_size / 1e6:.1f} MB, {time.perf_counter() - t0:.1f} s)")
-
-
 class FleetKind(KindBase):
     name = "fleet"
     title = "an aeossp fleet directory (eosp import CASE, eosp generate --fleet)"
@@ -247,14 +236,15 @@ class FleetKind(KindBase):
     def report(self, path: str, schedules: list[str], out: str, ns: argparse.Namespace) -> str:
         """The planner's page of the fleet's day for one or more schedules; a schedule of another fleet is refused
         (fingerprint) before anything is written."""
-        from eosp.evaluation.fleet_report import check_report_out
+        from eosp.evaluation.fleet_report import check_report_out, report_page
+        from eosp.fleet.io import read_schedule
         from eosp.fleet.opportunities import require_check_memory
 
         check_report_out(out, ns.overwrite)
         t0 = time.perf_counter()
         data = self.read(path)
         require_check_memory(data.fleet, data.meta)  # the page checks and draws the whole horizon
-        scheds = labelled(schedules, lambda s: self.read_schedule(s, data))
+        scheds = labelled(schedules, lambda s: read_schedule(s, data.fleet))
         return report_page(data.fleet, data.opps, scheds, out, ns, t0)
 
     # ------------------------------------------------------------------ the command line
@@ -326,13 +316,14 @@ class FleetKind(KindBase):
         if solver in ("fleet-policy", "fleet-sample", "fleet-features"):
             i = res.info
             info = {"value": res.value, "solver": solver, "raw_wcr": i["raw_wcr"], "polish": i["polish"],
-                    "seconds": round(seconds, 3)}
+                    "seconds": round(seconds, 3), "time_limit": getattr(cfg, "time_limit", None)}
             extra = f", {i['episodes']} episodes" if "episodes" in i else ""
             return info, (f"{out}: {n} observations, WCR {res.value:.6f} (raw decode {i['raw_wcr']:.6f}, polish "
                           f"{i['polish']}); {i['decisions']} decisions, {i['decisions_per_s']:.0f} a second{extra} "
                           f"({seconds:.1f} s)")
         info = {"value": res.value, "solver": "fleet", "pass_solver": cfg.pass_solver, "seconds": round(seconds, 3),
-                "bound": res.bound, "gap": res.gap, "bound_source": res.bound_kind}
+                "bound": res.bound, "gap": res.gap, "bound_source": res.bound_kind, "time_limit": cfg.time_limit,
+                "rounds": res.info["rounds"], "warm_start": cfg.warm_start}
         why = res.info["no_lagrangian_bound_because"]
         source = f"{res.bound_kind}{'' if why is None else f': {why}'}"
         bound = "" if res.bound is None else f", bound {res.bound:.6f} ({source}), gap {res.gap:.4%}"

@@ -119,13 +119,13 @@ class OneraKind(KindBase):
     def report(self, path: str, schedules: list[str], out: str, ns: argparse.Namespace) -> str:
         """The fleet page (:mod:`eosp.evaluation.fleet_report`) of an ONERA fleet: its own model and plans, no
         orbits."""
-        from eosp.evaluation.fleet_report import check_report_out
-        from eosp.kinds.fleet.kind import report_page
+        from eosp.evaluation.fleet_report import check_report_out, report_page
+        from eosp.onera.model import read_schedule
 
         check_report_out(out, ns.overwrite)
         t0 = time.perf_counter()
         f = self.read(path)
-        return report_page(f, None, labelled(schedules, lambda s: self.read_schedule(s, f)), out, ns, t0)
+        return report_page(f, None, labelled(schedules, lambda s: read_schedule(s, f)), out, ns, t0)
 
     # ------------------------------------------------------------------ the command line
     def solver_config(self, solver: str | None) -> type:
@@ -137,7 +137,8 @@ class OneraKind(KindBase):
         from eosp.onera.model import KIND_SHORT
 
         info = {"value": res.value, "solver": solver, "bound": res.bound, "gap": res.gap,
-                "bound_source": res.bound_kind, "seconds": round(res.timings["solve"], 3)}
+                "bound_source": res.bound_kind, "seconds": round(res.timings["solve"], 3),
+                "time_limit": getattr(cfg, "time_limit", None)}
         served = ", ".join(f"{k} {res.verdict.metrics[k]}" for k in KIND_SHORT)
         bound = "" if res.bound is None else f", bound {res.bound:.4f} ({res.bound_kind}), gap {res.gap:.2%}"
         return info, (f"{out}: value {res.value:.4f}{bound}; served {served}; {res.info['moves']} moves "
