@@ -8,7 +8,7 @@ opportunities: the sample gives its per-satellite figures without holding it), s
 for the first ``--solve`` sampled satellites builds every pass graph and solves each pass with the exact
 solver (5 s limit a pass, as the fleet solver does) at the tasks' weights: pass sizes and solve seconds by
 size, and the bytes of those pass graphs per opportunity (arrays of the graph and of its bound graph), the
-inputs of the cluster-sizing table in docs/results.md.
+inputs of the cluster-sizing table in docs/results/fleet-scale.md.
 """
 
 from __future__ import annotations
