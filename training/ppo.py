@@ -29,6 +29,30 @@ def estimate_value_scale(cfg: RunConfig, episodes: int = 8) -> float:
     return float(max(1.0, np.mean(returns)))
 
 
+def env_runners_get_their_config_by_value() -> None:
+    """Env runners are created with their AlgorithmConfig inside the actor's creation task, not as an object in
+    Ray's object store.
+
+    RLlib puts the config in the object store once and hands every env-runner actor its reference; with
+    ``restart_failed_env_runners`` the actors have ``max_restarts > 0``, and Ray then logs at error level, for
+    every actor, that a restart fails if that object is lost (core_worker.cc), a line a user reads as a failure.
+    The config is some 12 kB pickled (below Ray's 100 kB limit for arguments inlined in the task), so each actor
+    carries its own copy: a restarted actor (tests/test_platform.py kills one mid-training) needs nothing from the
+    object store, and the line is gone.  Installed on RLlib's EnvRunnerGroup once, for this process."""
+    from ray.rllib.env.env_runner_group import EnvRunnerGroup
+
+    if isinstance(EnvRunnerGroup.__dict__.get("_remote_config_obj_ref"), property):
+        return
+
+    def get(self):
+        return self._remote_config
+
+    def put(self, value):  # RLlib's ray.put(config) in __init__: kept in the object store, never handed out
+        self.__dict__["_remote_config_ref_unused"] = value
+
+    EnvRunnerGroup._remote_config_obj_ref = property(get, put)
+
+
 def ppo_config(cfg: RunConfig):
     """PPO on the single pass (`cfg` a RunConfig), or on the constellation (a FleetRunConfig: multi-agent env
     runners over the demo set's fleets, every satellite mapped to the one shared module)."""
@@ -38,6 +62,7 @@ def ppo_config(cfg: RunConfig):
     from eosp.envs.eosp_env import EOSPEnv
     from eosp.training.rl_module import EOSPTorchRLModule, drop_log_message
 
+    env_runners_get_their_config_by_value()
     # RLlib announces the new API stack to every PPO user (it is the default, and what this project uses)
     drop_log_message("ray.rllib.algorithms.algorithm_config", "on the new API stack! This is the new default")
 
