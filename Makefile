@@ -16,7 +16,7 @@ $(VENV)/.installed: pyproject.toml
 
 install: $(VENV)/.installed
 
-# the main job on small embedded defaults, then the kernels of the first `eosp` commands compiled (jobs/warmup.py)
+# the main job on small embedded defaults, then the kernels of every kind's first commands compiled (jobs/warmup.py)
 demo: install
 	$(PY) jobs/train.py --demo
 	$(PY) jobs/warmup.py

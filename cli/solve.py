@@ -62,16 +62,36 @@ def make_config(kind, ns: argparse.Namespace):
     return cls(**solve_options(ns))
 
 
+class CompileClock:
+    """Seconds numba spends compiling kernels (those not in its cache) while the block runs, in this process: what
+    a solve's line names when its first schedule comes after its time limit (``Result.timings["compile"]``)."""
+
+    def __enter__(self) -> CompileClock:
+        from numba.core import event
+
+        self.seconds, self._listener = 0.0, event.TimingListener()
+        event.register("numba:compile", self._listener)
+        return self
+
+    def __exit__(self, *exc) -> None:
+        from numba.core import event
+
+        event.unregister("numba:compile", self._listener)
+        self.seconds = self._listener.duration if self._listener.done else 0.0
+
+
 def cmd_solve(kind, ns: argparse.Namespace) -> int:
     cfg = make_config(kind, ns)  # bad options are refused before any file is read
     out = kind.schedule_out(ns.out, ns.overwrite)
     kind.before_read(ns.solver, cfg)
+    t_read = time.perf_counter()
     problem = kind.read(ns.problem)  # the readers check their own memory from the files' headers
     kind.before_solve(problem, ns.problem)
     inputs = kind.solve_inputs(ns, problem)
     t0 = time.perf_counter()
     try:
-        res = load(kind.solvers[ns.solver].solve)(problem, cfg, **inputs)
+        with CompileClock() as compiling:
+            res = load(kind.solvers[ns.solver].solve)(problem, cfg, **inputs)
     except KeyboardInterrupt:
         return interrupted_solve(kind, ns, problem)
     except Exception:
@@ -79,6 +99,8 @@ def cmd_solve(kind, ns: argparse.Namespace) -> int:
             return interrupted_solve(kind, ns, problem)
         raise
     elapsed = time.perf_counter() - t0
+    res.timings.setdefault("read", t0 - t_read)
+    res.timings.setdefault("compile", compiling.seconds)
     stopped = res.status == "interrupted"  # a search that kept its best schedule when Ctrl-C stopped it
     if stopped:
         import signal

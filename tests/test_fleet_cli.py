@@ -39,6 +39,34 @@ def test_solve_validate_export(fleet_dir, tmp_path, capsys):
     assert main(["solve", str(fleet_dir), "--solver", "greedy", "--out", str(out), "--overwrite"]) == 0
 
 
+def test_a_first_schedule_after_the_limit_says_why(fleet_dir, tmp_path, capsys):
+    """A limit shorter than the first schedule: the line says when it came and where the time went (compiling kernels
+    not yet cached, building the pass graphs, reading)."""
+    import re
+
+    from eosp.cli.solve import CompileClock
+    from eosp.kinds.fleet.kind import late_because
+    from eosp.problem import Result
+
+    out = tmp_path / "s.parquet"
+    assert main(["solve", str(fleet_dir), "--solver", "fleet", "--time-limit", "0.0001", "--out", str(out)]) == 0
+    said = capsys.readouterr().out
+    assert re.search(r"\(the first schedule, found after the time limit at [\d.]+ s: [\d.]+ s of it compiling "
+                     r"kernels[^,]*, [\d.]+ s building the pass graphs; reading took [\d.]+ s before\)", said), said
+    r = Result(None, 0.0, timings={"compile": 12.3, "build": 0.5, "read": 2.0}, info={"first_schedule_s": 14.0})
+    assert late_because(r) == ("12.3 s of it compiling kernels (jobs/warmup.py compiles them once), 0.5 s building "
+                               "the pass graphs; reading took 2.0 s before")
+    import numba
+
+    @numba.njit
+    def fresh(x):  # not cached: compiled in the block
+        return x + 1
+
+    with CompileClock() as c:
+        fresh(1)
+    assert c.seconds > 0
+
+
 @pytest.mark.parametrize("args,why", [
     (["--time-limit", "0"], "--time-limit"),
     (["--time-limit", "1e9"], "--time-limit"),

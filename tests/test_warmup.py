@@ -1,20 +1,25 @@
-"""jobs/warmup.py (run by `make demo`): it runs the first commands' code paths and leaves their kernels compiled."""
+"""jobs/warmup.py (run by `make demo`): every kind's first commands, their kernels left compiled."""
 
 import numba
 
-from eosp.jobs.warmup import main
+from eosp.jobs.warmup import WARM, main
 
 
-def test_warmup_compiles_the_interchange_reader_and_the_solvers(capsys):
-    from eosp.instances import interchange
+def test_every_registered_kind_is_warmed():
+    from eosp.kinds import REGISTRY
 
-    assert main(["--solvers", "greedy", "ramp"]) == 0
-    assert "[warmup] kernels compiled and cached" in capsys.readouterr().out
-    kernels = [f for f in vars(interchange).values() if isinstance(f, numba.core.registry.CPUDispatcher)]
-    assert kernels and all(k.signatures for k in kernels)  # every reader kernel compiled for its arguments
+    assert set(WARM) == set(REGISTRY)  # a new kind adds its first commands to the warm-up
 
 
-def test_warmup_refuses_an_unknown_solver(capsys):
-    assert main(["--solvers", "greedy", "nope"]) == 2
-    assert capsys.readouterr().err.strip() == ("warmup.py: error: --solvers: unknown solver 'nope'; one of beam, "
-                                                "exact, greedy, lns, mcts, policy, ramp, random, sample")
+def test_warmup_compiles_the_kernels_of_the_kinds_it_runs(capsys):
+    from eosp.kinds.eosbench import passes
+
+    assert main(["--kinds", "eosbench", "onera"]) == 0
+    assert "[warmup] kernels of every kind compiled and cached" in capsys.readouterr().out
+    assert isinstance(passes._arcs, numba.core.registry.CPUDispatcher) and passes._arcs.signatures  # the pass arcs
+
+
+def test_warmup_refuses_an_unknown_kind(capsys):
+    assert main(["--kinds", "fleet", "nope"]) == 2
+    assert capsys.readouterr().err.strip() == ("warmup.py: error: --kinds: unknown kind 'nope'; one of single-pass, "
+                                                "fleet, onera, eosbench")
