@@ -13,6 +13,7 @@ from eosp.fleet.geometry import Geometry
 from eosp.fleet.io import read_fleet, read_schedule, write_fleet
 from eosp.fleet.opportunities import compute
 from eosp.jobs import solve_fleet as job_mod
+from eosp.kinds.fleet.raypool import RayPassPool
 from eosp.kinds.fleet.config import FleetConfig
 
 ROUNDS = 2
@@ -113,7 +114,7 @@ def test_ray_sweeps_with_one_and_two_actors_give_the_in_process_schedule(cluster
 
     def run(workers, pool=True):
         cfg = FleetConfig(pass_solver="exact", rounds=ROUNDS, time_limit=None, workers=workers, seed=4)
-        ray_pool = job_mod.RayPassPool(driver, cfg) if pool else None
+        ray_pool = RayPassPool(driver, cfg) if pool else None
         prob = driver if pool else full
         try:
             sol = solve(fleet, opps, cfg, problem=prob, pool=ray_pool)
@@ -170,7 +171,7 @@ def test_four_actors_on_four_nodes_give_the_in_process_schedule(clustered_fleet_
     two_nodes.wait_for_nodes()
     pool = None
     try:
-        pool = job_mod.RayPassPool(driver, cfg)
+        pool = RayPassPool(driver, cfg)
         assert len(set(pool.nodes)) == 4  # one actor on each node
         assert result(solve(fleet, opps, cfg, problem=driver, pool=pool)) == alone
         assert pool.sweeps >= 1 and pool.repairs >= 1 and pool.faults == 0 and not driver.built
@@ -209,7 +210,7 @@ def test_actors_repair_the_batteries_of_their_satellites_as_the_driver_does(two_
         ray.init(address=two_nodes.address)
     for fault in ("", "1"):
         monkeypatch.setenv("EOSP_FAULT_KILL_ACTOR_REPAIR", fault)
-        pool = job_mod.RayPassPool(prob, FleetConfig(pass_solver="exact", workers=2))
+        pool = RayPassPool(prob, FleetConfig(pass_solver="exact", workers=2))
         try:
             assert len({int(pool.owner[p]) for p in range(len(prob.passes))}) == 2
             assert np.array_equal(pool.repair_rows(rows, None), here)
@@ -304,7 +305,6 @@ def test_a_lost_node_costs_at_most_time(fleet_dir, two_nodes, monkeypatch, worke
 
     import ray
 
-    from eosp.jobs.solve_fleet import RayPassPool
     from eosp.kinds.fleet.pool import solve_priced_pass
     from eosp.kinds.fleet.problem import Problem
     from eosp.kinds.fleet.solve import solve

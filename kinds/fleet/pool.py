@@ -1,5 +1,5 @@
 """What solves the passes of a price round and of a coordinate-descent sweep: :class:`PassPool`, and its
-in-process and forked implementations (the Ray actors' is :class:`jobs.solve_fleet.RayPassPool`).
+in-process and forked implementations (the Ray actors' is :class:`eosp.kinds.fleet.raypool.RayPassPool`).
 
 For a price round a pool takes pass ids, the task prices and the passes' energy prices (one vector each,
 :mod:`eosp.kinds.fleet.prices`), never utilities: whoever holds a pass's graph prices its tasks
