@@ -16,10 +16,10 @@ $(VENV)/.installed: pyproject.toml
 
 install: $(VENV)/.installed
 
-# the main job on small embedded defaults, then the kernels of every kind's first commands compiled (jobs/warmup.py)
+# the main job on small embedded defaults, then the kernels of every kind's first commands compiled (python -m eosp.cli.warmup)
 demo: install
 	$(PY) jobs/train.py --demo
-	$(PY) jobs/warmup.py
+	$(PY) -m eosp.cli.warmup
 
 # the tests without Ray on two xdist workers, then those with Ray one after another
 test: install

@@ -54,7 +54,7 @@ def test_a_first_schedule_after_the_limit_says_why(fleet_dir, tmp_path, capsys):
     assert re.search(r"\(the first schedule, found after the time limit at [\d.]+ s: [\d.]+ s of it compiling "
                      r"kernels[^,]*, [\d.]+ s building the pass graphs; reading took [\d.]+ s before\)", said), said
     r = Result(None, 0.0, timings={"compile": 12.3, "build": 0.5, "read": 2.0}, info={"first_schedule_s": 14.0})
-    assert late_because(r) == ("12.3 s of it compiling kernels (jobs/warmup.py compiles them once), 0.5 s building "
+    assert late_because(r) == ("12.3 s of it compiling kernels (python -m eosp.cli.warmup compiles them once), 0.5 s building "
                                "the pass graphs; reading took 2.0 s before")
     import numba
 

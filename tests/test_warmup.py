@@ -1,8 +1,8 @@
-"""jobs/warmup.py (run by `make demo`): every kind's first commands, their kernels left compiled."""
+"""eosp.cli.warmup (run by `make demo`): every kind's first commands, their kernels left compiled."""
 
 import numba
 
-from eosp.jobs.warmup import WARM, main
+from eosp.cli.warmup import WARM, main
 
 
 def test_every_registered_kind_is_warmed():
@@ -21,5 +21,5 @@ def test_warmup_compiles_the_kernels_of_the_kinds_it_runs(capsys):
 
 def test_warmup_refuses_an_unknown_kind(capsys):
     assert main(["--kinds", "fleet", "nope"]) == 2
-    assert capsys.readouterr().err.strip() == ("warmup.py: error: --kinds: unknown kind 'nope'; one of single-pass, "
+    assert capsys.readouterr().err.strip() == ("warmup: error: --kinds: unknown kind 'nope'; one of single-pass, "
                                                 "fleet, onera, eosbench")

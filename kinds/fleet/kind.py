@@ -146,11 +146,11 @@ PAGE = ("One self-contained HTML page of a constellation day: Gantt per satellit
 
 def late_because(res: Result) -> str:
     """Why a first schedule came after the time limit, in the solve's line: the seconds spent compiling kernels not
-    yet cached (`make demo`, or jobs/warmup.py, compiles them once), those building the pass graphs (their share
+    yet cached (`make demo`, or ``python -m eosp.cli.warmup``, compiles them once), those building the pass graphs (their share
     of compiling included), and reading, before the limit started counting."""
     t = res.timings
     compiling = t.get("compile", 0.0)
-    hint = " (jobs/warmup.py compiles them once)" if compiling >= 1.0 else ""
+    hint = " (python -m eosp.cli.warmup compiles them once)" if compiling >= 1.0 else ""
     return (f"{compiling:.1f} s of it compiling kernels{hint}, {t.get('build', 0.0):.1f} s building the pass graphs; "
             f"reading took {t.get('read', 0.0):.1f} s before")
 

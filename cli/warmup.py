@@ -1,7 +1,7 @@
 """Compile the kernels of every kind's first commands, so that a planner's first solve answers in its time limit.
 
-    python jobs/warmup.py                     # make demo runs it; a container image can run it at build time
-    python jobs/warmup.py --kinds fleet       # one kind only
+    python -m eosp.cli.warmup                 # make demo runs it; a container image can run it at build time
+    python -m eosp.cli.warmup --kinds fleet   # one kind only
 
 The project's hot loops are numba kernels compiled on first use and cached beside the package (``__pycache__``);
 on a fresh install the first constellation solve spent 12 s of a 10 s limit compiling, and the first learned
@@ -205,11 +205,11 @@ def run(cfg: WarmupConfig) -> dict[str, float]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    return run_job(_main, argv, "warmup.py")
+    return run_job(_main, argv, "warmup")
 
 
 def _main(argv: list[str] | None) -> int:
-    p = Parser(prog="warmup.py", description=__doc__.splitlines()[0])
+    p = Parser(prog="python -m eosp.cli.warmup", description=__doc__.splitlines()[0])
     add_config_args(p, WarmupConfig)
     cfg = config_from_args(WarmupConfig, p.parse_args(argv))
     t0 = time.perf_counter()
