@@ -5,7 +5,7 @@ PYTHON ?= python3
 VENV   ?= .venv
 PY     := $(VENV)/bin/python
 
-.PHONY: install demo test test-all bench platform-up platform-down
+.PHONY: install demo test test-extended test-all bench platform-up platform-down
 
 # (setuptools prints an informational notice for every editable install of a mapped package layout: silenced)
 $(VENV)/.installed: pyproject.toml
@@ -21,10 +21,14 @@ demo: install
 	$(PY) jobs/train.py --demo
 	$(PY) -m eosp.cli.warmup
 
-# the tests without Ray on two xdist workers, then those with Ray one after another
+# the tests without Ray on two xdist workers, then those with Ray one after another (within 10 minutes on 2 cores);
+# the extended suite: Ray services and jobs under faults, training variants, the README's blocks (CI runs both)
 test: install
-	$(PY) -m pytest -q -n 2 -m "not slow and not ray" --durations=10
-	$(PY) -m pytest -q -m "ray and not slow" --durations=10
+	$(PY) -m pytest -q -n 2 -m "not slow and not ray and not extended" --durations=10
+	$(PY) -m pytest -q -m "ray and not slow and not extended" --durations=10
+
+test-extended: install
+	$(PY) -m pytest -q -m "extended and not slow" --durations=10
 
 test-all: install
 	$(PY) -m pytest -q -m ""

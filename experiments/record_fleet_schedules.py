@@ -31,7 +31,6 @@ from pathlib import Path
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parents[1]
 SPLITS = {"test": 5, "test_easy": 5, "test_hard": 5, "test_horizon_2022": 5, "train": 10}
 VARIANT_CASES = ("test-case_0001", "test_hard-case_0005", "test_horizon_2022-case_0001")
 VARIANTS = {"uniform": ["--price-step", "uniform"], "energy-bound": ["--energy-bound", "true"],
@@ -84,9 +83,8 @@ def digest(fleet_dir: Path, schedule: Path) -> dict:
 
 
 def prepare(astro: Path, work: Path) -> dict[str, Path]:
-    """The fleet directories and ONERA instances of the record, made under `work` once."""
-    from eosp.cli.warmup import onera_instance
-
+    """The fleet directories and ONERA instances of the record, made under `work` once (so that another version of
+    the code, on the import path, reads the same inputs)."""
     dirs = {}
     cases = astro / "benchmarks" / "aeossp_standard" / "dataset" / "cases"
     for split, n in SPLITS.items():
@@ -105,6 +103,8 @@ def prepare(astro: Path, work: Path) -> dict[str, Path]:
         name = f"onera-{n}"
         d = work / "fleets" / name
         if not d.exists():
+            from eosp.cli.warmup import onera_instance
+
             pb = work / f"{name}.pb"
             pb.write_text(onera_instance(n, seed))
             cli(["import", pb, "--out", d])
@@ -137,7 +137,7 @@ def record_ray(work: Path, fleet_dir: Path, name: str) -> list[dict]:
             import shutil
 
             shutil.rmtree(run)
-        argv = [sys.executable, str(ROOT / "jobs" / "solve_fleet.py"), "--fleet-dir", str(fleet_dir), "--run-dir",
+        argv = [sys.executable, "-m", "eosp.jobs.solve_fleet", "--fleet-dir", str(fleet_dir), "--run-dir",
                 str(run), "--fleet.time-limit", "0", "--fleet.rounds", "6", "--mlflow-uri",
                 f"sqlite:///{work / 'mlflow.db'}", "--ray.num-cpus", "2", *extra]
         t0 = time.perf_counter()
