@@ -30,14 +30,15 @@ def main(argv: list[str] | None = None) -> int:
     from eosp.jobs.train_prices import read_problem
     from eosp.kinds.fleet.config import FleetConfig
     from eosp.kinds.fleet.coordinator import Coordinator
+    from eosp.kinds.fleet.construct import construct, descend
 
     prob = read_problem(args.fleet)
     fleet, sun = prob.fleet, prob.sun
     b, att = fleet.satellites.battery, fleet.satellites.attitude
     coord = Coordinator(prob, FleetConfig(rounds=1, time_limit=None))
     first = coord.empty()
-    coord.construct(np.argsort(prob.pass_time[:, 0], kind="stable"), primal=first, whole=True)
-    coord.descend(first, list(range(len(prob.passes))), None)
+    construct(coord, np.argsort(prob.pass_time[:, 0], kind="stable"), primal=first, whole=True)
+    descend(coord, first, list(range(len(prob.passes))), None)
     print(f"first schedule before the repair: WCR {first.value / prob.total_weight:.4f}")
     for sat, tl in enumerate(coord.timelines(first)):
         if not tl.start:

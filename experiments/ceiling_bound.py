@@ -22,6 +22,7 @@ def main(argv: list[str] | None = None) -> int:
     from eosp.jobs.train_prices import read_problem
     from eosp.kinds.fleet.config import FleetConfig
     from eosp.kinds.fleet.coordinator import Coordinator
+    from eosp.kinds.fleet.dual import ceiling_round
     from eosp.memory import peak_rss_gb
 
     for path in args.fleets:
@@ -31,7 +32,7 @@ def main(argv: list[str] | None = None) -> int:
         coord = Coordinator(prob, FleetConfig(rounds=1, time_limit=None))
         W = prob.total_weight
         t = time.perf_counter()
-        ceiling = coord.ceiling_round(None)
+        ceiling = ceiling_round(coord, None)
         print(f"{path}: conflict-free {coord.conflict_free() / W:.4f}, ceiling prices' L {ceiling / W:.4f} "
               f"({coord.bound_source}); read and pass graphs {graphs_s:.0f} s, ceiling round "
               f"{time.perf_counter() - t:.1f} s, peak {peak_rss_gb():.1f} GB", flush=True)

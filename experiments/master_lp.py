@@ -33,6 +33,8 @@ def main(argv: list[str] | None = None) -> int:
     from eosp.jobs.train_prices import read_problem
     from eosp.kinds.fleet.config import FleetConfig
     from eosp.kinds.fleet.coordinator import Coordinator
+    from eosp.kinds.fleet.dual import _dual_round
+    from eosp.kinds.fleet.loop import run
     from eosp.kinds.fleet.master import SMOOTHING, quiet_highs
     from eosp.kinds.fleet.problem import path_slew_wh, path_tasks, path_wh
     from eosp.kinds.fleet.warmstart import heuristic_prices
@@ -41,7 +43,7 @@ def main(argv: list[str] | None = None) -> int:
     W, w, n, P = prob.total_weight, prob.weight, len(prob.weight), len(prob.passes)
     coord = Coordinator(prob, FleetConfig(rounds=1, time_limit=8.0, energy_bound=args.energy_rows))
     t0 = time.perf_counter()
-    coord.run()
+    run(coord)
     print(f"first schedule {coord.best.value / W:.4f} in {time.perf_counter() - t0:.1f} s; "
           f"energy windows {len(coord.windows)}", flush=True)
     win = coord.windows
@@ -80,7 +82,7 @@ def main(argv: list[str] | None = None) -> int:
     t1 = time.perf_counter()
     while time.perf_counter() - t1 < args.time:
         coord.prices.mu = mu * win.scale_wh
-        total, _, _, _, paths = coord._dual_round(lam, None)
+        total, _, _, _, paths = _dual_round(coord, lam, None)
         if total < lowest:
             lowest, centre, centre_mu = total, lam.copy(), mu.copy()
         added = add(paths)

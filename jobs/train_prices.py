@@ -88,29 +88,14 @@ def reference_prices(prob, rounds: int):
 
     from eosp.kinds.fleet.config import FleetConfig
     from eosp.kinds.fleet.coordinator import Coordinator
-
-    best = {"L": np.inf, "lam": np.zeros(len(prob.weight))}
-
-    class Recording(Coordinator):
-        def _keep(self, lam, before):
-            if self.bound_source == "lagrangian" and self.best_bound < before and self.best_bound < best["L"]:
-                best["L"], best["lam"] = self.best_bound, lam
-
-        def price_round(self, deadline):
-            lam, before = self.prices.lam.copy(), self.best_bound
-            total = super().price_round(deadline)
-            self._keep(lam, before)
-            return total
-
-        def ceiling_round(self, deadline):
-            before = self.best_bound
-            total = super().ceiling_round(deadline)
-            self._keep(self.ceiling_prices(), before)
-            return total
+    from eosp.kinds.fleet.loop import run
 
     t0 = time.perf_counter()
-    coord = Recording(prob, FleetConfig(rounds=rounds, time_limit=None))
-    coord.run()
+    coord = Coordinator(prob, FleetConfig(rounds=rounds, time_limit=None))
+    run(coord)
+    best = {"L": np.inf, "lam": np.zeros(len(prob.weight))}
+    if coord.bound_source == "lagrangian":  # the prices where the kept bound was proven (dual._bound_from)
+        best["L"], best["lam"] = coord.best_bound, coord.bound_lam
     return best["lam"], float(best["L"]), float(coord.best.value), time.perf_counter() - t0
 
 

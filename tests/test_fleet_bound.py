@@ -21,6 +21,7 @@ from eosp.fleet.passgraph import bound_problem, bridge_triples, build_passes, pr
 from eosp.fleet.slew import LineOfSight
 from eosp.graphs.discrete import DiscreteGraph, acq_ptr_from_node_acq
 from eosp.planning.labels import label_search
+from eosp.kinds.fleet.dual import ceiling_prices, ceiling_round
 from tests.test_fleet import fixture, strings
 
 SLOW = dict(rate=0.5, acc=0.1, settle=3.5, off_nadir=30.0)  # slower than the benchmark's slowest (0.9, 0.15)
@@ -371,9 +372,9 @@ def test_the_ceiling_prices_bound_the_brute_force_and_stay_below_conflict_free(w
     prob = Problem.build(fleet, compute(fleet, Geometry(fleet)))
     coord = Coordinator(prob, FleetConfig(rounds=1, time_limit=None))
     free = coord.conflict_free()
-    ceiling = coord.ceiling_round(None)
+    ceiling = ceiling_round(coord, None)
     best = brute_force(fleet)
-    lam = coord.ceiling_prices()
+    lam = ceiling_prices(coord)
     assert lam[[len(h) > 1 for h in prob.task_passes]].tolist() == fleet.tasks.weight[
         [len(h) > 1 for h in prob.task_passes]].tolist() and lam.sum() > 0
     assert best - 1e-9 <= ceiling <= free + 1e-9
@@ -393,7 +394,7 @@ def test_the_ceiling_bound_is_below_conflict_free_where_passes_are_crowded():
     opps = compute(fleet)
     prob = Problem.build(fleet, opps)
     coord = Coordinator(prob, FleetConfig(rounds=1, time_limit=None))
-    ceiling = coord.ceiling_round(None)
+    ceiling = ceiling_round(coord, None)
     assert ceiling < coord.conflict_free() - 1e-6
     sol = solve(fleet, opps, FleetConfig(rounds=3, time_limit=None), problem=prob)
     W = fleet.tasks.weight.sum()

@@ -16,10 +16,11 @@ from eosp.fleet.geometry import Geometry
 from eosp.fleet.opportunities import compute
 from eosp.fleet.passgraph import build_pass, lean_pass, walk
 from eosp.kinds.fleet.config import FleetConfig
-from eosp.kinds.fleet.coordinator import Coordinator, wave
+from eosp.kinds.fleet.coordinator import Coordinator
 from eosp.kinds.fleet.pool import InProcessPool
 from eosp.kinds.fleet.problem import Primal, Problem, rewalk, solve_pass
 from eosp.kinds.fleet.solve import solve
+from eosp.kinds.fleet.construct import construct, wave
 
 
 def crowded_fleet(seed: int):
@@ -118,7 +119,7 @@ def test_the_construction_in_waves_is_the_one_by_one_construction(pair, seed):
     rng = np.random.default_rng(seed)
     order = rng.permutation(len(full.passes))
     shift = full.weight * rng.uniform(0.0, 1.0, len(full.weight)) if seed else None
-    waves = coord.construct(order, shift)
+    waves = construct(coord, order, shift)
     alone = one_by_one(coord, order, shift)
     assert [p.tolist() for p in waves.paths] == [p.tolist() for p in alone.paths]
     assert np.array_equal(waves.served, alone.served) and waves.value == alone.value > 0

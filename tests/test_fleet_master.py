@@ -12,6 +12,8 @@ from scipy.optimize import linprog
 
 from eosp.fleet.geometry import Geometry
 from eosp.fleet.opportunities import compute
+from eosp.kinds.fleet.dual import _dual_round, price_round
+from eosp.kinds.fleet.loop import run
 from tests.test_fleet import synthetic_fleet
 
 
@@ -91,7 +93,8 @@ def test_a_master_slower_than_its_round_gives_way_to_weighted_steps_from_the_sta
     it started with; before that each such round takes a weighted step and keeps the master; the bound stays a
     bound."""
     from eosp.kinds.fleet.config import FleetConfig
-    from eosp.kinds.fleet.coordinator import MASTER_PATIENCE, Coordinator
+    from eosp.kinds.fleet.coordinator import Coordinator
+    from eosp.kinds.fleet.dual import MASTER_PATIENCE
     from eosp.kinds.fleet.master import Master
     from eosp.kinds.fleet.problem import Problem
 
@@ -100,18 +103,18 @@ def test_a_master_slower_than_its_round_gives_way_to_weighted_steps_from_the_sta
     coord = Coordinator(prob, FleetConfig(rounds=1, time_limit=None))
     start = prob.weight * 0.3
     coord.prices.lam = start.copy()
-    coord.price_round(None)  # solved in its time
+    price_round(coord, None)  # solved in its time
     assert coord.master is not None and coord.master.solved
     monkeypatch.setattr(Master, "duals", lambda self, deadline, limit, iterations=None: None)  # out of time
     for _ in range(MASTER_PATIENCE - 1):
         before = coord.prices.lam.copy()
-        coord.price_round(None)
+        price_round(coord, None)
         assert coord.master is not None  # one slow solve: kept
         assert not np.array_equal(coord.prices.lam, before)  # a weighted step for the round
-    coord.price_round(None)
+    price_round(coord, None)
     assert coord.master is None and not coord.converged
     assert np.array_equal(coord.prices.lam, start)
-    coord.price_round(None)  # a weighted step now
+    price_round(coord, None)  # a weighted step now
     assert not np.array_equal(coord.prices.lam, start)
     assert coord.best_bound >= full_lp(prob) / 1.0 - 1e-9
 
@@ -131,7 +134,7 @@ def test_a_master_that_never_solved_in_its_time_is_dropped_at_its_first_miss(mon
     start = prob.weight * 0.3
     coord.prices.lam = start.copy()
     monkeypatch.setattr(Master, "duals", lambda self, deadline, limit, iterations=None: None)  # out of time
-    coord.price_round(None)
+    price_round(coord, None)
     assert coord.master is None and np.array_equal(coord.prices.lam, start)
 
 
@@ -149,7 +152,7 @@ def test_the_master_time_limit_counts_from_the_time_already_run():
     master = Master(prob)
     rng = np.random.default_rng(0)
     for _ in range(5):  # columns from rounds at random prices, a solve after each
-        got = coord._dual_round(rng.uniform(0.0, 1.0, len(prob.weight)) * prob.weight, None)
+        got = _dual_round(coord, rng.uniform(0.0, 1.0, len(prob.weight)) * prob.weight, None)
         master.add(got[4])
         before = float(master._h.getRunTime())
         assert master.duals(None, 0.5) is not None
@@ -171,7 +174,7 @@ def test_with_fixed_rounds_the_master_is_limited_in_iterations_not_seconds():
     prob = Problem.build(fleet, compute(fleet, Geometry(fleet)))
     coord = Coordinator(prob, FleetConfig(rounds=1, time_limit=None))
     rng = np.random.default_rng(0)
-    rounds = [coord._dual_round(rng.uniform(0.0, 1.0, len(prob.weight)) * prob.weight, None)[4] for _ in range(4)]
+    rounds = [_dual_round(coord, rng.uniform(0.0, 1.0, len(prob.weight)) * prob.weight, None)[4] for _ in range(4)]
 
     def master():
         m = Master(prob)
@@ -199,7 +202,7 @@ def test_the_integer_master_is_a_schedule_of_its_columns_at_least_the_start(n_ta
     fleet = narrow_fleet(n_tasks, seed)
     prob = Problem.build(fleet, compute(fleet, Geometry(fleet)))
     coord = Coordinator(prob, FleetConfig(rounds=12, time_limit=None, price_step="lp", seed=seed))
-    coord.run()
+    run(coord)
     master = coord.master
     assert master is not None and master.columns > 0
     sel = master.integer(coord.best.paths, 30.0)
@@ -244,7 +247,7 @@ def test_the_integer_master_with_energy_rows_keeps_every_window_with_the_checker
     prob = Problem.build(fleet, compute(fleet, Geometry(fleet)))
     coord = Coordinator(prob, FleetConfig(rounds=12, time_limit=None, price_step="lp", seed=seed,
                                           integer_energy=False))
-    coord.run()
+    run(coord)
     master = coord.master
     for p, path in enumerate(coord.round_paths):  # more columns: the last round's optima, battery or not
         master.add([path if q == p else np.zeros(0, np.int64) for q in range(len(prob.passes))])

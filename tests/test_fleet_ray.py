@@ -102,12 +102,14 @@ def test_ray_sweeps_with_one_and_two_actors_give_the_in_process_schedule(cluster
     construction on the actors, paths re-walked from the geometry) and builds none while no actor is lost."""
     import ray
 
-    from eosp.kinds.fleet import coordinator as coord_mod
+    from eosp.kinds.fleet import construct as coord_mod
     from eosp.kinds.fleet.problem import Problem
     from eosp.kinds.fleet.solve import solve
 
+    from eosp.kinds.fleet import battery
+
     monkeypatch.setattr(coord_mod, "SWEEP_IN_PROCESS", 2)
-    monkeypatch.setattr(coord_mod, "REPAIR_AWAY", 1)
+    monkeypatch.setattr(battery, "REPAIR_AWAY", 1)
     fleet, opps = read_fleet(clustered_fleet_dir)
     full = Problem.build(fleet, opps)
     driver = Problem.build(fleet, opps, full.geo, lean=True) if lean else full
@@ -148,7 +150,7 @@ def test_four_actors_on_four_nodes_give_the_in_process_schedule(clustered_fleet_
     nowhere), and every battery repair; the schedule, value, bound and solve count of this process alone.  The nodes leave afterwards."""
     import ray
 
-    from eosp.kinds.fleet import coordinator as coord_mod
+    from eosp.kinds.fleet import construct as coord_mod
     from eosp.kinds.fleet.problem import Problem
     from eosp.kinds.fleet.solve import solve
 

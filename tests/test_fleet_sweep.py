@@ -12,11 +12,13 @@ from eosp.fleet.generate import FleetGenConfig, generate
 from eosp.fleet.geometry import NUMERICAL_EPS, Geometry
 from eosp.fleet.opportunities import compute
 from eosp.fleet.slew import LineOfSight
-from eosp.kinds.fleet import coordinator as coord_mod
+from eosp.kinds.fleet import construct as coord_mod
 from eosp.kinds.fleet.config import FleetConfig
 from eosp.kinds.fleet.coordinator import Coordinator
 from eosp.kinds.fleet.pool import ForkPool, InProcessPool
 from eosp.kinds.fleet.problem import Primal, Problem, path_tasks, rewalk, solve_pass
+from eosp.kinds.fleet.construct import _solve_batch, construct, descend
+from eosp.kinds.fleet.recovery import _take_in_order
 from tests.test_fleet import synthetic_fleet
 
 
@@ -38,7 +40,7 @@ def start(coord: Coordinator, seed: int) -> Primal:
     rng = np.random.default_rng(seed)
     n = len(coord.prob.passes)
     shift = coord.prob.weight * rng.uniform(0.0, 1.0, len(coord.prob.weight))
-    return coord.construct(rng.permutation(n)[: n // 2 + 1], shift)
+    return construct(coord, rng.permutation(n)[: n // 2 + 1], shift)
 
 
 def consistent(prob: Problem, primal: Primal) -> None:
@@ -61,7 +63,7 @@ def test_the_sweep_is_valid_and_never_worse_than_its_start(crowded, seed):
         primal = start(coord, seed)
         before = primal.value
         consistent(prob, primal)
-        coord.descend(primal, list(range(len(prob.passes))), None)
+        descend(coord, primal, list(range(len(prob.passes))), None)
         consistent(prob, primal)
         assert primal.value >= before - 1e-12
         assert validate(prob.fleet, coord.schedule(primal), prob.geo).valid
@@ -81,7 +83,7 @@ def test_frozen_passes_are_never_solved_again(crowded):
     frozen[::3] = True
     coord = Coordinator(prob, FleetConfig(rounds=1, time_limit=None), initial=primal.copy(), frozen=frozen)
     kept = [primal.paths[p] for p in np.flatnonzero(frozen)]
-    coord.descend(primal, list(range(len(prob.passes))), None)
+    descend(coord, primal, list(range(len(prob.passes))), None)
     assert all(np.array_equal(primal.paths[p], k) for p, k in zip(np.flatnonzero(frozen), kept))
     consistent(prob, primal)
 
@@ -89,7 +91,7 @@ def test_frozen_passes_are_never_solved_again(crowded):
 def sweep(prob: Problem, pool, seed: int) -> tuple[list, float, int]:
     coord = Coordinator(prob, FleetConfig(rounds=1, time_limit=None), pool=pool)
     primal = start(coord, seed)
-    coord.descend(primal, list(range(len(prob.passes))), None)
+    descend(coord, primal, list(range(len(prob.passes))), None)
     return [p.tolist() for p in primal.paths], primal.value, coord.pass_solves
 
 
@@ -150,11 +152,11 @@ def test_a_memo_hit_is_the_pass_solved_again(crowded):
     prob = crowded[1]
     coord = Coordinator(prob, FleetConfig(rounds=1, time_limit=None))
     primal = start(coord, 3)
-    coord.descend(primal, list(range(len(prob.passes))), None)
+    descend(coord, primal, list(range(len(prob.passes))), None)
     n = len(prob.passes)
     util, offsets = coord._batch_utilities(primal, list(range(n)))
     hits_before = coord.memo_hits
-    got = coord._solve_batch(list(range(n)), util, offsets, None)
+    got = _solve_batch(coord, list(range(n)), util, offsets, None)
     assert coord.memo_hits > hits_before
     for p in range(n):
         fresh = solve_pass(prob, p, util[offsets[p]:offsets[p + 1]], coord.cfg)
@@ -213,7 +215,7 @@ def test_after_the_sweep_no_pass_alone_is_worth_more(kind, seed):
     assert sum(len(h) > 1 for h in prob.task_passes) >= 5  # contested tasks: a sweep has conflicts to settle
     coord = Coordinator(prob, FleetConfig(rounds=1, time_limit=None))
     primal = coord.empty()
-    coord.descend(primal, list(range(len(prob.passes))), None)
+    descend(coord, primal, list(range(len(prob.passes))), None)
     consistent(prob, primal)
     checked = 0
     for p, pg in enumerate(prob.passes):
@@ -311,7 +313,7 @@ def test_the_recovery_takes_the_paths_in_order_as_one_pass_after_another(crowded
             free = coord._available(want, p)[prob.passes[p].graph.node_acq[path]]
             coord._assign(want, p, path if free.all() else prob.rewalk(p, path[free]))
         got = coord.empty()
-        coord._take_in_order(got, order, [paths[p] for p in order])
+        _take_in_order(coord, got, order, [paths[p] for p in order])
         assert np.array_equal(got.served, want.served) and got.value == want.value
         assert all(np.array_equal(a, b) for a, b in zip(got.paths, want.paths))
         cut = sum(len(want.paths[p]) < len(paths[p]) for p in order)

@@ -15,6 +15,7 @@ from eosp.fleet.model import Fleet, Schedule
 from eosp.fleet.opportunities import Opportunities
 from eosp.kinds.fleet.config import FleetConfig, GreedyConfig
 from eosp.kinds.fleet.coordinator import Coordinator
+from eosp.kinds.fleet.loop import run
 from eosp.kinds.fleet.pool import ForkPool, PassPool
 from eosp.kinds.fleet.prices import Prices
 from eosp.kinds.fleet.problem import Primal, Problem, primal_of
@@ -71,9 +72,8 @@ def solve(fleet: Fleet, opps: Opportunities, cfg: FleetConfig | None = None, pro
     `resume`: prices and bound of a stopped run (its best schedule as `initial`); `t0`: when the fleet was read
     (``time.perf_counter()``; default: now): ``cfg.time_limit`` counts from it and bounds everything after it
     (the pass graphs when `problem` is not given, the rounds, the battery repairs, the final check: the rounds
-    stop early by the final check's estimate, :meth:`Coordinator.check_estimate`); when the first schedule comes
+    stop early by the final check's estimate, :func:`eosp.kinds.fleet.loop.check_estimate`); when the first schedule comes
     after the limit, it is returned as soon as it is repaired and checked (``info["first_after_limit"]``)."""
-    from eosp.fleet.check import validate
 
     t0 = time.perf_counter() if t0 is None else t0
     cfg = cfg or FleetConfig()
@@ -100,20 +100,12 @@ def solve(fleet: Fleet, opps: Opportunities, cfg: FleetConfig | None = None, pro
         if resume.best_bound < coord.best_bound:
             coord.best_bound, coord.bound_source = resume.best_bound, resume.bound_source
     try:
-        best = coord.run()
+        best = run(coord)
     finally:
         if own_pool:
             pool.close()
     t_final = time.perf_counter()
-    sched = coord.schedule(best)
-    res = validate(fleet, sched, prob.geo)
-    dropped = 0
-    while not res.valid and len(sched):
-        bad = sorted({v.action for v in res.violations if v.action >= 0}) or [0]
-        keep = np.setdiff1d(np.arange(len(sched)), bad)
-        sched = Schedule(sched.satellite[keep], sched.task[keep], sched.start_us[keep], sched.end_us[keep])
-        dropped += len(bad)
-        res = validate(fleet, sched, prob.geo)
+    sched, res, dropped = checked(fleet, coord.schedule(best), prob.geo)
     W = prob.total_weight
     value = float(res.metrics.get("WCR", 0.0))
     if coord.bound_source == "lagrangian" and W > 0 and value > coord.bound / W + 1e-9:
@@ -144,6 +136,22 @@ def solve(fleet: Fleet, opps: Opportunities, cfg: FleetConfig | None = None, pro
                 else "no price round finished")}
     hist = [(t, v / W, b / W) for t, v, b in coord.history]
     return FleetSolution(sched, value, min(1.0, bound / W) if W > 0 else 0.0, hist, info, res)
+
+
+def checked(fleet: Fleet, sched: Schedule, geo) -> tuple[Schedule, object, int]:
+    """The schedule as the checker accepts it: the actions it rejects dropped (never expected: the pass graphs and
+    the battery repair use its rules), its verdict, and how many were dropped."""
+    from eosp.fleet.check import validate
+
+    res = validate(fleet, sched, geo)
+    dropped = 0
+    while not res.valid and len(sched):
+        bad = sorted({v.action for v in res.violations if v.action >= 0}) or [0]
+        keep = np.setdiff1d(np.arange(len(sched)), bad)
+        sched = Schedule(sched.satellite[keep], sched.task[keep], sched.start_us[keep], sched.end_us[keep])
+        dropped += len(bad)
+        res = validate(fleet, sched, geo)
+    return sched, res, dropped
 
 
 def solve_fleet(data, cfg: FleetConfig, initial: Schedule | None = None,
