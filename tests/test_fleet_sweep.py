@@ -18,6 +18,7 @@ from eosp.kinds.fleet.coordinator import Coordinator
 from eosp.kinds.fleet.pool import ForkPool, InProcessPool
 from eosp.kinds.fleet.problem import Primal, Problem, path_tasks, rewalk, solve_pass
 from eosp.kinds.fleet.construct import _solve_batch, construct, descend
+from eosp.kinds.fleet.dual import _path_stats
 from eosp.kinds.fleet.recovery import _take_in_order
 from tests.test_fleet import synthetic_fleet
 
@@ -70,7 +71,7 @@ def test_the_sweep_is_valid_and_never_worse_than_its_start(crowded, seed):
     # from an empty schedule every pass wants every task at once: the settling must keep each task once
     empty = Coordinator(crowded[0], FleetConfig(rounds=1, time_limit=None))
     primal = empty.empty()
-    empty.descend(primal, list(range(len(crowded[0].passes))), None)
+    descend(empty, primal, list(range(len(crowded[0].passes))), None)
     consistent(crowded[0], primal)
     assert primal.value > 0 and validate(crowded[0].fleet, empty.schedule(primal), crowded[0].geo).valid
 
@@ -121,12 +122,12 @@ def test_fixed_rounds_give_the_same_schedule_with_one_and_two_workers(crowded):
     assert (one.value, one.bound, one.info["pass_solves"]) == (two.value, two.bound, two.info["pass_solves"])
 
 
-class Forgetful(Coordinator):
-    """The coordinator without its memo: every pass of a sweep or a wave solved again."""
-
-    def _solve_batch(self, batch, util, offsets, deadline):
-        self._memo_ok[:] = False
-        return super()._solve_batch(batch, util, offsets, deadline)
+def forgetful(solve_batch):
+    """The sweeps' and waves' batch solve without its memo: every pass solved again."""
+    def run(c, batch, util, offsets, deadline):
+        c._memo_ok[:] = False
+        return solve_batch(c, batch, util, offsets, deadline)
+    return run
 
 
 def test_the_memo_changes_no_schedule_only_the_solves(crowded, monkeypatch):
@@ -137,7 +138,7 @@ def test_the_memo_changes_no_schedule_only_the_solves(crowded, monkeypatch):
     for prob in crowded:
         cfg = FleetConfig(rounds=3, seed=1, time_limit=None)
         memo = solve_mod.solve(prob.fleet, prob.opps, cfg, problem=prob)
-        monkeypatch.setattr(solve_mod, "Coordinator", Forgetful)
+        monkeypatch.setattr(coord_mod, "_solve_batch", forgetful(coord_mod._solve_batch))
         again = solve_mod.solve(prob.fleet, prob.opps, cfg, problem=prob)
         monkeypatch.undo()
         assert memo.schedule.task.tolist() == again.schedule.task.tolist()
@@ -262,7 +263,7 @@ def test_a_rounds_serve_counts_and_energies_are_each_paths(crowded, seed):
             nodes = rng.permutation(np.arange(1, len(pg.graph.node_acq)))[:rng.integers(0, 4)]
             paths.append(np.sort(nodes[np.unique(pg.graph.node_acq[nodes], return_index=True)[1]]))
         for ps in (paths, start(coord, seed).paths):
-            count, wh = coord._path_stats(ps)
+            count, wh = _path_stats(coord, ps)
             want = np.zeros(len(prob.weight))
             for p, path in enumerate(ps):
                 want[path_tasks(prob, p, path)] += 1
