@@ -24,6 +24,7 @@ demo: install
 # the tests without Ray on two xdist workers, then those with Ray one after another (within 10 minutes on 2 cores);
 # the extended suite: Ray services and jobs under faults, training variants, the README's blocks (CI runs both)
 test: install
+	$(VENV)/bin/ruff check --quiet .
 	$(PY) -m pytest -q -n 2 -m "not slow and not ray and not extended" --durations=10
 	$(PY) -m pytest -q -m "ray and not slow and not extended" --durations=10
 

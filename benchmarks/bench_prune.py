@@ -92,7 +92,7 @@ def main() -> None:
           f"{t['fifo_violating']} with FIFO violations, {time.perf_counter() - t0:.0f} s")
     print(f"RAMP (beam {a.beam}) on the unpruned graph below Greedy: {t['ramp_unpruned_below_greedy']}")
     print("| rule | arcs kept | MDP best < unpruned optimum | worst MDP best / optimum | "
-          f"RAMP < RAMP unpruned | RAMP < Greedy |")
+          "RAMP < RAMP unpruned | RAMP < Greedy |")
     print("|---|---|---|---|---|---|")
     for r, k in c.items():
         print(f"| {r} | {k['arcs'] / t['arcs']:.1%} | {k['mdp_below_opt']} | {res['worst'][r]:.4f} | "

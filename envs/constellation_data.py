@@ -95,7 +95,6 @@ class PreparedFleet:
 def _sunlight(fleet: Fleet, geo: Geometry, total_us: int, half_us: int) -> tuple[np.ndarray, np.ndarray]:
     """(lit_half [K, H], lit_base [K, B]): see the module docstring."""
     sun = SunCache(geo)
-    base_us = geo.base_step_s * US
     half_t = np.arange(0, total_us + 1, half_us, dtype=np.int64)
     k_sats = len(fleet.satellites)
     lit_half = np.zeros((k_sats, len(half_t)), dtype=np.uint8)

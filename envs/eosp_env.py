@@ -201,7 +201,6 @@ class EOSPEnv(gym.Env):
             why = "out of range" if not 0 <= a < n else "masked (no arc from the last scheduled node to it)"
             raise InvalidAction(f"action {a} is not allowed: {why}; allowed: {np.flatnonzero(ep.mask).tolist()}")
         bufs = self._buffers()
-        cfg = self.cfg
         w, m = step_and_observe_fields(tuple(eg), tuple(ep), tuple(s.prepared.cand), a, self._obs_options(),
                                        (*bufs, self._plan_out))
         assert w >= 0

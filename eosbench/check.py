@@ -224,7 +224,7 @@ def _their_reasons(scenario: Scenario, schedule: Schedule, rules: Rules) -> dict
 
 def _generator_reason(scenario: Scenario, schedule: Schedule, i: int, windows: dict, rules: Rules) -> str | None:
     """The first of the generator's rules that assignment i breaks (see the module docstring), None if none."""
-    w, sats = scenario.windows, scenario.satellites
+    w = scenario.windows
     t, s = int(schedule.task[i]), int(schedule.satellite[i])
     start, end = int(schedule.start_us[i]), int(schedule.end_us[i])
     rows = windows.get((t, s), np.zeros(0, np.int64))

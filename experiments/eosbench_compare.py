@@ -95,7 +95,7 @@ def main() -> None:
         for r in rows:
             r.update(judge(scen, r["path"], their))
     name = f"{stem} ({len(scen.satellites)} sat., {len(scen.tasks)} tasks, read in {read_s:.1f} s)"
-    print(f"| scenario | schedule | TP | TCR | TM | BD | runtime s | valid doc./code | their checker | bound | gap |")
+    print("| scenario | schedule | TP | TCR | TM | BD | runtime s | valid doc./code | their checker | bound | gap |")
     print("|---|---|---|---|---|---|---|---|---|---|---|")
     for r in rows:
         tc = "-" if "their_first" not in r else \

@@ -32,7 +32,7 @@ from pathlib import Path
 
 import numpy as np
 
-from eosp.args import Parser, add_config_args, add_memory_arg, config_from_args, prefixed_config, run_job  # noqa: E402
+from eosp.args import Parser, add_config_args, add_memory_arg, config_from_args, run_job  # noqa: E402
 from eosp.config import RayConfig, choice, flatten  # noqa: E402
 from eosp.kinds.fleet.config import FleetConfig  # noqa: E402
 

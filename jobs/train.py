@@ -136,10 +136,10 @@ def main(argv: list[str] | None = None) -> int:
     return run_job(_main, argv, "train.py")
 
 
-def _main(argv: list[str] | None) -> int:
-    cfg, ns = parse(argv)
-    from eosp.jobs.preflight import (check_mlflow, make_run_dir, ray_nodes, require_cluster_fits, require_data,
-                                     require_findable, require_run_dir)
+def preflight(cfg: RunConfig, ns: argparse.Namespace) -> None:
+    """What is refused before Ray starts: the run dir (missing to resume, or not ours to replace), the data sets,
+    the starting checkpoint, an unreachable MLflow."""
+    from eosp.jobs.preflight import check_mlflow, require_data, require_findable, require_run_dir
 
     require_findable(cfg.train.run_dir, "--train.run-dir")
     run_dir = Path(cfg.train.run_dir) / cfg.train.run_name
@@ -153,6 +153,64 @@ def _main(argv: list[str] | None) -> int:
     if cfg.train.init_checkpoint and not Path(cfg.train.init_checkpoint).exists():
         raise InputError(f"--train.init-checkpoint {cfg.train.init_checkpoint}", "checkpoint not found")
     check_mlflow(cfg.train.mlflow_uri, "--train.mlflow-uri")
+
+
+def resumed(cfg: RunConfig, ns: argparse.Namespace, run_file: Path) -> tuple[RunConfig, str, int, float, list]:
+    """A resumed run's saved configuration (with the iterations asked now), MLflow run, iteration, best score and
+    history; flags given beside --train.resume are ignored, and said."""
+    prev = json.loads(run_file.read_text())
+    given = {k for k in vars(ns) if "." in k and k not in ("train.resume", "train.iterations", "train.run_name",
+                                                             "train.run_dir")}
+    if given:
+        print(f"[train] warning: --train.resume continues the saved configuration; ignoring "
+              f"{', '.join('--' + k.replace('_', '-') for k in sorted(given))}", file=sys.stderr)
+    cfg = from_dict(RunConfig, {**prev["config"], "train": {**prev["config"]["train"],
+                                                             "iterations": cfg.train.iterations, "resume": True}})
+    return (cfg, prev["mlflow_run_id"], prev["iteration"], prev.get("best_score", float("-inf")),
+            prev.get("history", []))
+
+
+def say_done(cfg: RunConfig, ns: argparse.Namespace, history: list, start_iter: int, wall: float) -> None:
+    """The run's closing lines: iterations done, the validation against the baselines and what it means (demo)."""
+    t = cfg.train
+    summary = history[-1] if history else {}
+    done = history[-1]["iteration"] - start_iter if history else 0  # fewer than asked when the time budget ended it
+    print(f"[train] done: {t.run_name}, {done} iterations this session in {wall:.0f} s; "
+          f"checkpoints in {Path(t.run_dir) / t.run_name / 'checkpoints'}")
+    if "val/ratio_to_greedy" in summary:
+        print("[train] validation (greedy decoding) vs baselines:")
+        for s in ("greedy", "ramp"):
+            print(f"  {s:7s} mean {summary[f'val/{s}_mean']:.6g}  policy/{s} {summary[f'val/ratio_to_{s}']:.4f}  "
+                  f"wins/ties/losses {summary[f'val/wins_vs_{s}']:.0f}/{summary[f'val/ties_vs_{s}']:.0f}/"
+                  f"{summary[f'val/losses_vs_{s}']:.0f}")
+    if ns.demo and "val/ratio_to_greedy" in summary:
+        show_shipped(cfg, wall)
+
+
+def log_artifacts(history: list, run_dir: Path, validator) -> None:
+    """The run's artifacts: the learning curve, the agent as an MLflow model (loaded from code + weights, no
+    pickle), the validation reports of the final checkpoint (the best, else the last)."""
+    import mlflow
+
+    from eosp.training.plots import learning_curve
+
+    if history:
+        png = learning_curve(history, run_dir / "learning_curve")
+        mlflow.log_artifact(str(png))
+        mlflow.log_artifact(str(png.with_suffix(".svg")))
+    ckpt_dir = run_dir / "checkpoints"
+    final = ckpt_dir / ("best" if (ckpt_dir / "best").exists() else "last")
+    if final.exists():
+        log_agent_model(final)
+        if validator is not None:
+            log_validation_reports(validator, final, run_dir)
+
+
+def _main(argv: list[str] | None) -> int:
+    cfg, ns = parse(argv)
+    from eosp.jobs.preflight import make_run_dir, ray_nodes, require_cluster_fits
+
+    preflight(cfg, ns)
     import mlflow
     import ray
     import torch
@@ -160,7 +218,6 @@ def _main(argv: list[str] | None) -> int:
     from eosp.jobs.ray_init import init_ray
     from eosp.models.checkpoint import load_agent, load_start, save_agent
     from eosp.training.loop import Trainer
-    from eosp.training.plots import learning_curve
     from eosp.training.ppo import estimate_value_scale
     from eosp.training.validation import Validator, selection_score
 
@@ -174,16 +231,7 @@ def _main(argv: list[str] | None) -> int:
     run_id = None
     history: list[dict] = []
     if t.resume:
-        prev = json.loads(run_file.read_text())
-        given = {k for k in vars(ns) if "." in k and k not in ("train.resume", "train.iterations", "train.run_name",
-                                                                 "train.run_dir")}
-        if given:
-            print(f"[train] warning: --train.resume continues the saved configuration; ignoring "
-                  f"{', '.join('--' + k.replace('_', '-') for k in sorted(given))}", file=sys.stderr)
-        run_id, start_iter, best = prev["mlflow_run_id"], prev["iteration"], prev.get("best_score", float("-inf"))
-        history = prev.get("history", [])
-        cfg = from_dict(RunConfig, {**prev["config"], "train": {**prev["config"]["train"],
-                                                                 "iterations": t.iterations, "resume": True}})
+        cfg, run_id, start_iter, best, history = resumed(cfg, ns, run_file)
         t = cfg.train
     # before anything is written or built: can this Ray cluster run the env runners and the learner?
     require_cluster_fits(t, ray_nodes(), torch.cuda.device_count() if t.num_gpus_per_learner > 0 else None)
@@ -260,31 +308,11 @@ def _main(argv: list[str] | None) -> int:
             break
     wall = time.perf_counter() - t_start
 
-    # artifacts: learning curve, the agent as an MLflow model (loaded from code + weights, no pickle)
-    if history:
-        png = learning_curve(history, run_dir / "learning_curve")
-        mlflow.log_artifact(str(png))
-        mlflow.log_artifact(str(png.with_suffix(".svg")))
-    final = ckpt_dir / ("best" if (ckpt_dir / "best").exists() else "last")
-    if final.exists():
-        log_agent_model(final)
-        if validator is not None:
-            log_validation_reports(validator, final, run_dir)
+    log_artifacts(history, run_dir, validator)
     mlflow.log_metric("perf/train_wall_s", wall)
     mlflow.end_run()
     trainer.stop()
-    summary = history[-1] if history else {}
-    done = history[-1]["iteration"] - start_iter if history else 0  # fewer than asked when the time budget ended it
-    print(f"[train] done: {t.run_name}, {done} iterations this session in {wall:.0f} s; "
-          f"checkpoints in {ckpt_dir}")
-    if "val/ratio_to_greedy" in summary:
-        print("[train] validation (greedy decoding) vs baselines:")
-        for s in ("greedy", "ramp"):
-            print(f"  {s:7s} mean {summary[f'val/{s}_mean']:.6g}  policy/{s} {summary[f'val/ratio_to_{s}']:.4f}  "
-                  f"wins/ties/losses {summary[f'val/wins_vs_{s}']:.0f}/{summary[f'val/ties_vs_{s}']:.0f}/"
-                  f"{summary[f'val/losses_vs_{s}']:.0f}")
-    if ns.demo and "val/ratio_to_greedy" in summary:
-        show_shipped(cfg, wall)
+    say_done(cfg, ns, history, start_iter, wall)
     uri = mlflow_uri(cfg)
     where = f"open {uri}" if uri.startswith("http") else f"mlflow ui --backend-store-uri {uri}"
     print(f"[train] MLflow: {where}   (run {run_id}, experiment '{t.experiment}')")

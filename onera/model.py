@@ -244,17 +244,7 @@ def read_pb(path: str | os.PathLike) -> OneraFleet:
     dcols = _columns(path, dl_rows, dl_line, (int, int, int, int, float, float, float),
                      ("download id", "satellite", "window start", "window end", "latitude", "longitude", "altitude"))
     obs_line_a = np.asarray(obs_line, dtype=np.int64)
-    for what, cols, lines_, ranges in (
-            ("observation", ocols, obs_line, ((2, "window start", 0, TIME_MAX_S), (3, "window end", 0, TIME_MAX_S),
-                                              (4, "duration", 0, TIME_MAX_S), (5, "latitude", -90, 90),
-                                              (6, "longitude", -180, 180))),
-            ("download", dcols, dl_line, ((2, "window start", 0, TIME_MAX_S), (3, "window end", 0, TIME_MAX_S),
-                                          (4, "latitude", -90, 90), (5, "longitude", -180, 180)))):
-        for c, name, lo, hi in ranges:
-            bad = np.flatnonzero((cols[c] < lo) | (cols[c] > hi))
-            if len(bad):
-                k = bad[0]
-                raise InputError(path, f"line {lines_[k]}: {what} {name} {cols[c][k]} is out of range [{lo}, {hi}]")
+    _require_ranges(path, ocols, dcols, obs_line, dl_line)
     sats = np.unique(dcols[1])
     o_sat = np.searchsorted(sats, ocols[1])
     unknown = np.flatnonzero((o_sat >= len(sats)) | (sats[np.minimum(o_sat, max(len(sats) - 1, 0))] != ocols[1])
@@ -277,8 +267,40 @@ def read_pb(path: str | os.PathLike) -> OneraFleet:
     bad = np.flatnonzero((ocols[8] < 0) | (ocols[8] > 1) | ~np.isfinite(ocols[8]))
     if len(bad):
         raise InputError(path, f"line {obs_line[bad[0]]}: score {ocols[8][bad[0]]} is outside [0, 1]")
-    all_ids = np.concatenate([ocols[0], dcols[0]])
-    all_lines = np.concatenate([obs_line_a, np.asarray(dl_line, dtype=np.int64)])
+    _require_unique_ids(path, np.concatenate([ocols[0], dcols[0]]),
+                        np.concatenate([obs_line_a, np.asarray(dl_line, dtype=np.int64)]), r_id, r_line)
+    o_req = np.asarray(obs_req, dtype=np.int32)
+    slot = np.asarray(obs_slot, dtype=np.int32)
+    kind_a = np.asarray(r_kind, dtype=np.int8)
+    _check_pairs(path, kind_a, o_req, slot, o_sat, obs_line_a)
+    value = score_class(ocols[8]) * np.where(kind_a[o_req] == VIDEO, VIDEO_FACTOR, 1.0)
+    requests = Requests(np.asarray(r_id, np.int64), kind_a, np.asarray(r_first, np.int64), np.asarray(r_line, np.int64))
+    observations = Observations(ocols[0], o_req, o_sat.astype(np.int32), slot, ocols[2], ocols[3], ocols[4], ocols[5],
+                                ocols[6], ocols[7], ocols[8], value)
+    d_sat = np.searchsorted(sats, dcols[1]).astype(np.int32)
+    downloads = Downloads(dcols[0], d_sat, dcols[2], dcols[3], dcols[4], dcols[5], dcols[6])
+    return OneraFleet(sats.astype(np.int64), requests, observations, downloads, name=path.stem)
+
+
+def _require_ranges(path: Path, ocols: list, dcols: list, obs_line: list, dl_line: list) -> None:
+    """Observations' and downloads' times, durations and coordinates within their ranges (one line naming the first
+    value out of range)."""
+    for what, cols, lines_, ranges in (
+            ("observation", ocols, obs_line, ((2, "window start", 0, TIME_MAX_S), (3, "window end", 0, TIME_MAX_S),
+                                              (4, "duration", 0, TIME_MAX_S), (5, "latitude", -90, 90),
+                                              (6, "longitude", -180, 180))),
+            ("download", dcols, dl_line, ((2, "window start", 0, TIME_MAX_S), (3, "window end", 0, TIME_MAX_S),
+                                          (4, "latitude", -90, 90), (5, "longitude", -180, 180)))):
+        for c, name, lo, hi in ranges:
+            bad = np.flatnonzero((cols[c] < lo) | (cols[c] > hi))
+            if len(bad):
+                k = bad[0]
+                raise InputError(path, f"line {lines_[k]}: {what} {name} {cols[c][k]} is out of range [{lo}, {hi}]")
+
+
+def _require_unique_ids(path: Path, all_ids: np.ndarray, all_lines: np.ndarray, r_id: list, r_line: list) -> None:
+    """Observation and download ids (`all_ids`, read at `all_lines`) unique among themselves, request ids among
+    themselves (one line naming the second use and the first)."""
     order = np.argsort(all_ids, kind="stable")
     dup = np.flatnonzero(np.diff(all_ids[order]) == 0)
     if len(dup):
@@ -291,17 +313,6 @@ def read_pb(path: str | os.PathLike) -> OneraFleet:
             if rid in seen:
                 raise InputError(path, f"line {ln}: request id {rid} already used at line {seen[rid]}")
             seen[rid] = ln
-    o_req = np.asarray(obs_req, dtype=np.int32)
-    slot = np.asarray(obs_slot, dtype=np.int32)
-    kind_a = np.asarray(r_kind, dtype=np.int8)
-    _check_pairs(path, kind_a, o_req, slot, o_sat, obs_line_a)
-    value = score_class(ocols[8]) * np.where(kind_a[o_req] == VIDEO, VIDEO_FACTOR, 1.0)
-    requests = Requests(np.asarray(r_id, np.int64), kind_a, np.asarray(r_first, np.int64), np.asarray(r_line, np.int64))
-    observations = Observations(ocols[0], o_req, o_sat.astype(np.int32), slot, ocols[2], ocols[3], ocols[4], ocols[5],
-                                ocols[6], ocols[7], ocols[8], value)
-    d_sat = np.searchsorted(sats, dcols[1]).astype(np.int32)
-    downloads = Downloads(dcols[0], d_sat, dcols[2], dcols[3], dcols[4], dcols[5], dcols[6])
-    return OneraFleet(sats.astype(np.int64), requests, observations, downloads, name=path.stem)
 
 
 def _columns(path, rows, lines, types, names) -> list[np.ndarray]:

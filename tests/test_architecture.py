@@ -267,3 +267,47 @@ def test_wheel_holds_one_top_level_package_and_builds_without_warnings(tmp_path)
     for sub in ("envs", "models", "jobs", "sim", "cli", "training", "solvers", "search"):
         assert f"eosp/{sub}/__init__.py" in names
     assert "eosp/config.py" in names and "eosp/jobs/train.py" in names
+
+
+# Size ceilings: a reader takes in a function at once.  Across the package no function over MAX_FUNCTION_LINES; in
+# the fleet solver's package (kinds/fleet/, phases over one state) none over FLEET_FUNCTION_LINES, no class over
+# FLEET_CLASS_LINES, no module over FLEET_MODULE_LINES.  Listed ("path:function": why) are the numba kernels kept
+# whole; a split into inline="always" helpers compiles to the same loop, but is not yet made and measured.
+MAX_FUNCTION_LINES = 120
+FLEET_FUNCTION_LINES, FLEET_CLASS_LINES, FLEET_MODULE_LINES = 80, 300, 500
+LONG_KERNELS = {"planning/labels.py:_sweep": "the label sweep's one compiled loop (extension, dominance, bound)",
+                "planning/labels.py:window_sweep": "the windowed label sweep's one compiled loop"}
+
+
+def sizes(path: Path) -> list[tuple[str, str, int]]:
+    """(kind, name, lines) of every function, method and class of `path`."""
+    out = []
+    for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+        if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef, ast.ClassDef)):
+            kind = "class" if isinstance(node, ast.ClassDef) else "function"
+            out.append((kind, node.name, node.end_lineno - node.lineno + 1))
+    return out
+
+
+def test_functions_classes_and_modules_stay_small():
+    bad = []
+    for _, path in modules():
+        rel = path.relative_to(ROOT).as_posix()
+        fleet = rel.startswith("kinds/fleet/")
+        for kind, name, n in sizes(path):
+            if f"{rel}:{name}" in LONG_KERNELS:
+                continue
+            limit = (FLEET_CLASS_LINES if kind == "class" else FLEET_FUNCTION_LINES) if fleet else \
+                (None if kind == "class" else MAX_FUNCTION_LINES)
+            if limit is not None and n > limit:
+                bad.append(f"{rel}: {kind} {name} has {n} lines (at most {limit})")
+        lines = len(path.read_text(encoding="utf-8").splitlines())
+        if fleet and lines > FLEET_MODULE_LINES:
+            bad.append(f"{rel} has {lines} lines (at most {FLEET_MODULE_LINES})")
+    assert not bad, "\n".join(bad)
+
+
+def test_the_size_check_sees_a_long_function(tmp_path):
+    f = tmp_path / "m.py"
+    f.write_text("def f():\n" + "    x = 1\n" * 130 + "\n\nclass K:\n    def m(self):\n        pass\n")
+    assert sizes(f) == [("function", "f", 131), ("class", "K", 3), ("function", "m", 2)]

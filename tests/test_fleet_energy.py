@@ -18,7 +18,6 @@ from hypothesis import strategies as st
 from eosp.fleet.battery import Intervals, SunCache, simulate
 from eosp.fleet.check import Inertial, timedelta_us, validate
 from eosp.fleet.geometry import NUMERICAL_EPS, Geometry, angle_deg, slew_time_s
-from eosp.fleet.model import Schedule, strings
 from eosp.fleet.opportunities import compute
 from eosp.kinds.fleet.dual import _dual_round, energy_search
 from tests.test_fleet import synthetic_fleet

@@ -14,7 +14,7 @@ from eosp.fleet.check import validate
 from eosp.fleet.generate import FleetGenConfig, generate
 from eosp.fleet.geometry import Geometry
 from eosp.fleet.opportunities import compute
-from eosp.fleet.passgraph import build_pass, lean_pass, walk
+from eosp.fleet.passgraph import build_pass, walk
 from eosp.kinds.fleet.config import FleetConfig
 from eosp.kinds.fleet.coordinator import Coordinator
 from eosp.kinds.fleet.pool import InProcessPool

@@ -5,7 +5,6 @@ and fleet checkpoints round-trip and refuse another layout or objective in one l
 from __future__ import annotations
 
 import json
-from dataclasses import replace
 from pathlib import Path
 
 import numpy as np

@@ -27,6 +27,39 @@ from eosp.kinds.fleet.config import FleetConfig
 
 REVIVE_S = 60.0  # seconds a lost actor may take to come back (restarted by Ray, graphs built) before its passes move
 
+def inject_faults(pool: RayPassPool, kind: str, count: int) -> None:
+    """The tests' fault injection once a call's work is sent: the first actor killed in the round, sweep or repair
+    the environment names (``EOSP_FAULT_KILL_ACTOR_*``), and the tests' callback told."""
+    import ray
+
+    kill = {"round": pool.kill_round, "sweep": pool.kill_sweep, "repair": pool.kill_repair}[kind]
+    if count == kill and pool.actors[0] is not None:
+        ray.kill(pool.actors[0], no_restart=False)  # a worker lost mid-round or mid-sweep (tests)
+    if pool.on_sent is not None:
+        pool.on_sent(kind, count)
+
+
+def unpack(passes: np.ndarray, value: np.ndarray, bound: np.ndarray, offsets: np.ndarray, nodes: np.ndarray) -> dict:
+    """An actor's packed answer (:meth:`PassWorker.solve_priced`) as a PassResult per pass (a NaN bound: none)."""
+    from eosp.kinds.fleet.problem import PassResult
+
+    out = {}
+    for i, (p, b) in enumerate(zip(passes.tolist(), bound.tolist())):
+        out[p] = PassResult(nodes[offsets[i]:offsets[i + 1]], float(value[i]), None if b != b else b)
+    return out
+
+
+def graphs_summary(graphs: list, fifo: bool) -> dict:
+    """Of some pass graphs: how many, their bytes, those whose bound needs a bound problem, those with none
+    provable, and (`fifo`) their FIFO violations (None: not counted)."""
+    from eosp.graphs.prune import fifo_violations
+
+    return {"passes": len(graphs), "bytes": sum(pg.nbytes for pg in graphs),
+            "bound_graphs": sum(pg.bound_graph is not None for pg in graphs),
+            "unprovable": sum(not pg.bound_provable for pg in graphs),
+            "fifo_violations": sum(fifo_violations(pg.graph) for pg in graphs) if fifo else None}
+
+
 class PassWorker:
     """A Ray actor holding the pass graphs of some passes (built here, once) and solving them on demand."""
 
@@ -68,13 +101,7 @@ class PassWorker:
     def summary(self) -> dict:
         """What the driver of a lean problem cannot count itself: of the graphs held here, their bytes, the passes
         whose bound needs a bound problem, those with none provable, and the FIFO violations."""
-        from eosp.graphs.prune import fifo_violations
-
-        g = list(self.graphs.values())
-        return {"passes": len(g), "bytes": sum(pg.nbytes for pg in g),
-                "bound_graphs": sum(pg.bound_graph is not None for pg in g),
-                "unprovable": sum(not pg.bound_provable for pg in g),
-                "fifo_violations": sum(fifo_violations(pg.graph) for pg in g)}
+        return graphs_summary(list(self.graphs.values()), fifo=True)
 
     def solve_priced(self, passes: np.ndarray, lam: np.ndarray, pass_prices: np.ndarray, left_s: float | None) -> tuple:
         """Every pass of `passes` under task prices `lam` and the passes' energy prices `pass_prices` (utility
@@ -269,15 +296,6 @@ class RayPassPool:
         parts = [(k, np.flatnonzero(owner == k)) for k in live]
         return [(k, idx) for k, idx in parts if len(idx)], np.flatnonzero(~np.isin(owner, live))
 
-    def _test_faults(self, kind: str, count: int) -> None:
-        import ray
-
-        kill = {"round": self.kill_round, "sweep": self.kill_sweep, "repair": self.kill_repair}[kind]
-        if count == kill and self.actors[0] is not None:
-            ray.kill(self.actors[0], no_restart=False)  # a worker lost mid-round or mid-sweep (tests)
-        if self.on_sent is not None:
-            self.on_sent(kind, count)
-
     # ------------------------------------------------------------------ calls
     def solve_priced(self, passes: list[int], lam: np.ndarray, pass_prices: np.ndarray,
                      deadline: float | None) -> dict | None:
@@ -295,7 +313,6 @@ class RayPassPool:
         from ray.exceptions import RayActorError
 
         from eosp.kinds.fleet.pool import solve_priced_pass
-        from eosp.kinds.fleet.problem import PassResult
 
         self.calls += 1
         ids = np.asarray(passes, dtype=np.int64)
@@ -304,7 +321,7 @@ class RayPassPool:
         pi_ref = ray.put(np.asarray(pass_prices, dtype=np.float64))
         left = None if deadline is None else max(0.0, deadline - time.perf_counter())
         refs = [self.actors[k].solve_priced.remote(ids[idx], lam_ref, pi_ref, left) for k, idx in parts]
-        self._test_faults("round", self.calls)
+        inject_faults(self, "round", self.calls)
         out = {}
 
         def locally(idx: np.ndarray) -> bool:
@@ -330,9 +347,7 @@ class RayPassPool:
                     if not locally(idx):
                         return None
                     continue
-                for i, p in enumerate(got.tolist()):
-                    b = float(bound[i])
-                    out[p] = PassResult(nodes[offsets[i]:offsets[i + 1]], float(value[i]), None if b != b else b)
+                out.update(unpack(got, value, bound, offsets, nodes))
                 self.times += list(zip(got.tolist(), secs.tolist(), [k] * len(got)))
                 busy.append(float(secs.sum()))
             self.round_solve_s = max(busy)
@@ -355,7 +370,6 @@ class RayPassPool:
         from ray.exceptions import RayActorError
 
         from eosp.kinds.fleet.pool import solve_utility_passes
-        from eosp.kinds.fleet.problem import PassResult
 
         self.sweeps += 1
         ids = np.asarray(passes, dtype=np.int64)
@@ -373,7 +387,7 @@ class RayPassPool:
             mine_util, mine_off = pick(idx)
             refs.append(self.actors[k].solve_utilities.remote(ids[idx], mine_util, mine_off, left))
             sent.append((mine_util, mine_off))
-        self._test_faults("sweep", self.sweeps)
+        inject_faults(self, "sweep", self.sweeps)
         out = {}
         if len(here):
             done = solve_utility_passes(self.prob, self.cfg, ids[here].tolist(), *pick(here), deadline)
@@ -394,8 +408,7 @@ class RayPassPool:
                     return None
                 out.update(done)
                 continue
-            for i, (p, b) in enumerate(zip(got.tolist(), bound.tolist())):
-                out[p] = PassResult(nodes[offs[i]:offs[i + 1]], float(value[i]), None if b != b else b)
+            out.update(unpack(got, value, bound, offs, nodes))
         return out
 
     def repair_rows(self, rows, deadline: float | None) -> np.ndarray | None:
@@ -416,7 +429,7 @@ class RayPassPool:
         here = np.flatnonzero(~np.isin(owner, live))
         left = None if deadline is None else max(0.0, deadline - time.perf_counter())
         refs = [self.actors[k].repair_rows.remote(rows.part(idx), left) for k, idx in parts]
-        self._test_faults("repair", self.repairs)
+        inject_faults(self, "repair", self.repairs)
         kept = np.ones(len(rows.task), dtype=bool)
 
         def locally(idx: np.ndarray) -> bool:
@@ -459,14 +472,11 @@ class RayPassPool:
                     continue
         built = list(getattr(self.prob, "built", {}).values())
         if built:
-            out.append({"passes": len(built), "bytes": sum(pg.nbytes for pg in built),
-                        "bound_graphs": sum(pg.bound_graph is not None for pg in built),
-                        "unprovable": sum(not pg.bound_provable for pg in built), "fifo_violations": None})
+            out.append(graphs_summary(built, fifo=False))
         return out
 
     def close(self) -> None:
         import ray
 
-        for a in self.actors:
-            if a is not None:
-                ray.kill(a)
+        for a in [a for a in self.actors if a is not None]:
+            ray.kill(a)

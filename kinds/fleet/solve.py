@@ -87,18 +87,7 @@ def solve(fleet: Fleet, opps: Opportunities, cfg: FleetConfig | None = None, pro
     own_pool = pool is None and cfg.workers > 1
     pool = ForkPool(prob, cfg) if own_pool else pool
     coord = Coordinator(prob, cfg, t0=t0, pool=pool, initial=start, frozen=frozen, on_round=on_round)
-    if resume is None and cfg.warm_start != "none":
-        from eosp.kinds.fleet.warmstart import start_prices
-
-        coord.prices = Prices(start_prices(prob, cfg.warm_start, cfg.price_model or None), coord.windows)
-    if resume is not None:
-        if len(resume.lam) != len(fleet.tasks):
-            raise ValueError("resume: prices of another fleet")
-        coord.prices = Prices(resume.lam.astype(np.float64), coord.windows, resume_mu(resume, coord.windows),
-                              resume.step)
-        coord.start_round = resume.rounds_done
-        if resume.best_bound < coord.best_bound:
-            coord.best_bound, coord.bound_source = resume.best_bound, resume.bound_source
+    start_prices(coord, resume)
     try:
         best = run(coord)
     finally:
@@ -136,6 +125,24 @@ def solve(fleet: Fleet, opps: Opportunities, cfg: FleetConfig | None = None, pro
                 else "no price round finished")}
     hist = [(t, v / W, b / W) for t, v, b in coord.history]
     return FleetSolution(sched, value, min(1.0, bound / W) if W > 0 else 0.0, hist, info, res)
+
+
+def start_prices(coord: Coordinator, resume: Resume | None) -> None:
+    """Where the prices start: a stopped run's prices, step, rounds and bound (`resume`), else ``--warm-start``'s
+    (none: zero)."""
+    cfg, prob = coord.cfg, coord.prob
+    if resume is None and cfg.warm_start != "none":
+        from eosp.kinds.fleet.warmstart import start_prices as warm
+
+        coord.prices = Prices(warm(prob, cfg.warm_start, cfg.price_model or None), coord.windows)
+    if resume is not None:
+        if len(resume.lam) != len(prob.fleet.tasks):
+            raise ValueError("resume: prices of another fleet")
+        coord.prices = Prices(resume.lam.astype(np.float64), coord.windows, resume_mu(resume, coord.windows),
+                              resume.step)
+        coord.start_round = resume.rounds_done
+        if resume.best_bound < coord.best_bound:
+            coord.best_bound, coord.bound_source = resume.best_bound, resume.bound_source
 
 
 def checked(fleet: Fleet, sched: Schedule, geo) -> tuple[Schedule, object, int]:
