@@ -290,7 +290,9 @@ def build_page(fleet: Fleet, opps, schedules: dict[str, Schedule], title: str | 
 
 
 def _page(data: dict, notes: list[str], summary: str, title: str, meta: str, lat, lon) -> str:
-    from eosp.evaluation.fleet_page_js import SCRIPT
+    from importlib.resources import files
+
+    script = files("eosp.evaluation").joinpath("fleet_page.js").read_text(encoding="utf-8")
     from eosp.evaluation.html_report import coastlines, lon_origin, map_extent, wrap_lon
 
     clon, clat = coastlines()
@@ -305,7 +307,7 @@ def _page(data: dict, notes: list[str], summary: str, title: str, meta: str, lat
             f"<body data-satellites='{len(data['sats'])}' data-tasks='{len(data['tasks']['id'])}' "
             f"data-schedules='{len(data['views'])}'>\n<h1>{html.escape(title)}</h1><p class='meta'>{meta}</p>"
             f"{note_html}\n{summary}<div id='diff'></div>\n{_BODY}\n"
-            f"<script type='application/json' id='fleet-data'>{payload}</script>\n<script>{SCRIPT}</script>\n"
+            f"<script type='application/json' id='fleet-data'>{payload}</script>\n<script>{script}</script>\n"
             "</body></html>\n")
 
 

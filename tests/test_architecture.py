@@ -267,6 +267,7 @@ def test_wheel_holds_one_top_level_package_and_builds_without_warnings(tmp_path)
     for sub in ("envs", "models", "jobs", "sim", "cli", "training", "solvers", "search"):
         assert f"eosp/{sub}/__init__.py" in names
     assert "eosp/config.py" in names and "eosp/jobs/train.py" in names
+    assert "eosp/evaluation/fleet_page.js" in names  # the page's script, a package data file
 
 
 # Size ceilings: a reader takes in a function at once.  Across the package no function over MAX_FUNCTION_LINES; in

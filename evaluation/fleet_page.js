@@ -1,13 +1,9 @@
-"""The script of the fleet page (:mod:`eosp.evaluation.fleet_report`): canvases drawn from one JSON block.
-
-Plain browser JavaScript, no library: a Gantt chart and a map on canvases (tens of thousands of
-bars and points draw in milliseconds, where SVG would take seconds), hover by binary search in
-each satellite's observations and by nearest target, and a task table rendered a page at a time.
-``window.fleetPage`` exposes what was drawn (counts) and the pixel position of any observation, so
-that a test can point the mouse at a known bar.
-"""
-
-SCRIPT = r"""
+// The script of the fleet page (eosp/evaluation/fleet_report.py): canvases drawn from one JSON block.
+//
+// Plain browser JavaScript, no library: a Gantt chart and a map on canvases (tens of thousands of bars and points
+// draw in milliseconds, where SVG would take seconds), hover by binary search in each satellite's observations and
+// by nearest target, and a task table rendered a page at a time.  window.fleetPage exposes what was drawn (counts)
+// and the pixel position of any observation, so that a test can point the mouse at a known bar.
 (function () {
 'use strict';
 const T0 = performance.now();
@@ -407,4 +403,3 @@ drawDiff(); drawAll();
 page.ready = true; page.renderMs = performance.now() - T0;
 document.body.dataset.ready = '1';
 })();
-"""
