@@ -1,7 +1,7 @@
 """The bound of the ceiling prices on a fleet, beside the conflict-free bound, without solving it.
 
 Every fleet solve evaluates the ceiling prices (every task more than one pass can serve priced at its weight) at
-round 0 (:meth:`eosp.kinds.fleet.coordinator.Coordinator.ceiling_round`).  This prints that bound for fleets
+round 0 (:func:`eosp.kinds.fleet.dual.ceiling_round`).  This prints that bound for fleets
 whose solves were measured before it existed, and what it costs: the pass graphs, then one round of pass solves.
 
     python experiments/ceiling_bound.py FLEET_DIR_OR_CASE ...

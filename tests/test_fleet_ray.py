@@ -163,7 +163,9 @@ def test_four_actors_on_four_nodes_give_the_in_process_schedule(clustered_fleet_
         rows = sorted(zip(sol.schedule.satellite.tolist(), sol.schedule.task.tolist(), sol.schedule.start_us.tolist()))
         return rows, sol.value, sol.bound, sol.info["pass_solves"]
 
-    monkeypatch.setattr(coord_mod, "REPAIR_AWAY", 1)
+    from eosp.kinds.fleet import battery
+
+    monkeypatch.setattr(battery, "REPAIR_AWAY", 1)
     cfg = FleetConfig(pass_solver="exact", rounds=ROUNDS, time_limit=None, workers=4, seed=4)
     alone = result(solve(fleet, opps, FleetConfig(pass_solver="exact", rounds=ROUNDS, time_limit=None, workers=1,
                                                   seed=4), problem=full))

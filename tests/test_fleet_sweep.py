@@ -1,4 +1,4 @@
-"""The fleet solver's coordinate descent as a parallel sweep (Coordinator.descend): valid and never worse than its
+"""The fleet solver's coordinate descent as a parallel sweep (eosp.kinds.fleet.construct.descend): valid and never worse than its
 start, the same schedule on every pool and any number of workers, and a fixed point (no pass alone, solved with
 the tasks no other pass serves, is worth more than its path), checked by brute force."""
 

@@ -65,7 +65,7 @@ def wave(order, ptr, idx, claimed):
 def descend(c: Coordinator, primal: Primal, queue: list[int], deadline: float | None) -> None:
     """Coordinate descent as a sweep: the queued passes (frozen ones skipped; those sharing no task that no
     pass serves, :func:`disjoint`) are solved as one batch with every task no other pass serves at the batch's
-    start (utilities :meth:`_utility`), on the pool; then the results are settled here in ascending pass order
+    start (utilities :meth:`Coordinator._utility`), on the pool; then the results are settled here in ascending pass order
     (:func:`_settle`).  Passes that gain freed tasks, and passes whose result lost tasks to a lower pass of the
     same batch (never with this batch rule; settled all the same), make the next batch; until none is left or
     the deadline.
@@ -103,7 +103,7 @@ def _settle(c: Coordinator, primal: Primal, p: int, path: np.ndarray, todo: np.n
     """Pass p's result of a sweep, against the schedule as the lower passes of the batch left it: the tasks
     another pass took meanwhile are taken out of `path` (the rest re-walked along the graph's arcs, so it
     stays feasible, :func:`eosp.kinds.fleet.problem.rewalk`), and the path is taken when it is worth more
-    than the pass's current one under :meth:`_utility`.  Marks in `todo` the other passes that can take the
+    than the pass's current one under :meth:`Coordinator._utility`.  Marks in `todo` the other passes that can take the
     tasks it freed, and p itself when it lost tasks (solved again with what is left)."""
     pg = c.prob.passes[p]
     again = bool(todo[p])  # a lower pass of the batch freed a task p can take
@@ -178,7 +178,7 @@ def _solve_missing(c: Coordinator, batch: list[int], util: np.ndarray, offsets: 
 
 def construct(c: Coordinator, order: np.ndarray, util_shift: np.ndarray | None = None,
               primal: Primal | None = None, deadline: float | None = None, whole: bool = False) -> Primal:
-    """Passes in `order`, each solved with the tasks still free (utilities :meth:`_utility`, `util_shift`
+    """Passes in `order`, each solved with the tasks still free (utilities :meth:`Coordinator._utility`, `util_shift`
     taken off the weights); stops at `deadline` unless `whole` (the first schedule: every pass, each solve
     then cut short past the deadline).
 

@@ -18,7 +18,7 @@ MASTER_MIN_S = 1.0  # seconds a master LP solve may always take (else at most th
 MASTER_MIN_ITERATIONS = 1000  # simplex iterations a master LP solve may always take when rounds are fixed
 MASTER_PATIENCE = 3  # master solves in a row cut by that time before the master is dropped (weighted steps then;
 # before a first solve has finished in its time, one miss drops it)
-ENERGY_STEPS = 12  # bisection steps of an energy window's multiplier (Coordinator.energy_search)
+ENERGY_STEPS = 12  # bisection steps of an energy window's multiplier (energy_search)
 
 
 def _dual_round(c: Coordinator, lam: np.ndarray, deadline: float | None) -> tuple | None:

@@ -22,7 +22,7 @@ Why: measured on aeossp cases, the subgradient steps (``--price-step weighted``)
 weight on test_easy/case_0003, where this master reaches the optimum 0.8250 in 35 rounds (9 s); on
 test_hard/case_0005 0.8642 in about 30 rounds (20 s), which 96 subgradient rounds approach (0.8644).  The
 battery's energy windows are left out of the master: at its optimum on test_hard/case_0005 their duals were 0
-(with ``--energy-bound`` their multipliers are searched at each round's prices, :meth:`Coordinator.energy_search`).
+(with ``--energy-bound`` their multipliers are searched at each round's prices, :func:`eosp.kinds.fleet.dual.energy_search`).
 """
 
 from __future__ import annotations

@@ -14,7 +14,7 @@ from eosp.kinds.fleet.construct import construct, descend
 from eosp.kinds.fleet.coordinator import Coordinator
 from eosp.kinds.fleet.problem import schedule_windows
 
-INTEGER_MAX_S = 30.0  # seconds the master's integer solution may take at most (Coordinator.integer_round)
+INTEGER_MAX_S = 30.0  # seconds the master's integer solution may take at most (integer_round)
 INTEGER_NODES = 200  # its branch-and-bound nodes when the solve has no time limit (--rounds): machine-independent
 
 

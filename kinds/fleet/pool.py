@@ -4,7 +4,7 @@ in-process and forked implementations (the Ray actors' is :class:`eosp.kinds.fle
 For a price round a pool takes pass ids, the task prices and the passes' energy prices (one vector each,
 :mod:`eosp.kinds.fleet.prices`), never utilities: whoever holds a pass's graph prices its tasks
 (:func:`eosp.kinds.fleet.problem.priced`), so a round sends two vectors of prices and gets paths back.  A sweep of
-the coordinate descent (:meth:`eosp.kinds.fleet.coordinator.Coordinator.descend`) depends on the schedule (a task
+the coordinate descent (:func:`eosp.kinds.fleet.construct.descend`) depends on the schedule (a task
 another pass serves is worth 0 to this one), which only the driver holds: it sends each pass's utilities,
 packed as one flat float64 vector and CSR offsets (a sweep of thousands of passes would be thousands of small
 objects otherwise).  The pass graphs stay where they were built: in this process, in forked children that
@@ -28,7 +28,7 @@ class PassPool(Protocol):
     """Solves passes under task prices and energy prices.  A pool whose workers run beside the driver may also
     offer ``submit_priced(passes, prices, pass_prices, deadline)``: :meth:`solve_priced` sent now, returning a
     function that waits for its result (Ray's actors; the coordinator then solves the next price round while it
-    recovers a schedule, :meth:`eosp.kinds.fleet.coordinator.Coordinator.prefetch`; the function may offer
+    recovers a schedule, :func:`eosp.kinds.fleet.dual.prefetch`; the function may offer
     ``idle()``: whether the workers have finished that round, so that a sweep sent now would not wait behind it);
     it then says, as ``round_solve_s``, the seconds of solves of its busiest worker in the last round it returned
     (the master LP's time limit: the time since such a round was sent counts the recovery it ran beside).  Such a
