@@ -58,7 +58,8 @@ def resume_mu(resume: Resume, windows: EnergyWindows) -> np.ndarray | None:
 
 
 def solve(fleet: Fleet, opps: Opportunities, cfg: FleetConfig | None = None, problem: Problem | None = None,
-          initial: Schedule | None = None, freeze_until_s: float | None = None, pool: PassPool | None = None,
+          initial: Schedule | None = None, freeze_until_s: float | np.ndarray | None = None,
+          pool: PassPool | None = None,
           on_round: Callable[[Coordinator], None] | None = None, resume: Resume | None = None,
           t0: float | None = None) -> FleetSolution:
     """Schedule a fleet (:mod:`eosp.kinds.fleet.coordinator`); the schedule is checked by the checker before it is
@@ -66,7 +67,9 @@ def solve(fleet: Fleet, opps: Opportunities, cfg: FleetConfig | None = None, pro
     rules).
 
     `initial`: a schedule to start from; `freeze_until_s`: the passes starting before this time (seconds from
-    the horizon start) keep the initial schedule's actions as they are (so every action before it is kept).
+    the horizon start) keep the initial schedule's actions as they are (so every action before it is kept); one
+    time per satellite (an array in the fleet's satellite order) freezes each satellite up to its own time, as a
+    plan uploaded at each satellite's own ground contact is (:func:`frozen_passes`).
     `pool`: what solves the passes of a price round (:class:`eosp.kinds.fleet.pool.PassPool`, e.g. Ray actors;
     default: forked processes when ``cfg.workers > 1``, else this process); `on_round`: called after every round;
     `resume`: prices and bound of a stopped run (its best schedule as `initial`); `t0`: when the fleet was read
@@ -82,7 +85,7 @@ def solve(fleet: Fleet, opps: Opportunities, cfg: FleetConfig | None = None, pro
     start = None if initial is None else primal_of(prob, initial)
     frozen = None
     if freeze_until_s is not None:
-        frozen = prob.pass_time[:, 0] < freeze_until_s
+        frozen = frozen_passes(prob, freeze_until_s)
         start = start or Primal.empty(len(prob.passes), len(fleet.tasks))
     own_pool = pool is None and cfg.workers > 1
     pool = ForkPool(prob, cfg) if own_pool else pool
@@ -125,6 +128,19 @@ def solve(fleet: Fleet, opps: Opportunities, cfg: FleetConfig | None = None, pro
                 else "no price round finished")}
     hist = [(t, v / W, b / W) for t, v, b in coord.history]
     return FleetSolution(sched, value, min(1.0, bound / W) if W > 0 else 0.0, hist, info, res)
+
+
+def frozen_passes(prob: Problem, until_s: float | np.ndarray) -> np.ndarray:
+    """Bool per pass: it starts before `until_s` (seconds from the horizon start), one time for the whole fleet or
+    one per satellite (its passes against its own time); an array of another length is a ValueError."""
+    until = np.asarray(until_s, dtype=np.float64)
+    if until.ndim == 0:
+        return prob.pass_time[:, 0] < float(until)
+    n_sat = len(prob.fleet.satellites)
+    if until.shape != (n_sat,):
+        raise ValueError(f"freeze times: one per satellite ({n_sat}), got an array of shape {until.shape}")
+    sat = np.fromiter((pg.satellite for pg in prob.passes), np.int64, len(prob.passes))
+    return prob.pass_time[:, 0] < until[sat]
 
 
 def start_prices(coord: Coordinator, resume: Resume | None) -> None:
