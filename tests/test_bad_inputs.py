@@ -1430,17 +1430,10 @@ def test_ctrl_c_of_the_fleet_job_on_ray_actors(tmp_path):
 
 def _onera_instance(n: int, seed: int = 0) -> str:
     """An ONERA instance of `n` one-shot requests on 2 satellites over 2 h, packed enough that no plan serves them
-    all (the search runs to its time limit)."""
-    rng = np.random.default_rng(seed)
-    lines = [str(n)]
-    for r in range(n):
-        lines.append(f"{r},2,ONE_SHOT_MONO")
-        for k in range(2):
-            t = int(rng.integers(0, 7000))
-            lines.append(f"{1000 + 2 * r + k},{k},{t},{t + 120},{int(rng.integers(20, 60))},"
-                         f"{rng.uniform(-40, 40):.3f},{rng.uniform(-40, 40):.3f},0.0,{rng.uniform(0, 1):.3f}")
-    lines += ["2", f"1,0,7300,7500,{STATION}", f"2,1,7300,7500,{STATION}"]
-    return "\n".join(lines) + "\n"
+    all (the search runs to its time limit): the warm-up's maker."""
+    from eosp.cli.warmup import onera_instance
+
+    return onera_instance(n, seed)
 
 
 def test_ctrl_c_of_the_onera_search_keeps_its_plan(tmp_path):

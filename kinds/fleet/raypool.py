@@ -49,6 +49,26 @@ def unpack(passes: np.ndarray, value: np.ndarray, bound: np.ndarray, offsets: np
     return out
 
 
+def packed(passes: np.ndarray, solve_one) -> tuple:
+    """Each of `passes` solved by ``solve_one(i, pass)`` (a PassResult), timed, and packed in a few arrays (a round
+    of thousands of passes costs thousands of small objects otherwise): pass ids, values, bounds (NaN: none), CSR
+    offsets and nodes of the paths, seconds per pass (:func:`unpack` reads them back)."""
+    n = len(passes)
+    value, bound, secs = np.zeros(n), np.full(n, np.nan), np.zeros(n)
+    paths = []
+    for i, p in enumerate(passes.tolist()):
+        t = time.perf_counter()
+        res = solve_one(i, p)
+        secs[i] = time.perf_counter() - t
+        value[i] = res.value
+        if res.bound is not None:
+            bound[i] = res.bound
+        paths.append(res.nodes)
+    offsets = np.r_[0, np.cumsum([len(x) for x in paths])].astype(np.int64)
+    nodes = np.concatenate(paths).astype(np.int64) if paths else np.zeros(0, np.int64)
+    return passes, value, bound, offsets, nodes, secs
+
+
 def graphs_summary(graphs: list, fifo: bool) -> dict:
     """Of some pass graphs: how many, their bytes, those whose bound needs a bound problem, those with none
     provable, and (`fifo`) their FIFO violations (None: not counted)."""
@@ -112,22 +132,12 @@ class PassWorker:
         from eosp.kinds.fleet.problem import priced, solve_round_pass
 
         deadline = None if left_s is None else time.perf_counter() + left_s
-        n = len(passes)
-        value, bound, secs = np.zeros(n), np.full(n, np.nan), np.zeros(n)
-        paths = []
-        for i, p in enumerate(passes.tolist()):
+
+        def one(i: int, p: int):
             pg = self.graphs[p]
-            t = time.perf_counter()
-            util = priced(self.weight, lam, pg.tasks, pg.energy_wh, pass_prices[p])
-            res = solve_round_pass(pg, util, self.cfg, deadline)
-            secs[i] = time.perf_counter() - t
-            value[i] = res.value
-            if res.bound is not None:
-                bound[i] = res.bound
-            paths.append(res.nodes)
-        offsets = np.r_[0, np.cumsum([len(x) for x in paths])].astype(np.int64)
-        nodes = np.concatenate(paths).astype(np.int64) if paths else np.zeros(0, np.int64)
-        return passes, value, bound, offsets, nodes, secs
+            return solve_round_pass(pg, priced(self.weight, lam, pg.tasks, pg.energy_wh, pass_prices[p]), self.cfg,
+                                    deadline)
+        return packed(passes, one)
 
     def repair_rows(self, rows, left_s: float | None):
         """The battery repair of some of this actor's satellites (:func:`eosp.fleet.timeline.repair_rows`: whether
@@ -149,20 +159,8 @@ class PassWorker:
         from eosp.kinds.fleet.problem import solve_pass_graph
 
         deadline = None if left_s is None else time.perf_counter() + left_s
-        n = len(passes)
-        value, bound, secs = np.zeros(n), np.full(n, np.nan), np.zeros(n)
-        paths = []
-        for i, p in enumerate(passes.tolist()):
-            t = time.perf_counter()
-            res = solve_pass_graph(self.graphs[p], util[util_offsets[i]:util_offsets[i + 1]], self.cfg, deadline)
-            secs[i] = time.perf_counter() - t
-            value[i] = res.value
-            if res.bound is not None:
-                bound[i] = res.bound
-            paths.append(res.nodes)
-        offsets = np.r_[0, np.cumsum([len(x) for x in paths])].astype(np.int64)
-        nodes = np.concatenate(paths).astype(np.int64) if paths else np.zeros(0, np.int64)
-        return passes, value, bound, offsets, nodes, secs
+        return packed(passes, lambda i, p: solve_pass_graph(self.graphs[p], util[util_offsets[i]:util_offsets[i + 1]],
+                                                             self.cfg, deadline))
 
 
 def assign(prob, workers: int) -> np.ndarray:
