@@ -33,12 +33,11 @@ def main() -> None:
     args = ap.parse_args()
 
     from eosp.fleet.io import read_fleet
-    from eosp.kinds.fleet.config import FleetConfig
-    from eosp.kinds.fleet.problem import Problem, solve_pass_graph
+    from eosp.kinds.fleet.problem import PassSpec, Problem, solve_pass_graph
 
     fleet, opps = read_fleet(args.fleet_dir)
     prob = Problem.build(fleet, opps)
-    cfg = FleetConfig()
+    cfg = PassSpec()
     rng = np.random.default_rng(args.seed)
     utils = [np.where(rng.random(len(pg.tasks)) < args.open, prob.weight[pg.tasks], 0.0) for pg in prob.passes]
     for pg, u in zip(prob.passes[:300], utils):

@@ -24,6 +24,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("fleet", help="an aeossp case directory or a fleet directory")
     args = ap.parse_args(argv)
 
+    from eosp.budget import UNLIMITED
     from eosp.fleet.battery import active, levels, segments, simulate
     from eosp.fleet.energy import sunlit_seconds
     from eosp.fleet.timeline import intervals
@@ -38,7 +39,7 @@ def main(argv: list[str] | None = None) -> int:
     coord = Coordinator(prob, FleetConfig(rounds=1, time_limit=None))
     first = coord.empty()
     construct(coord, np.argsort(prob.pass_time[:, 0], kind="stable"), primal=first, whole=True)
-    descend(coord, first, list(range(len(prob.passes))), None)
+    descend(coord, first, list(range(len(prob.passes))), UNLIMITED)
     print(f"first schedule before the repair: WCR {first.value / prob.total_weight:.4f}")
     for sat, tl in enumerate(coord.timelines(first)):
         if not tl.start:

@@ -19,6 +19,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("fleets", nargs="+", help="fleet directories or aeossp case directories")
     args = ap.parse_args(argv)
 
+    from eosp.budget import UNLIMITED
     from eosp.jobs.train_prices import read_problem
     from eosp.kinds.fleet.config import FleetConfig
     from eosp.kinds.fleet.coordinator import Coordinator
@@ -32,7 +33,7 @@ def main(argv: list[str] | None = None) -> int:
         coord = Coordinator(prob, FleetConfig(rounds=1, time_limit=None))
         W = prob.total_weight
         t = time.perf_counter()
-        ceiling = ceiling_round(coord, None)
+        ceiling = ceiling_round(coord, UNLIMITED)
         print(f"{path}: conflict-free {coord.conflict_free() / W:.4f}, ceiling prices' L {ceiling / W:.4f} "
               f"({coord.bound_source}); read and pass graphs {graphs_s:.0f} s, ceiling round "
               f"{time.perf_counter() - t:.1f} s, peak {peak_rss_gb():.1f} GB", flush=True)

@@ -25,6 +25,7 @@ import time
 
 import numpy as np
 
+from eosp.budget import UNLIMITED
 from eosp.eosbench.read import read_scenario
 from eosp.eosbench.transition import READINGS, Rules
 from eosp.errors import InputError
@@ -63,12 +64,12 @@ def main(argv: list[str] | None = None) -> int:
     lam, value, proven = np.zeros(len(scen.tasks)), math.inf, False
     t0 = time.perf_counter()
     for r in range(ns.rounds):
-        lam = lp.next_prices(lam, value if proven else math.inf, None)  # smoothed towards the lowest L's prices
+        lam = lp.next_prices(lam, value if proven else math.inf, UNLIMITED)  # smoothed towards the lowest L's prices
         value, _, proven = eb.bound_round(st, lam)
         added = 0
         for prices in (lam, lp.last_duals):
             for k, p in enumerate(st.passes):
-                path = eb.solve_pass(alone, k, st.prio[p.tasks] - prices[p.tasks], None)
+                path = eb.solve_pass(alone, k, st.prio[p.tasks] - prices[p.tasks], UNLIMITED)
                 if 0 < len(path) <= p.cap:
                     added += lp.add(k, p.tasks[p.node_acq[path]])
         best = min(value if proven else math.inf, lp.centre_value)

@@ -30,7 +30,7 @@ def main() -> None:
     from eosp.fleet.passgraph import build_pass
     from eosp.fleet.slew import LineOfSight
     from eosp.kinds.fleet.config import FleetConfig
-    from eosp.kinds.fleet.problem import solve_pass_graph
+    from eosp.kinds.fleet.problem import PassSpec, solve_pass_graph
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--satellites", type=int, default=1000)
@@ -66,7 +66,7 @@ def main() -> None:
                 graph_opps += len(pg.rows)
                 arcs += pg.graph.n_arcs + (pg.bound_graph.n_arcs if pg.bound_graph is not None else 0)
                 s = time.perf_counter()
-                solve_pass_graph(pg, fleet.tasks.weight[pg.tasks].astype(np.float64), cfg)
+                solve_pass_graph(pg, fleet.tasks.weight[pg.tasks].astype(np.float64), PassSpec.of(cfg))
                 timings.append((len(pg.rows), time.perf_counter() - s))
     t_scan = time.perf_counter() - t1
     sizes = np.asarray(sizes)

@@ -30,6 +30,7 @@ def main(argv: list[str] | None = None) -> int:
 
     import highspy
 
+    from eosp.budget import UNLIMITED
     from eosp.jobs.train_prices import read_problem
     from eosp.kinds.fleet.config import FleetConfig
     from eosp.kinds.fleet.coordinator import Coordinator
@@ -82,7 +83,7 @@ def main(argv: list[str] | None = None) -> int:
     t1 = time.perf_counter()
     while time.perf_counter() - t1 < args.time:
         coord.prices.mu = mu * win.scale_wh
-        total, _, _, _, paths = _dual_round(coord, lam, None)
+        total, _, _, _, paths = _dual_round(coord, lam, UNLIMITED)
         if total < lowest:
             lowest, centre, centre_mu = total, lam.copy(), mu.copy()
         added = add(paths)

@@ -11,12 +11,12 @@ while it runs dry, drops the least valuable observation started before the failu
 
 from __future__ import annotations
 
-import time
 from dataclasses import dataclass, field
 from typing import NamedTuple
 
 import numpy as np
 
+from eosp.budget import UNLIMITED, Budget
 from eosp.fleet.battery import Intervals, SunCache, simulate
 from eosp.fleet.check import timedelta_us
 from eosp.fleet.model import US, Fleet, Schedule, strings
@@ -136,9 +136,9 @@ def intervals(los: LineOfSight, tl: Timeline, sat: int) -> tuple[Intervals, Inte
 
 
 def repair_battery(fleet: Fleet, los: LineOfSight, tls: list[Timeline] | dict[int, Timeline], sats=None,
-                   sun: SunCache | None = None, deadline: float | None = None) -> int | None:
+                   sun: SunCache | None = None, budget: Budget = UNLIMITED) -> int | None:
     """Drop the least valuable observations until every battery stays above zero; returns drops, or None when
-    `deadline` (a ``time.perf_counter()`` instant) came first (the timelines are then half repaired).
+    `budget` ran out first (the timelines are then half repaired).
 
     `sats`: only these satellites' timelines (default: all); `sun`: a cache of sunlight kept between calls."""
     sun = sun or SunCache(los.geo)
@@ -147,7 +147,7 @@ def repair_battery(fleet: Fleet, los: LineOfSight, tls: list[Timeline] | dict[in
     for sat in range(len(tls)) if sats is None else sats:
         tl = tls[sat]
         while True:
-            if deadline is not None and time.perf_counter() > deadline:
+            if budget.expired():
                 return None
             run = simulate(fleet, sun, sat, *intervals(los, tl, sat))
             if run.ok or not tl.start:
@@ -194,13 +194,13 @@ class Rows(NamedTuple):
 
 
 def repair_rows(fleet: Fleet, los: LineOfSight, rows: Rows, sun: SunCache,
-                deadline: float | None = None) -> np.ndarray | None:
+                budget: Budget = UNLIMITED) -> np.ndarray | None:
     """:func:`repair_battery` of the satellites of `rows`: whether each row is kept (one bool per row), or None
-    when the deadline came first.  Each satellite's repair reads its own rows only, so the result is the same
+    when the budget ran out first.  Each satellite's repair reads its own rows only, so the result is the same
     wherever it runs and however the satellites are split."""
     tls = {int(k): timeline(los, int(k), rows.task[a:b], rows.start[a:b], rows.end[a:b])
            for k, a, b in zip(rows.sats.tolist(), rows.offsets[:-1].tolist(), rows.offsets[1:].tolist())}
-    if repair_battery(fleet, los, tls, sats=list(tls), sun=sun, deadline=deadline) is None:
+    if repair_battery(fleet, los, tls, sats=list(tls), sun=sun, budget=budget) is None:
         return None
     kept = np.ones(len(rows.task), dtype=bool)
     for i, k in enumerate(rows.sats.tolist()):

@@ -14,7 +14,7 @@ ROOT = Path(__file__).resolve().parents[1]
 # bottom first; modules of one layer may import each other
 LAYERS = [
     {"eosp", "eosp.config", "eosp.errors", "eosp.atomic", "eosp.args", "eosp.memory", "eosp.ownership", "eosp.reward",
-     "eosp.problem", "eosp.interrupt"},
+     "eosp.problem", "eosp.interrupt", "eosp.budget"},
     {"eosp.sim"},
     {"eosp.graphs"},
     {"eosp.planning"},

@@ -16,6 +16,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+from eosp.budget import UNLIMITED
 from eosp.cli import main
 from eosp.eosbench.check import check, metrics
 from eosp.eosbench.model import Schedule
@@ -376,7 +377,7 @@ def test_the_packing_of_paths_met_is_the_best_packing(tmp_path, monkeypatch, see
     st = State(scen, rules, build_passes(scen), EosBenchConfig(transition="code"))
     for _ in range(6):  # paths of every pass under random utilities: the columns
         for k, p in enumerate(st.passes):
-            st.commit(k, solve_pass(st, k, rng.uniform(0.1, 1.0, len(p.tasks)), None))
+            st.commit(k, solve_pass(st, k, rng.uniform(0.1, 1.0, len(p.tasks)), UNLIMITED))
         for k in range(len(st.passes)):
             st.commit(k, np.zeros(0, np.int64))
     by_pass = [[np.frombuffer(t, dtype=np.int32) for (q, t) in st.columns if q == k] for k in range(len(st.passes))]
@@ -413,7 +414,7 @@ def test_no_prices_bound_below_the_lp_of_the_relaxed_paths(tmp_path, seed):
         for k, tasks in cols:
             assert len(tasks) <= st.passes[k].cap
             lp.add(k, tasks)
-        lam = lp.next_prices(lam, value if proven else math.inf, None)
+        lam = lp.next_prices(lam, value if proven else math.inf, UNLIMITED)
     lp_value = lp._h.getInfo().objective_function_value
     assert lp_value > 0
     for _ in range(20):

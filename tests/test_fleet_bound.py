@@ -15,6 +15,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+from eosp.budget import UNLIMITED
 from eosp.fleet.geometry import NUMERICAL_EPS, Geometry, angle_deg, brahe_module, slew_time_s
 from eosp.fleet.opportunities import compute
 from eosp.fleet.passgraph import bound_problem, bridge_triples, build_passes, priced_instance
@@ -249,8 +250,8 @@ def test_a_bound_below_a_schedule_is_refused(monkeypatch):
     from eosp.kinds.fleet.solve import solve
     from tests.test_fleet import synthetic_fleet
 
-    def wrong(pg, value, cfg, deadline=None):
-        res = solve_round_pass(pg, value, cfg, deadline)
+    def wrong(pg, value, spec, budget):
+        res = solve_round_pass(pg, value, spec, budget)
         return PassResult(res.nodes, res.value, 0.0)
 
     monkeypatch.setattr(pool, "solve_round_pass", wrong)
@@ -372,7 +373,7 @@ def test_the_ceiling_prices_bound_the_brute_force_and_stay_below_conflict_free(w
     prob = Problem.build(fleet, compute(fleet, Geometry(fleet)))
     coord = Coordinator(prob, FleetConfig(rounds=1, time_limit=None))
     free = coord.conflict_free()
-    ceiling = ceiling_round(coord, None)
+    ceiling = ceiling_round(coord, UNLIMITED)
     best = brute_force(fleet)
     lam = ceiling_prices(coord)
     assert lam[[len(h) > 1 for h in prob.task_passes]].tolist() == fleet.tasks.weight[
@@ -394,7 +395,7 @@ def test_the_ceiling_bound_is_below_conflict_free_where_passes_are_crowded():
     opps = compute(fleet)
     prob = Problem.build(fleet, opps)
     coord = Coordinator(prob, FleetConfig(rounds=1, time_limit=None))
-    ceiling = ceiling_round(coord, None)
+    ceiling = ceiling_round(coord, UNLIMITED)
     assert ceiling < coord.conflict_free() - 1e-6
     sol = solve(fleet, opps, FleetConfig(rounds=3, time_limit=None), problem=prob)
     W = fleet.tasks.weight.sum()

@@ -15,6 +15,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+from eosp.budget import UNLIMITED
 from eosp.fleet.battery import Intervals, SunCache, simulate
 from eosp.fleet.check import Inertial, timedelta_us, validate
 from eosp.fleet.geometry import NUMERICAL_EPS, Geometry, angle_deg, slew_time_s
@@ -187,9 +188,9 @@ def test_the_energy_search_lowers_l_at_fixed_prices_and_stays_a_bound(n_tasks, s
     lam = rng.uniform(0, 0.8, n_tasks) * prob.weight * (rng.random(n_tasks) < 0.5)
     for _ in range(3):  # successive searches at the same prices, from the multipliers the last one left
         before = lagrangian(prob, lam, coord.prices.mu)
-        total, proven, _, pass_wh, _ = _dual_round(coord, lam, None)
+        total, proven, _, pass_wh, _ = _dual_round(coord, lam, UNLIMITED)
         assert proven and abs(total - before) < 1e-6
-        got = energy_search(coord, lam, total, pass_wh, None)
+        got = energy_search(coord, lam, total, pass_wh, UNLIMITED)
         if got is None:
             break
         assert got <= before + 1e-9

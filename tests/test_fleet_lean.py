@@ -18,7 +18,7 @@ from eosp.fleet.passgraph import build_pass, walk
 from eosp.kinds.fleet.config import FleetConfig
 from eosp.kinds.fleet.coordinator import Coordinator
 from eosp.kinds.fleet.pool import InProcessPool
-from eosp.kinds.fleet.problem import Primal, Problem, rewalk, solve_pass
+from eosp.kinds.fleet.problem import PassSpec, Primal, Problem, rewalk, solve_pass
 from eosp.kinds.fleet.solve import solve
 from eosp.kinds.fleet.construct import construct, wave
 
@@ -72,7 +72,7 @@ def test_walking_from_the_geometry_finds_the_arcs_nodes(pair, seed):
                 acqs = rng.permutation(pg.n_tasks)[:rng.integers(1, pg.n_tasks + 1)]
                 nodes = np.array([rng.integers(g.acq_ptr[a], g.acq_ptr[a + 1]) for a in acqs.tolist()])
             else:
-                path = solve_pass(full, p, rng.uniform(0.1, 1.0, pg.n_tasks), FleetConfig()).nodes
+                path = solve_pass(full, p, rng.uniform(0.1, 1.0, pg.n_tasks), PassSpec()).nodes
                 nodes = path[rng.random(len(path)) < 0.7]
                 later = np.minimum(nodes + rng.integers(0, 3, len(nodes)), g.acq_ptr[g.node_acq[nodes] + 1] - 1)
                 nodes = later if k % 3 == 1 else nodes
@@ -89,7 +89,7 @@ def test_a_lean_problem_builds_a_graph_only_for_a_pass_it_solves(pair):
     lean.built.clear()
     p = int(np.argmax([pg.n_tasks for pg in full.passes]))
     value = full.weight[full.passes[p].tasks]
-    a, b = solve_pass(full, p, value, FleetConfig()), solve_pass(lean, p, value, FleetConfig())
+    a, b = solve_pass(full, p, value, PassSpec()), solve_pass(lean, p, value, PassSpec())
     assert np.array_equal(a.nodes, b.nodes) and a.value == b.value
     assert list(lean.built) == [p]
     assert np.array_equal(lean.graph(p).graph.dst, full.passes[p].graph.dst)
@@ -107,7 +107,7 @@ def one_by_one(coord: Coordinator, order: np.ndarray, shift: np.ndarray | None) 
     """The construction as it was: passes in `order`, each solved alone with the tasks still free."""
     primal = Primal.empty(len(coord.prob.passes), len(coord.prob.weight))
     for p in order.tolist():
-        res = solve_pass(coord.prob, p, coord._utility(primal, p, shift), coord.cfg)
+        res = solve_pass(coord.prob, p, coord._utility(primal, p, shift), coord.spec)
         coord._assign(primal, p, res.nodes)
     return primal
 

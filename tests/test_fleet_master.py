@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 from scipy.optimize import linprog
 
+from eosp.budget import UNLIMITED, Budget
 from eosp.fleet.geometry import Geometry
 from eosp.fleet.opportunities import compute
 from eosp.kinds.fleet.dual import _dual_round, price_round
@@ -103,18 +104,18 @@ def test_a_master_slower_than_its_round_gives_way_to_weighted_steps_from_the_sta
     coord = Coordinator(prob, FleetConfig(rounds=1, time_limit=None))
     start = prob.weight * 0.3
     coord.prices.lam = start.copy()
-    price_round(coord, None)  # solved in its time
+    price_round(coord, UNLIMITED)  # solved in its time
     assert coord.master is not None and coord.master.solved
-    monkeypatch.setattr(Master, "duals", lambda self, deadline, limit, iterations=None: None)  # out of time
+    monkeypatch.setattr(Master, "duals", lambda self, budget, iterations=None: None)  # out of time
     for _ in range(MASTER_PATIENCE - 1):
         before = coord.prices.lam.copy()
-        price_round(coord, None)
+        price_round(coord, UNLIMITED)
         assert coord.master is not None  # one slow solve: kept
         assert not np.array_equal(coord.prices.lam, before)  # a weighted step for the round
-    price_round(coord, None)
+    price_round(coord, UNLIMITED)
     assert coord.master is None and not coord.converged
     assert np.array_equal(coord.prices.lam, start)
-    price_round(coord, None)  # a weighted step now
+    price_round(coord, UNLIMITED)  # a weighted step now
     assert not np.array_equal(coord.prices.lam, start)
     assert coord.best_bound >= full_lp(prob) / 1.0 - 1e-9
 
@@ -133,8 +134,8 @@ def test_a_master_that_never_solved_in_its_time_is_dropped_at_its_first_miss(mon
     coord = Coordinator(prob, FleetConfig(rounds=1, time_limit=None))
     start = prob.weight * 0.3
     coord.prices.lam = start.copy()
-    monkeypatch.setattr(Master, "duals", lambda self, deadline, limit, iterations=None: None)  # out of time
-    price_round(coord, None)
+    monkeypatch.setattr(Master, "duals", lambda self, budget, iterations=None: None)  # out of time
+    price_round(coord, UNLIMITED)
     assert coord.master is None and np.array_equal(coord.prices.lam, start)
 
 
@@ -152,12 +153,12 @@ def test_the_master_time_limit_counts_from_the_time_already_run():
     master = Master(prob)
     rng = np.random.default_rng(0)
     for _ in range(5):  # columns from rounds at random prices, a solve after each
-        got = _dual_round(coord, rng.uniform(0.0, 1.0, len(prob.weight)) * prob.weight, None)
+        got = _dual_round(coord, rng.uniform(0.0, 1.0, len(prob.weight)) * prob.weight, UNLIMITED)
         master.add(got[4])
         before = float(master._h.getRunTime())
-        assert master.duals(None, 0.5) is not None
-        # the limit HiGHS got is this solve's time on top of all the solves before it
-        assert float(master._h.getOptionValue("time_limit")[1]) >= before + 0.5 - 1e-9
+        assert master.duals(Budget.of(0.5)) is not None
+        # the limit HiGHS got is this solve's time (what was left of the budget) on top of all the solves before it
+        assert float(master._h.getOptionValue("time_limit")[1]) >= before + 0.4
     assert float(master._h.getRunTime()) > 0.0
 
 
@@ -174,7 +175,7 @@ def test_with_fixed_rounds_the_master_is_limited_in_iterations_not_seconds():
     prob = Problem.build(fleet, compute(fleet, Geometry(fleet)))
     coord = Coordinator(prob, FleetConfig(rounds=1, time_limit=None))
     rng = np.random.default_rng(0)
-    rounds = [_dual_round(coord, rng.uniform(0.0, 1.0, len(prob.weight)) * prob.weight, None)[4] for _ in range(4)]
+    rounds = [_dual_round(coord, rng.uniform(0.0, 1.0, len(prob.weight)) * prob.weight, UNLIMITED)[4] for _ in range(4)]
 
     def master():
         m = Master(prob)
@@ -182,9 +183,9 @@ def test_with_fixed_rounds_the_master_is_limited_in_iterations_not_seconds():
             m.add(paths)
         return m
 
-    assert master().duals(None, 0.0, iterations=1) is None
-    free = master().duals(None, 60.0)
-    got = master().duals(None, 0.0, iterations=100_000)  # no time at all, enough iterations
+    assert master().duals(Budget.of(0.0), iterations=1) is None
+    free = master().duals(Budget.of(60.0))
+    got = master().duals(Budget.of(0.0), iterations=100_000)  # no time at all, enough iterations
     assert got is not None and np.allclose(got, free)
 
 
@@ -213,7 +214,7 @@ def test_the_integer_master_is_a_schedule_of_its_columns_at_least_the_start(n_ta
     assert len(tasks) == len(np.unique(tasks))
     value = float(w[tasks.astype(np.int64)].sum())
     assert value >= coord.best.value - 1e-9
-    master.duals(None, 10.0)
+    master.duals(Budget.of(10.0))
     assert value <= master.value + 1e-9
     by_pass: dict[int, list[set]] = {}
     for p, path in zip(master.col_pass, master.col_path):
@@ -253,7 +254,7 @@ def test_the_integer_master_with_energy_rows_keeps_every_window_with_the_checker
         master.add([path if q == p else np.zeros(0, np.int64) for q in range(len(prob.passes))])
     windows = schedule_windows(prob)
     assert len(windows) > 0
-    assert master.energy_rows(windows, coord.best.paths, deadline=0.0) is None  # past its deadline: no rows
+    assert master.energy_rows(windows, coord.best.paths, budget=Budget.spent()) is None  # spent: no rows
     keep, starts, idx, val = master.energy_rows(windows, coord.best.paths)
     assert np.array_equal(keep, np.arange(len(windows)))
     b = fleet.satellites.battery

@@ -13,8 +13,10 @@ from eosp.fleet.geometry import Geometry
 from eosp.fleet.io import read_fleet, read_schedule, write_fleet
 from eosp.fleet.opportunities import compute
 from eosp.jobs import solve_fleet as job_mod
-from eosp.kinds.fleet.raypool import RayPassPool
+from eosp.budget import UNLIMITED
 from eosp.kinds.fleet.config import FleetConfig
+from eosp.kinds.fleet.problem import PassSpec
+from eosp.kinds.fleet.raypool import RayPassPool
 
 ROUNDS = 2
 
@@ -217,9 +219,9 @@ def test_actors_repair_the_batteries_of_their_satellites_as_the_driver_does(two_
         pool = RayPassPool(prob, FleetConfig(pass_solver="exact", workers=2))
         try:
             assert len({int(pool.owner[p]) for p in range(len(prob.passes))}) == 2
-            assert np.array_equal(pool.repair_rows(rows, None), here)
+            assert np.array_equal(pool.repair_rows(rows, UNLIMITED), here)
             assert pool.faults == (1 if fault else 0)
-            assert np.array_equal(pool.repair_rows(rows, None), here)  # and once more, the actor back or not
+            assert np.array_equal(pool.repair_rows(rows, UNLIMITED), here)  # and once more, the actor back or not
         finally:
             pool.close()
 
@@ -347,9 +349,9 @@ def test_a_lost_node_costs_at_most_time(fleet_dir, two_nodes, monkeypatch, worke
         every = list(range(len(prob.passes)))
         rng = np.random.default_rng(0)
         lam, pi = rng.uniform(0, 1, len(fleet.tasks)) * prob.weight, np.zeros(len(prob.passes))
-        got = pool.solve_priced(every, lam, pi, None)
+        got = pool.solve_priced(every, lam, pi, UNLIMITED)
         for p in every:
-            want = solve_priced_pass(prob, p, lam, pi, cfg, None)
+            want = solve_priced_pass(prob, p, lam, pi, PassSpec.of(cfg), UNLIMITED)
             assert np.array_equal(got[p].nodes, want.nodes) and got[p].value == want.value
         assert pool.faults == faults
     finally:

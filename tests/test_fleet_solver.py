@@ -60,15 +60,14 @@ def brute_force_pass(prob, p: int) -> float:
 
 @pytest.mark.parametrize("seed", [5, 6, 7])
 def test_exact_pass_optimum_equals_brute_force_over_every_start(seed):
-    from eosp.kinds.fleet.config import FleetConfig
-    from eosp.kinds.fleet.problem import solve_pass
+    from eosp.kinds.fleet.problem import PassSpec, solve_pass
 
     problem = build(6, seed)
     small = [p for p, pg in enumerate(problem.passes) if 2 <= pg.n_tasks <= 7]
     assert len(small) >= 1
     for p in small:
         pg = problem.passes[p]
-        res = solve_pass(problem, p, problem.weight[pg.tasks], FleetConfig())
+        res = solve_pass(problem, p, problem.weight[pg.tasks], PassSpec())
         assert res.value == pytest.approx(brute_force_pass(problem, p)), p
         assert res.bound == pytest.approx(res.value)
 
@@ -80,28 +79,27 @@ def test_a_pass_solve_from_its_graph_is_the_exact_solvers_on_its_instance(seed, 
     (no label budget for it) the solver's steps on that instance give the same optimum, proven."""
     import eosp.solvers.exact as exact
     from eosp.fleet.passgraph import priced_instance
-    from eosp.kinds.fleet.config import FleetConfig
-    from eosp.kinds.fleet.problem import solve_pass_graph
+    from eosp.kinds.fleet.problem import PassSpec, solve_pass_graph
     from eosp.solvers.base import run_solver
 
-    prob, cfg = build(40, seed), FleetConfig()
+    prob, spec = build(40, seed), PassSpec()
     rng = np.random.default_rng(seed)
     cases = [(pg, np.where(rng.random(pg.n_tasks) < share, prob.weight[pg.tasks] * rng.uniform(0.5, 1.0, pg.n_tasks),
                            0.0)) for pg in prob.passes if pg.n_tasks >= 2 for share in (0.1, 0.3, 0.6, 1.0)]
     assert sum((value > 0).sum() > exact.SMALL_INSTANCE for _, value in cases) >= 2  # both sides of SMALL_INSTANCE
     assert sum(1 <= (value > 0).sum() <= exact.SMALL_INSTANCE for _, value in cases) >= 2
     for pg, value in cases:
-        res = solve_pass_graph(pg, value, cfg)
+        res = solve_pass_graph(pg, value, spec)
         pp = priced_instance(pg, value)
         if pp is None:
             assert len(res.nodes) == 0 and res.value == 0.0
             continue
-        sol = run_solver("exact", pp.instance, mode="utility", time_limit=cfg.pass_time_limit)
+        sol = run_solver("exact", pp.instance, mode="utility", time_limit=spec.time_limit)
         assert np.array_equal(res.nodes, pp.nodes[sol.nodes]) and res.value == sol.value == res.bound
         with monkeypatch.context() as m:
             m.setattr(exact, "SMALL_INSTANCE", 0)
             m.setattr(exact, "ALONE_LABELS", 0)
-            steps = solve_pass_graph(pg, value, cfg)
+            steps = solve_pass_graph(pg, value, spec)
         assert steps.value == pytest.approx(res.value, rel=1e-12) and steps.bound == pytest.approx(res.value)
 
 

@@ -7,6 +7,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from eosp.budget import UNLIMITED
 from eosp.fleet.check import validate
 from eosp.fleet.generate import FleetGenConfig, generate
 from eosp.fleet.geometry import NUMERICAL_EPS, Geometry
@@ -64,14 +65,14 @@ def test_the_sweep_is_valid_and_never_worse_than_its_start(crowded, seed):
         primal = start(coord, seed)
         before = primal.value
         consistent(prob, primal)
-        descend(coord, primal, list(range(len(prob.passes))), None)
+        descend(coord, primal, list(range(len(prob.passes))), UNLIMITED)
         consistent(prob, primal)
         assert primal.value >= before - 1e-12
         assert validate(prob.fleet, coord.schedule(primal), prob.geo).valid
     # from an empty schedule every pass wants every task at once: the settling must keep each task once
     empty = Coordinator(crowded[0], FleetConfig(rounds=1, time_limit=None))
     primal = empty.empty()
-    descend(empty, primal, list(range(len(crowded[0].passes))), None)
+    descend(empty, primal, list(range(len(crowded[0].passes))), UNLIMITED)
     consistent(crowded[0], primal)
     assert primal.value > 0 and validate(crowded[0].fleet, empty.schedule(primal), crowded[0].geo).valid
 
@@ -84,7 +85,7 @@ def test_frozen_passes_are_never_solved_again(crowded):
     frozen[::3] = True
     coord = Coordinator(prob, FleetConfig(rounds=1, time_limit=None), initial=primal.copy(), frozen=frozen)
     kept = [primal.paths[p] for p in np.flatnonzero(frozen)]
-    descend(coord, primal, list(range(len(prob.passes))), None)
+    descend(coord, primal, list(range(len(prob.passes))), UNLIMITED)
     assert all(np.array_equal(primal.paths[p], k) for p, k in zip(np.flatnonzero(frozen), kept))
     consistent(prob, primal)
 
@@ -92,7 +93,7 @@ def test_frozen_passes_are_never_solved_again(crowded):
 def sweep(prob: Problem, pool, seed: int) -> tuple[list, float, int]:
     coord = Coordinator(prob, FleetConfig(rounds=1, time_limit=None), pool=pool)
     primal = start(coord, seed)
-    descend(coord, primal, list(range(len(prob.passes))), None)
+    descend(coord, primal, list(range(len(prob.passes))), UNLIMITED)
     return [p.tolist() for p in primal.paths], primal.value, coord.pass_solves
 
 
@@ -124,9 +125,9 @@ def test_fixed_rounds_give_the_same_schedule_with_one_and_two_workers(crowded):
 
 def forgetful(solve_batch):
     """The sweeps' and waves' batch solve without its memo: every pass solved again."""
-    def run(c, batch, util, offsets, deadline):
+    def run(c, batch, util, offsets, budget):
         c._memo_ok[:] = False
-        return solve_batch(c, batch, util, offsets, deadline)
+        return solve_batch(c, batch, util, offsets, budget)
     return run
 
 
@@ -153,14 +154,14 @@ def test_a_memo_hit_is_the_pass_solved_again(crowded):
     prob = crowded[1]
     coord = Coordinator(prob, FleetConfig(rounds=1, time_limit=None))
     primal = start(coord, 3)
-    descend(coord, primal, list(range(len(prob.passes))), None)
+    descend(coord, primal, list(range(len(prob.passes))), UNLIMITED)
     n = len(prob.passes)
     util, offsets = coord._batch_utilities(primal, list(range(n)))
     hits_before = coord.memo_hits
-    got = _solve_batch(coord, list(range(n)), util, offsets, None)
+    got = _solve_batch(coord, list(range(n)), util, offsets, UNLIMITED)
     assert coord.memo_hits > hits_before
     for p in range(n):
-        fresh = solve_pass(prob, p, util[offsets[p]:offsets[p + 1]], coord.cfg)
+        fresh = solve_pass(prob, p, util[offsets[p]:offsets[p + 1]], coord.spec)
         assert np.array_equal(got[p].nodes, fresh.nodes) and got[p].value == fresh.value, p
 
 
@@ -216,7 +217,7 @@ def test_after_the_sweep_no_pass_alone_is_worth_more(kind, seed):
     assert sum(len(h) > 1 for h in prob.task_passes) >= 5  # contested tasks: a sweep has conflicts to settle
     coord = Coordinator(prob, FleetConfig(rounds=1, time_limit=None))
     primal = coord.empty()
-    descend(coord, primal, list(range(len(prob.passes))), None)
+    descend(coord, primal, list(range(len(prob.passes))), UNLIMITED)
     consistent(prob, primal)
     checked = 0
     for p, pg in enumerate(prob.passes):
@@ -305,7 +306,7 @@ def test_the_recovery_takes_the_paths_in_order_as_one_pass_after_another(crowded
                             frozen=frozen)
         sats = np.array([pg.satellite for pg in prob.passes])
         coord.barred[sats[rng.integers(0, n, 40)], rng.integers(0, len(prob.weight), 40)] = True
-        paths = [solve_pass(prob, p, prob.weight[pg.tasks] * rng.uniform(0.2, 1.0, pg.n_tasks), coord.cfg).nodes
+        paths = [solve_pass(prob, p, prob.weight[pg.tasks] * rng.uniform(0.2, 1.0, pg.n_tasks), coord.spec).nodes
                  for p, pg in enumerate(prob.passes)]
         order = [p for p in rng.permutation(n).tolist() if not frozen[p] and len(paths[p])]
         want = coord.empty()

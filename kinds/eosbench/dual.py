@@ -21,9 +21,10 @@ the LP's floor is 2,733.0 (experiments/eosbench_lp.py).  Early rounds' L is far 
 from __future__ import annotations
 
 import math
-import time
 
 import numpy as np
+
+from eosp.budget import Budget
 
 SMOOTHING = 0.5  # Wentges' a: the share of the centre in the next round's prices
 LP_LIMIT_S = 5.0  # seconds one LP solve may take with a time limit (the centre's prices are kept beyond)
@@ -59,13 +60,13 @@ class PriceLP:
         self._h.addCol(float(self.prio[tasks].sum()), 0.0, self._hs.kHighsInf, len(idx), idx, np.ones(len(idx)))
         return True
 
-    def duals(self, deadline: float | None) -> np.ndarray | None:
+    def duals(self, budget: Budget) -> np.ndarray | None:
         """The task rows' duals of the LP over the columns held (clipped to the priorities; its value in
-        :attr:`value`), or None when it is not solved (by `deadline`, at most :data:`LP_LIMIT_S`; without a deadline
+        :attr:`value`), or None when it is not solved (within `budget`, at most :data:`LP_LIMIT_S`; without a limit
         it is solved to the end, the same on every machine)."""
         h = self._h
-        if deadline is not None:
-            left = min(LP_LIMIT_S, deadline - time.perf_counter())
+        if budget.limited:
+            left = min(LP_LIMIT_S, budget.left())
             h.setOptionValue("time_limit", float(h.getRunTime()) + max(0.01, left))
         h.run()
         if h.getModelStatus() != self._hs.HighsModelStatus.kOptimal:
@@ -73,13 +74,13 @@ class PriceLP:
         self.value = float(h.getInfo().objective_function_value)
         return np.minimum(np.abs(np.asarray(h.getSolution().row_dual[:len(self.prio)], dtype=np.float64)), self.prio)
 
-    def next_prices(self, lam: np.ndarray, value: float, deadline: float | None) -> np.ndarray:
+    def next_prices(self, lam: np.ndarray, value: float, budget: Budget) -> np.ndarray:
         """The prices of the next round, given that L(`lam`) = `value` (inf when not proven): the LP's duals
         (:meth:`duals`, kept in :attr:`last_duals`) smoothed towards the centre, or the centre when the LP is not
         solved."""
         if value < self.centre_value:
             self.centre, self.centre_value = lam.copy(), value
-        duals = self.duals(deadline)
+        duals = self.duals(budget)
         if duals is None:
             return self.centre.copy()
         self.last_duals = duals

@@ -42,6 +42,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from eosp.budget import UNLIMITED, Budget
 from eosp.config import WEEK_S, choice, ranged
 from eosp.eosbench.check import check, verdict
 from eosp.eosbench.model import Scenario, Schedule
@@ -201,14 +202,14 @@ def _repair_path(st: State, k: int, path: np.ndarray) -> np.ndarray:
     return path
 
 
-def solve_pass(st: State, k: int, util: np.ndarray, deadline: float | None) -> np.ndarray:
+def solve_pass(st: State, k: int, util: np.ndarray, budget: Budget) -> np.ndarray:
     """The best path of pass k under per-acquisition utilities `util` within the pass's cap, the other passes of
     its satellite fixed (see the module docstring)."""
     p = st.passes[k]
     base = _neighbour_mask(st, k)
     tl = st.cfg.pass_time_limit
-    if deadline is not None:
-        tl = max(0.05, min(tl, deadline - time.perf_counter()))
+    if budget.limited:
+        tl = max(0.05, min(tl, budget.left()))
 
     def run(u: np.ndarray) -> np.ndarray:
         allowed = base & np.r_[True, u[p.node_acq[1:]] > 0]
@@ -274,12 +275,12 @@ def _fill(st: State, k: int, path: np.ndarray, util: np.ndarray, base: np.ndarra
     return path
 
 
-def improve(st: State, k: int, deadline: float | None) -> bool:
+def improve(st: State, k: int, budget: Budget) -> bool:
     """Pass k solved again with every task no other pass serves; kept when it serves more profit."""
     p = st.passes[k]
     owner = st.served[p.tasks]
     util = np.where((owner < 0) | (owner == k), st.prio[p.tasks], 0.0)
-    path = solve_pass(st, k, util, deadline)
+    path = solve_pass(st, k, util, budget)
     gain = float(util[p.node_acq[path]].sum()) if len(path) else 0.0
     if gain > st.pass_value(k) + 1e-9:
         st.commit(k, path)
@@ -298,17 +299,17 @@ def polish(st: State) -> None:
             st.commit(k, path)
 
 
-def descend(st: State, order: list[int], deadline: float | None) -> None:
-    """Coordinate descent: passes solved again until none improves (or the deadline)."""
+def descend(st: State, order: list[int], budget: Budget) -> None:
+    """Coordinate descent: passes solved again until none improves (or the budget)."""
     queue = deque(order)
     queued = set(queue)
     while queue:
-        if deadline is not None and time.perf_counter() > deadline:
+        if budget.expired():
             return
         k = queue.popleft()
         queued.discard(k)
         before = set(st.path_tasks(k, st.paths[k]).tolist())
-        if improve(st, k, deadline):
+        if improve(st, k, budget):
             freed = before - set(st.path_tasks(k, st.paths[k]).tolist())
             for t in freed:  # passes holding a task this one gave up may now take it
                 for q in st.passes_of(t).tolist():
@@ -363,13 +364,13 @@ def _cap_term(p: Pass, pos: np.ndarray, build, time_limit: float
     return best, best_nodes, True, fit
 
 
-def bound_round(st: State, lam: np.ndarray, paths: list | None = None, deadline: float | None = None
+def bound_round(st: State, lam: np.ndarray, paths: list | None = None, budget: Budget = UNLIMITED
                 ) -> tuple[float, np.ndarray, bool]:
     """L(lam) (see the module docstring), the count of passes taking each task, and whether every pass term came
     from a finished label search or a cap; with `paths`, (pass, tasks) of paths of at most `cap` observations of
     each pass in the relaxation: the best its term's search met, and the path of its term cut to its `cap` most
-    valuable observations (:mod:`eosp.kinds.eosbench.dual`'s columns).  Past `deadline` (a ``time.perf_counter()``
-    instant) a pass's term is (b), or without a cap the sum of its positive utilities, without a label search: still
+    valuable observations (:mod:`eosp.kinds.eosbench.dual`'s columns).  Once `budget` is
+    spent a pass's term is (b), or without a cap the sum of its positive utilities, without a label search: still
     a bound, a weaker one."""
     total = float(lam.sum())
     taken = np.zeros(len(st.scenario.tasks))
@@ -386,11 +387,10 @@ def bound_round(st: State, lam: np.ndarray, paths: list | None = None, deadline:
             st.pass_solves += 1
             return graph(p, code, True, allowed) if st.agile[k] else graph(p, st.rules, False, allowed)
 
-        limit = st.cfg.pass_time_limit if deadline is None else min(st.cfg.pass_time_limit,
-                                                                     deadline - time.perf_counter())
+        limit = min(st.cfg.pass_time_limit, budget.left())
         if limit > 0:
             exact, nodes, _, fit = _cap_term(p, pos, build, max(0.05, limit))
-        else:  # past the deadline: the cap's term, or every positive utility
+        else:  # the budget spent: the cap's term, or every positive utility
             exact, nodes, fit = math.inf, np.zeros(0, np.int64), np.zeros(0, np.int64)
         if paths is not None:
             if len(fit):
@@ -430,7 +430,7 @@ def to_schedule(st: State) -> Schedule:
     return Schedule.build(st.scenario, [(r, s) for _, r, s in rows])
 
 
-def _lns(st: State, rng: np.random.Generator, lam: np.ndarray, deadline: float | None) -> None:
+def _lns(st: State, rng: np.random.Generator, lam: np.ndarray, budget: Budget) -> None:
     """Empty the passes meeting a random time span (one that meets a random pass) and solve them again in a random
     order, each task's utility lowered by a random share of its price (a contested task is left to the passes that
     need it most), then coordinate descent with the true priorities; kept when the profit does not fall."""
@@ -445,14 +445,14 @@ def _lns(st: State, rng: np.random.Generator, lam: np.ndarray, deadline: float |
     order = rng.permutation(hit).tolist()
     share = rng.uniform(0.0, 1.0)
     for k in order:
-        if deadline is not None and time.perf_counter() > deadline:
+        if budget.expired():
             break
         p = st.passes[k]
         util = np.where(st.served[p.tasks] < 0, st.prio[p.tasks] - share * lam[p.tasks], 0.0)
-        path = solve_pass(st, k, util, deadline)
+        path = solve_pass(st, k, util, budget)
         if len(path):
             st.commit(k, path)
-    descend(st, order, deadline)
+    descend(st, order, budget)
     if st.value < before[0] - 1e-9:  # the descent may have moved passes outside the span too: all restored
         st.paths, st.served = before[1], before[2]
 
@@ -511,19 +511,19 @@ def pack(st: State, limit: float | None, nodes: int | None = None) -> bool:
     return False
 
 
-def _pack_limit(cfg: EosBenchConfig, deadline: float | None) -> float | None:
+def _pack_limit(cfg: EosBenchConfig, budget: Budget) -> float | None:
     """Seconds a packing may take: none with a fixed number of rounds (a node limit instead), else what is left
-    before `deadline`, at most :data:`PACK_RESERVE_S`."""
-    if cfg.rounds is not None and deadline is None:
+    of `budget`, at most :data:`PACK_RESERVE_S`."""
+    if cfg.rounds is not None and not budget.limited:
         return None
-    return PACK_RESERVE_S if deadline is None else min(PACK_RESERVE_S, max(0.01, deadline - time.perf_counter()))
+    return min(PACK_RESERVE_S, max(0.01, budget.left()))
 
 
 def solve(scenario: Scenario, cfg: EosBenchConfig) -> Result:
     """Solve `scenario` (see the module docstring)."""
     t0 = time.perf_counter()
-    end = None if cfg.time_limit is None else t0 + cfg.time_limit
-    deadline = None if end is None else end - min(PACK_RESERVE_S, 0.05 * cfg.time_limit)  # the last packing's time
+    end = Budget.of(cfg.time_limit, start=t0)
+    budget = end.less(min(PACK_RESERVE_S, 0.05 * cfg.time_limit)) if end.limited else end  # the last packing's time
     rules = Rules(cfg.transition, cfg.agility)
     if len(scenario.stations):
         raise InputError(scenario.path, "unsupported by the eosbench solver: downlinks (the scenario has ground "
@@ -537,10 +537,10 @@ def solve(scenario: Scenario, cfg: EosBenchConfig) -> Result:
     timings = {"passes": time.perf_counter() - t0}
     order = sorted(range(len(passes)), key=lambda k: (st.span[k, 0], k))
     for k in order:  # construction
-        if deadline is not None and time.perf_counter() > deadline:
+        if budget.expired():
             break
-        improve(st, k, deadline)
-    descend(st, order, deadline)
+        improve(st, k, budget)
+    descend(st, order, budget)
     polish(st)
     timings["construction"] = time.perf_counter() - t0 - timings["passes"]
     best_value, best_paths, best_served = st.value, list(st.paths), st.served.copy()
@@ -550,11 +550,11 @@ def solve(scenario: Scenario, cfg: EosBenchConfig) -> Result:
     rng = np.random.default_rng(cfg.seed)
     rounds, best_dual = 0, math.inf
     while cfg.rounds is None or rounds < cfg.rounds:
-        if deadline is not None and time.perf_counter() > deadline and rounds > 0:
+        if budget.expired() and rounds > 0:
             break
         lam = prices.lam
         columns: list | None = [] if lp is not None else None
-        dual, taken, proven = bound_round(st, lam, columns, deadline)
+        dual, taken, proven = bound_round(st, lam, columns, budget)
         rounds += 1
         prices.stalled(dual < best_dual - 1e-9)  # the step shrinks when the dual stalls, whatever bound stands
         best_dual = min(best_dual, dual)
@@ -570,19 +570,19 @@ def solve(scenario: Scenario, cfg: EosBenchConfig) -> Result:
             for k, tasks in list(st.columns)[lp.committed:]:  # the paths the moves committed: valid, so relaxed too
                 lp.add(k, np.frombuffer(tasks, dtype=np.int32))
             lp.committed = len(st.columns)
-            prices.lam = lp.next_prices(lam, dual if proven else math.inf, deadline)
-        if deadline is not None and time.perf_counter() > deadline:
+            prices.lam = lp.next_prices(lam, dual if proven else math.inf, budget)
+        if budget.expired():
             break
         for _ in range(cfg.moves_per_round):
-            if deadline is not None and time.perf_counter() > deadline:
+            if budget.expired():
                 break
-            _lns(st, rng, prices.lam, deadline)
+            _lns(st, rng, prices.lam, budget)
             polish(st)
             if st.value > best_value + 1e-9:
                 best_value, best_paths, best_served = st.value, list(st.paths), st.served.copy()
-        if rounds % PACK_EVERY == 0 and (deadline is None or time.perf_counter() < deadline):
+        if rounds % PACK_EVERY == 0 and not budget.expired():
             st.paths, st.served = list(best_paths), best_served.copy()
-            if pack(st, _pack_limit(cfg, deadline), PACK_NODES if cfg.rounds is not None else None):
+            if pack(st, _pack_limit(cfg, budget), PACK_NODES if cfg.rounds is not None else None):
                 best_value, best_paths, best_served = st.value, list(st.paths), st.served.copy()
     st.paths, st.served = best_paths, best_served
     polish(st)

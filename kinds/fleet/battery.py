@@ -9,6 +9,7 @@ import time
 
 import numpy as np
 
+from eosp.budget import UNLIMITED, Budget
 from eosp.fleet.timeline import Rows, repair_rows
 from eosp.kinds.fleet.construct import descend
 from eosp.kinds.fleet.coordinator import Coordinator
@@ -18,13 +19,13 @@ REPAIR_AWAY = 4  # a battery repair of fewer satellites runs on the driver, not 
 # milliseconds, a satellite's simulation about one)
 
 
-def battery_repair(c: Coordinator, primal: Primal, deadline: float | None = None, whole: bool = False) -> int | None:
+def battery_repair(c: Coordinator, primal: Primal, budget: Budget = UNLIMITED, whole: bool = False) -> int | None:
     """Drop observations until every battery holds (checker's model); a dropped task is barred from that
     satellite, and the passes of other satellites that could serve it are solved again once (then the
     batteries are checked and repaired again).  Returns the number dropped (also counted in
-    :attr:`repair_drops`), or None when `deadline` came first: `primal` is then not repaired and must not be
-    kept.  `whole` (the first schedule): the repair runs to its end whatever the deadline (the re-solves
-    still stop at it).  Only the satellites whose observations changed since their battery was last seen to
+    :attr:`repair_drops`), or None when `budget` ran out first: `primal` is then not repaired and must not be
+    kept.  `whole` (the first schedule): the repair runs to its end whatever the budget (the re-solves
+    still stop at its end).  Only the satellites whose observations changed since their battery was last seen to
     hold are simulated, on the pool when it offers it (:func:`_repair_rows`)."""
     total = 0
     for attempt in range(2):  # the last attempt only repairs: what it returns holds
@@ -34,7 +35,7 @@ def battery_repair(c: Coordinator, primal: Primal, deadline: float | None = None
         todo = np.array([i for i, k in enumerate(rows.sats.tolist()) if c.battery_ok.get(k) != keys[i]],
                         dtype=np.int64)  # satellites not seen as they are
         part = rows.part(todo)
-        kept = _repair_rows(c, part, None if whole else deadline)
+        kept = _repair_rows(c, part, UNLIMITED if whole else budget)
         if kept is None:
             return None
         for i, k in enumerate(part.sats.tolist()):
@@ -56,11 +57,11 @@ def battery_repair(c: Coordinator, primal: Primal, deadline: float | None = None
             c._assign(primal, p, path[ok] if c.frozen[p] else c.prob.rewalk(p, path[ok]))
         if attempt < 1:  # one round of re-solves of the passes that could take the dropped tasks
             descend(c, primal, sorted({q for t in drop_task.tolist() for q in c.prob.task_passes[t].tolist()}),
-                         deadline)
+                         budget)
     return total
 
 
-def _repair_rows(c: Coordinator, rows: Rows, deadline: float | None) -> np.ndarray | None:
+def _repair_rows(c: Coordinator, rows: Rows, budget: Budget) -> np.ndarray | None:
     """:func:`eosp.fleet.timeline.repair_rows` of `rows`: on the pool when it offers ``repair_rows`` (Ray's
     actors, each repairing the satellites it owns), is free (no prefetched round still on it) and there are
     at least :data:`REPAIR_AWAY` satellites; else here.  The same result either way (a satellite's repair reads
@@ -70,16 +71,16 @@ def _repair_rows(c: Coordinator, rows: Rows, deadline: float | None) -> np.ndarr
         t = time.perf_counter()
         c._pool_calls += 1
         try:
-            return away(rows, deadline)
+            return away(rows, budget)
         finally:
             c._pool_s += time.perf_counter() - t
-    return repair_rows(c.prob.fleet, c.prob.los, rows, c.sun, deadline)
+    return repair_rows(c.prob.fleet, c.prob.los, rows, c.sun, budget)
 
 
-def offer(c: Coordinator, primal: Primal, deadline: float | None = None) -> bool:
-    """Keep `primal` (after battery repair) when it serves more than the best (not when the deadline cut its
+def offer(c: Coordinator, primal: Primal, budget: Budget = UNLIMITED) -> bool:
+    """Keep `primal` (after battery repair) when it serves more than the best (not when the budget cut its
     repair)."""
-    if battery_repair(c, primal, deadline) is None:
+    if battery_repair(c, primal, budget) is None:
         return False
     if primal.value > c.best.value + 1e-9:
         c.keep(primal)

@@ -11,6 +11,7 @@ import time
 import numba
 import numpy as np
 
+from eosp.budget import UNLIMITED, Budget
 from eosp.kinds.fleet.coordinator import Coordinator, csr_take
 from eosp.kinds.fleet.problem import PassResult, Primal, solve_pass
 
@@ -62,20 +63,20 @@ def wave(order, ptr, idx, claimed):
     return _take(order, ptr, idx, claimed, True, np.ones(len(claimed), dtype=np.bool_))
 
 
-def descend(c: Coordinator, primal: Primal, queue: list[int], deadline: float | None) -> None:
+def descend(c: Coordinator, primal: Primal, queue: list[int], budget: Budget) -> None:
     """Coordinate descent as a sweep: the queued passes (frozen ones skipped; those sharing no task that no
     pass serves, :func:`disjoint`) are solved as one batch with every task no other pass serves at the batch's
     start (utilities :meth:`Coordinator._utility`), on the pool; then the results are settled here in ascending pass order
     (:func:`_settle`).  Passes that gain freed tasks, and passes whose result lost tasks to a lower pass of the
     same batch (never with this batch rule; settled all the same), make the next batch; until none is left or
-    the deadline.
+    the budget runs out.
 
     Why a sweep, not a queue of single solves: one pass after another, each seeing its predecessors'
     changes, is serial, and on a 200-satellite day it took half of a round on the driver whatever the number
     of workers.  Solved from one state, a batch's passes are independent, so the pool spreads them; the
     settling order (pass ids) and the deterministic solver make the schedule the same whoever solved each
     pass, for any number of workers.  Each settled change raises its pass's utility under the schedule and
-    changes no other pass, so the descent ends; run to its end (no deadline, exact pass solver) no single pass,
+    changes no other pass, so the descent ends; run to its end (no budget, exact pass solver) no single pass,
     solved alone with the tasks no other pass serves, is worth more than its path (a fixed point of the
     serial descent too).  It takes more solves than the serial queue (a pass solved in a batch before a lower
     pass freed a task it can take is solved again): about a fifth more on aeossp cases."""
@@ -87,13 +88,13 @@ def descend(c: Coordinator, primal: Primal, queue: list[int], deadline: float | 
         queued = np.flatnonzero(todo)
         if len(queued) == 0:
             return
-        if deadline is not None and time.perf_counter() > deadline:
+        if budget.expired():
             return
         open_ = primal.served < 0
         batch = queued[disjoint(queued, c._task_ptr, c._task_idx, c._claimed, open_)].tolist()
-        solved = _solve_batch(c, batch, *c._batch_utilities(primal, batch), deadline)
+        solved = _solve_batch(c, batch, *c._batch_utilities(primal, batch), budget)
         if solved is None:
-            return  # cut by the deadline: the schedule is as the last batch left it (every edit whole)
+            return  # the budget ran out: the schedule is as the last batch left it (every edit whole)
         todo[batch] = False
         for p in batch:
             _settle(c, primal, p, solved[p].nodes, todo)
@@ -123,7 +124,7 @@ def _settle(c: Coordinator, primal: Primal, p: int, path: np.ndarray, todo: np.n
 
 
 def _solve_batch(c: Coordinator, batch: list[int], util: np.ndarray, offsets: np.ndarray,
-                 deadline: float | None) -> dict[int, PassResult] | None:
+                 budget: Budget) -> dict[int, PassResult] | None:
     """The passes of a sweep or a wave under their utilities (flat, CSR `offsets`).  A pass whose utilities
     are those of its last proven-optimal solve takes that solve's result (the memo); the others are solved on
     the pool, or here when they are few (:data:`SWEEP_IN_PROCESS`: a round trip would cost more than the
@@ -147,7 +148,7 @@ def _solve_batch(c: Coordinator, batch: list[int], util: np.ndarray, offsets: np
     if len(out):  # the missing passes' utilities, as their own flat vector and offsets
         take, sub = csr_take(offsets, miss)
         batch, util, offsets = b[miss].tolist(), util[take], sub
-    solved = _solve_missing(c, batch, util, offsets, deadline)
+    solved = _solve_missing(c, batch, util, offsets, budget)
     if solved is None:
         return None
     for i, p in enumerate(batch):
@@ -162,25 +163,25 @@ def _solve_batch(c: Coordinator, batch: list[int], util: np.ndarray, offsets: np
 
 
 def _solve_missing(c: Coordinator, batch: list[int], util: np.ndarray, offsets: np.ndarray,
-                   deadline: float | None) -> dict[int, PassResult] | None:
+                   budget: Budget) -> dict[int, PassResult] | None:
     """The passes of :func:`_solve_batch` the memo did not have, solved (here or on the pool)."""
     c.pass_solves += len(batch)
     if not c.prob.lean and (len(batch) < SWEEP_IN_PROCESS or c._pool_busy()):
-        return {p: solve_pass(c.prob, p, util[offsets[i]:offsets[i + 1]], c.cfg, deadline)
+        return {p: solve_pass(c.prob, p, util[offsets[i]:offsets[i + 1]], c.spec, budget)
                 for i, p in enumerate(batch)}
     t = time.perf_counter()
     c._pool_calls += 1
     try:
-        return c.pool.solve_utilities(batch, util, offsets, deadline)
+        return c.pool.solve_utilities(batch, util, offsets, budget)
     finally:
         c._pool_s += time.perf_counter() - t
 
 
 def construct(c: Coordinator, order: np.ndarray, util_shift: np.ndarray | None = None,
-              primal: Primal | None = None, deadline: float | None = None, whole: bool = False) -> Primal:
+              primal: Primal | None = None, budget: Budget = UNLIMITED, whole: bool = False) -> Primal:
     """Passes in `order`, each solved with the tasks still free (utilities :meth:`Coordinator._utility`, `util_shift`
-    taken off the weights); stops at `deadline` unless `whole` (the first schedule: every pass, each solve
-    then cut short past the deadline).
+    taken off the weights); stops when `budget` runs out unless `whole` (the first schedule: every pass, each
+    solve then cut short past the budget's end).
 
     Solved in waves (:func:`wave`): each wave the passes that share no task with a pass before them in `order`
     still waiting, solved together (on the pool when large) and assigned in order: a pass's utilities depend
@@ -189,28 +190,28 @@ def construct(c: Coordinator, order: np.ndarray, util_shift: np.ndarray | None =
     primal = primal or Primal.empty(len(c.prob.passes), len(c.prob.weight))
     left = order[~c.frozen[order]]
     while len(left):
-        if not whole and deadline is not None and time.perf_counter() > deadline:
+        if not whole and budget.expired():
             break
         take = wave(left, c._task_ptr, c._task_idx, c._claimed)
         batch = left[take].tolist()
         left = left[~take]
         util, offsets = c._batch_utilities(primal, batch, util_shift)
-        solved = _solve_batch(c, batch, util, offsets, deadline)
+        solved = _solve_batch(c, batch, util, offsets, budget)
         if solved is None:
             if not whole:
                 break
-            solved = _solve_late(c, batch, util, offsets, deadline)
+            solved = _solve_late(c, batch, util, offsets, budget)
         for p in batch:
             c._assign(primal, p, solved[p].nodes)
     return primal
 
 
 def _solve_late(c: Coordinator, batch: list[int], util: np.ndarray, offsets: np.ndarray,
-                deadline: float) -> dict[int, PassResult]:
-    """The passes of a wave of the first schedule that the deadline cut: every one solved all the same, here,
-    each cut short (:func:`eosp.kinds.fleet.problem.pass_limit`: 10 ms past the deadline), or on the pool with
-    no deadline (each within the pass time limit) when the problem is lean."""
+                budget: Budget) -> dict[int, PassResult]:
+    """The passes of a wave of the first schedule that the budget cut: every one solved all the same, here,
+    each cut short (:func:`eosp.kinds.fleet.problem.pass_limit`: 10 ms past the budget's end), or on the
+    pool with no limit but each pass's own (each within the pass time limit) when the problem is lean."""
     if c.prob.lean:
-        return c.pool.solve_utilities(batch, util, offsets, None)
-    return {p: solve_pass(c.prob, p, util[offsets[i]:offsets[i + 1]], c.cfg, deadline)
+        return c.pool.solve_utilities(batch, util, offsets, UNLIMITED)
+    return {p: solve_pass(c.prob, p, util[offsets[i]:offsets[i + 1]], c.spec, budget)
             for i, p in enumerate(batch)}

@@ -39,7 +39,7 @@ from eosp.interrupt import HeldInterrupt
 from eosp.kinds.fleet.master import Centre, Master
 from eosp.kinds.fleet.pool import InProcessPool, PassPool
 from eosp.kinds.fleet.prices import Prices
-from eosp.kinds.fleet.problem import (PassResult, Primal, Problem, path_tasks, priced)
+from eosp.kinds.fleet.problem import PassResult, PassSpec, Primal, Problem, path_tasks, priced
 
 
 def csr_take(ptr: np.ndarray, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -69,7 +69,7 @@ class Coordinator:
     first_repair_drops: int | None = None  # those it took out of the first schedule
     rounds_done: int = 0
     first_s: float | None = None  # seconds from t0 to the first schedule (repaired)
-    check_s: float = 0.0  # seconds kept before the deadline for the final check (check_estimate)
+    check_s: float = 0.0  # seconds kept before the budget's end for the final check (check_estimate)
     interrupted: bool = False
     bound_source: str = "conflict-free"  # until a proven Lagrangian bound is lower
     refused: list[str] = field(default_factory=list)  # Lagrangian bounds refused, and why (see price_round)
@@ -88,6 +88,7 @@ class Coordinator:
 
     def __post_init__(self) -> None:
         n = len(self.prob.fleet.tasks)
+        self.spec = PassSpec.of(self.cfg)  # what a pass solve reads of the config
         self.windows = self.prob.windows if self.cfg.energy_bound else EnergyWindows.none(len(self.prob.passes))
         self.prices = Prices.zero(n, self.windows)
         self.master = Master(self.prob) if self.cfg.price_step == "lp" else None  # the LP of --price-step lp

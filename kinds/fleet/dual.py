@@ -10,6 +10,7 @@ import time
 
 import numpy as np
 
+from eosp.budget import Budget
 from eosp.kinds.fleet.coordinator import Coordinator
 from eosp.kinds.fleet.prices import Prices
 from eosp.kinds.fleet.problem import PassResult, path_wh, priced
@@ -21,10 +22,10 @@ MASTER_PATIENCE = 3  # master solves in a row cut by that time before the master
 ENERGY_STEPS = 12  # bisection steps of an energy window's multiplier (energy_search)
 
 
-def _dual_round(c: Coordinator, lam: np.ndarray, deadline: float | None) -> tuple | None:
+def _dual_round(c: Coordinator, lam: np.ndarray, budget: Budget) -> tuple | None:
     """Every pass under task prices `lam` and the current energy multipliers (on the pool): L(lam, mu), whether
-    every pass term is proven, each task's serve count, each pass's energy and path; None when cut by the
-    deadline.  A price above its task's weight is taken at the weight: no pass takes the task either way (its
+    every pass term is proven, each task's serve count, each pass's energy and path; None when the
+    budget ran out.  A price above its task's weight is taken at the weight: no pass takes the task either way (its
     utility is not positive), so the pass terms are the same and L is lower."""
     w = c.prob.weight
     lam = np.minimum(lam, w)
@@ -39,11 +40,11 @@ def _dual_round(c: Coordinator, lam: np.ndarray, deadline: float | None) -> tupl
         # since it was sent (that counts the recovery it ran beside)
         c._solve_s = getattr(c.pool, "round_solve_s", None) or time.perf_counter() - pending[3]
     else:
-        solved = c.pool.solve_priced(todo, lam, pi, deadline)
+        solved = c.pool.solve_priced(todo, lam, pi, budget)
         c._solve_s = time.perf_counter() - t
     c._wait_s = time.perf_counter() - t
     if solved is None:
-        return None  # cut by the deadline
+        return None  # the budget ran out
     c.pass_solves += len(todo)
     paths = [np.zeros(0, np.int64)] * len(c.prob.passes)
     terms, proven = [], True
@@ -73,7 +74,7 @@ def _path_stats(c: Coordinator, paths: list[np.ndarray]) -> tuple[np.ndarray, np
     return count, np.bincount(owner, weights=c._task_wh[pos], minlength=len(paths))
 
 
-def prefetch(c: Coordinator, deadline: float | None) -> None:
+def prefetch(c: Coordinator, budget: Budget) -> None:
     """Send the next price round's passes to the pool now, at the prices the last round set, when the pool
     can work while the driver does (its ``submit_priced``: Ray actors); :func:`_dual_round` takes the
     result when its prices are these.  Why: the next round's prices never depend on the recovery that
@@ -86,7 +87,7 @@ def prefetch(c: Coordinator, deadline: float | None) -> None:
         return
     lam = np.minimum(c.prices.lam, c.prob.weight)
     pi = c.prices.pass_price()
-    c._pending = (lam, pi, submit(np.flatnonzero(~c.frozen).tolist(), lam, pi, deadline),
+    c._pending = (lam, pi, submit(np.flatnonzero(~c.frozen).tolist(), lam, pi, budget),
                      time.perf_counter())
 
 
@@ -101,12 +102,12 @@ def _bound_from(c: Coordinator, total: float, proven: bool, what: str, lam: np.n
             c.best_bound, c.bound_source, c.bound_lam = total, "lagrangian", lam
 
 
-def price_round(c: Coordinator, deadline: float | None) -> float | None:
-    """Every pass under the current prices (on the pool); returns L(lam, mu) (None when cut by the deadline),
+def price_round(c: Coordinator, budget: Budget) -> float | None:
+    """Every pass under the current prices (on the pool); returns L(lam, mu) (None when cut by the budget),
     keeps the bound when it is proven and lower, and moves the prices."""
     if c._start_lam is None:
         c._start_lam = c.prices.lam.copy()
-    got = _dual_round(c, c.prices.lam, deadline)
+    got = _dual_round(c, c.prices.lam, budget)
     if got is None:
         return None
     t_solves = c._solve_s  # the master's limit
@@ -120,17 +121,17 @@ def price_round(c: Coordinator, deadline: float | None) -> float | None:
         added = c.master.add(c.round_paths)
         # no new column and L at the master's value: lam minimises L, later rounds would repeat this one
         c.converged = added == 0 and proven and total <= c.master.value + 1e-9 * max(1.0, total)
-        # with a fixed number of rounds (no deadline) the LP's limit is in iterations, about one per pass
+        # with a fixed number of rounds (no budget) the LP's limit is in iterations, about one per pass
         # solved (at 200 satellites 13,152 passes, ~4 s of HiGHS here as of a round's pass solves on one core):
         # the time a round's solves took depends on the machine and the workers, the schedule must not
-        iters = None if deadline is not None else max(MASTER_MIN_ITERATIONS, len(c.round_paths))
-        duals = c.master.duals(deadline, max(MASTER_MIN_S, t_solves), iters)
+        iters = None if budget.limited else max(MASTER_MIN_ITERATIONS, len(c.round_paths))
+        duals = c.master.duals(budget.cap(max(MASTER_MIN_S, t_solves)), iters)
         if duals is not None:
             c._lp_misses, c._lp_solved = 0, True
             c.prices.lam = c.centre.towards(duals)
             if not search:
                 c.prices.step_towards(count, total, c.best.value, pass_wh, scale, tasks=False)
-        elif deadline is None or time.perf_counter() < deadline:
+        elif not budget.expired():
             c._lp_misses += 1
             # a master that never finished a solve in its time is not one slow solve: at 1,000 satellites its
             # first three solves ran out, 41-97 s each, and the rounds waited for them (docs/results.md)
@@ -149,7 +150,7 @@ def price_round(c: Coordinator, deadline: float | None) -> float | None:
     else:
         c.prices.step_towards(count, total, c.best.value, None if search else pass_wh, scale)
     if search and proven:
-        lower = energy_search(c, lam, total, pass_wh, deadline)
+        lower = energy_search(c, lam, total, pass_wh, budget)
         if lower is not None:
             _bound_from(c, lower, True, f"round {c.rounds_done + 1}, energy search", lam)
             total = lower
@@ -158,7 +159,7 @@ def price_round(c: Coordinator, deadline: float | None) -> float | None:
 
 
 def energy_search(c: Coordinator, lam: np.ndarray, total: float, pass_wh: np.ndarray,
-                  deadline: float | None) -> float | None:
+                  budget: Budget) -> float | None:
     """Line searches of the energy windows' multipliers at the task prices `lam` of the round just solved (its
     L(lam, mu) = `total`, its pass terms and each pass's energy `pass_wh`): on every satellite the window its
     round's paths overspend most (in typical observations) gets the multiplier increase x (per Wh) that
@@ -167,7 +168,7 @@ def energy_search(c: Coordinator, lam: np.ndarray, total: float, pass_wh: np.nda
     satellite's window solved together on the pool).  A window whose multiplier is above 0 and
     whose passes spend less than it allows may be the satellite's instead (x then between minus its multiplier
     and 0).  Returns L(lam, mu) with the new multipliers (None when no window moves, a term is not proven, or
-    the deadline came).
+    the budget ran out).
 
     Why a search, not only the subgradient steps: at fixed task prices each window's phi is convex and
     piecewise linear in x (a pass term is the maximum over its paths of linear functions of its price), so
@@ -211,7 +212,7 @@ def energy_search(c: Coordinator, lam: np.ndarray, total: float, pass_wh: np.nda
         x = 0.5 * (lo + hi)
         pp = pi.copy()
         pp[passes] += x[owner]
-        solved = c.pool.solve_priced(todo, lam, pp, deadline)
+        solved = c.pool.solve_priced(todo, lam, pp, budget)
         if solved is None:
             return None
         c.pass_solves += len(todo)
@@ -263,7 +264,7 @@ def ceiling_prices(c: Coordinator) -> np.ndarray:
     return np.where(contested, c.prob.weight, 0.0)
 
 
-def ceiling_round(c: Coordinator, deadline: float | None) -> float | None:
+def ceiling_round(c: Coordinator, budget: Budget) -> float | None:
     """L at :func:`ceiling_prices`, kept as the bound when lower; the prices the rounds move are left as they
     are.  Under those prices no pass gains anything from a contested task, so L is the contested tasks'
     weight plus each pass's best schedule of the tasks only it can serve: never above the conflict-free
@@ -272,7 +273,7 @@ def ceiling_round(c: Coordinator, deadline: float | None) -> float | None:
     0.6680 of the weight here against 0.8816 for the heuristic start and 0.6717 conflict-free, which 63 price
     rounds from any start never got below."""
     ceiling = ceiling_prices(c)
-    got = _dual_round(c, ceiling, deadline)
+    got = _dual_round(c, ceiling, budget)
     if got is None:
         return None
     _bound_from(c, got[0], got[1], "ceiling prices", ceiling)

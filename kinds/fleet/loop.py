@@ -9,6 +9,7 @@ import time
 
 import numpy as np
 
+from eosp.budget import Budget
 from eosp.fleet.check import validate
 from eosp.fleet.model import Schedule
 from eosp.kinds.fleet.battery import battery_repair, offer
@@ -20,12 +21,12 @@ from eosp.kinds.fleet.problem import Primal
 from eosp.kinds.fleet.recovery import recover
 
 CHECK_MARGIN = 1.5  # the final check's estimate times this (a better schedule has more actions, a loaded machine)
-CHECK_SLACK_S = 0.2  # seconds added to it (the time the first steps after the deadline take)
+CHECK_SLACK_S = 0.2  # seconds added to it (the time the first steps after the budget's end take)
 
 
 def run(c: Coordinator) -> Primal:
     cfg, prob = c.cfg, c.prob
-    deadline = None if cfg.time_limit is None else c.t0 + cfg.time_limit
+    budget = Budget.of(cfg.time_limit, start=c.t0)  # the time limit counts from when the problem was read
     rng = np.random.default_rng(cfg.seed if c.start_round == 0 else [cfg.seed, c.start_round])
     order = np.argsort(prob.pass_time[:, 0], kind="stable")
     first = c.empty()
@@ -35,23 +36,23 @@ def run(c: Coordinator) -> Primal:
                 path = c.initial.paths[p]
                 free = c._available(first, p)[prob.passes[p].graph.node_acq[path]] if len(path) else path
                 c._assign(first, p, prob.rewalk(p, path[free]) if len(path) else path)
-        else:  # every pass, each solve cut short past the deadline
-            construct(c, order, primal=first, deadline=deadline, whole=True)
-        descend(c, first, list(range(len(prob.passes))), deadline)
+        else:  # every pass, each solve cut short past the budget's end
+            construct(c, order, primal=first, budget=budget, whole=True)
+        descend(c, first, list(range(len(prob.passes))), budget)
     except KeyboardInterrupt:
         c.interrupted = True
-    # the first schedule is repaired whole (its re-solves stop at the deadline; none after Ctrl-C)
-    c.first_repair_drops = battery_repair(c, first, time.perf_counter() if c.interrupted else deadline,
+    # the first schedule is repaired whole (its re-solves stop at the budget's end; none after Ctrl-C)
+    c.first_repair_drops = battery_repair(c, first, Budget.spent() if c.interrupted else budget,
                                                   whole=True)
     if first.value > c.best.value + 1e-9:
         c.keep(first)
     c.first_s = time.perf_counter() - c.t0
     if not c.interrupted:
-        if deadline is not None and time.perf_counter() < deadline:  # past it: no round, nothing to reserve
+        if budget.limited and not budget.expired():  # past it: no round, nothing to reserve
             c.check_s = check_estimate(c, first)  # kept for the final check of a schedule like this one
-            deadline -= c.check_s
+            budget = budget.less(c.check_s)
         try:
-            _rounds(c, deadline, rng)
+            _rounds(c, budget, rng)
         except KeyboardInterrupt:  # Ctrl-C: the best schedule so far is the answer
             c.interrupted = True
     return c.best
@@ -82,37 +83,37 @@ def check_estimate(c: Coordinator, primal: Primal) -> float:
     return CHECK_MARGIN * ((t_fixed - t) + fixed + per_action * n) + CHECK_SLACK_S
 
 
-def _rounds(c: Coordinator, deadline: float | None, rng: np.random.Generator) -> None:
+def _rounds(c: Coordinator, budget: Budget, rng: np.random.Generator) -> None:
     cfg = c.cfg
     rounds = c.start_round
     c.rounds_done = rounds
     while cfg.rounds is None or rounds < cfg.rounds:
-        if deadline is not None and time.perf_counter() > deadline:
+        if budget.expired():
             break
         if c.best_bound <= c.best.value + 1e-9:
             break  # proven optimal
         if cfg.pass_solver == "exact" and rounds == 0:
-            if ceiling_round(c, deadline) is None:
+            if ceiling_round(c, budget) is None:
                 break
             c.record()
         if (cfg.pass_solver == "exact" or rounds == 0) and not c.converged:
             before = c.best_bound
             t_round = time.perf_counter()
-            if price_round(c, deadline) is None:
+            if price_round(c, budget) is None:
                 break
             c.round_s.append(time.perf_counter() - t_round)
             c.prices.stalled(c.best_bound < before - 1e-9)
             c.record()
             if cfg.pass_solver == "exact" and not c.converged and (cfg.rounds is None
                                                                       or rounds + 1 < cfg.rounds):
-                prefetch(c, deadline)
+                prefetch(c, budget)
             c._pool_s, c._pool_calls, t = 0.0, 0, [time.perf_counter()]
-            primal = recover(c, rng, deadline)
+            primal = recover(c, rng, budget)
             t.append(time.perf_counter())
-            kept = offer(c, primal, deadline)
+            kept = offer(c, primal, budget)
             t.append(time.perf_counter())
             if not kept:
-                neighbourhood(c, rng, deadline)
+                neighbourhood(c, rng, budget)
             t.append(time.perf_counter())
             c.phases.append({"round": round(c._wait_s, 3),
                                 "prices": round(c.round_s[-1] - c._wait_s, 3),
@@ -120,9 +121,9 @@ def _rounds(c: Coordinator, deadline: float | None, rng: np.random.Generator) ->
                                 "moves": round(t[3] - t[2], 3), "pool": round(c._pool_s, 3),
                                 "pool_calls": c._pool_calls})
         elif c.converged and not c.integer_done and c.master is not None:
-            integer_round(c, deadline)
+            integer_round(c, budget)
         else:
-            neighbourhood(c, rng, deadline)
+            neighbourhood(c, rng, budget)
         rounds += 1
         c.rounds_done = rounds
         if c.on_round is not None:

@@ -32,6 +32,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from eosp.budget import UNLIMITED, Budget
 from eosp.fleet.energy import EnergyWindows
 from eosp.kinds.fleet.problem import Problem, path_slew_wh, path_tasks, path_wh
 
@@ -152,17 +153,16 @@ class Master:
                             np.asarray(starts, np.int32), np.asarray(index, np.int32), np.ones(len(index)))
         return len(cost)
 
-    def duals(self, deadline: float | None, limit: float, iterations: int | None = None) -> np.ndarray | None:
+    def duals(self, budget: Budget, iterations: int | None = None) -> np.ndarray | None:
         """The task prices of the master's optimum (its task rows' duals), or None when it was not solved to
-        optimality within `limit` seconds and before `deadline`, or, with `iterations`, within that many simplex
-        iterations instead of any time (the same on every machine and for any number of workers: a solve with
+        optimality within `budget` (the caller's cap of its own, :meth:`eosp.budget.Budget.cap`), or, with
+        `iterations`, within that many simplex iterations instead of any time (the same on every machine and for any number of workers: a solve with
         a fixed number of rounds)."""
         if iterations is not None:
             self._h.setOptionValue("time_limit", self._hs.kHighsInf)
             self._h.setOptionValue("simplex_iteration_limit", int(iterations))
         else:
-            if deadline is not None:
-                limit = min(limit, deadline - time.perf_counter())
+            limit = budget.left()
             # HiGHS compares its time limit with the run time of all the solves of this instance together: the
             # limit of this solve is counted from the time already run (else the master seemed to outgrow the
             # rounds once its solves added up to a round's time: at round 25 on a test_hard-like case)
@@ -188,16 +188,16 @@ class Master:
         return [(self.col_pass[i], self.col_path[i]) for i in used.tolist()]
 
     def energy_rows(self, windows: EnergyWindows, start: list[np.ndarray], max_nonzeros: int = ENERGY_ROW_NONZEROS,
-                    deadline: float | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None:
+                    budget: Budget = UNLIMITED) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None:
         """The rows ``sum over the columns c of a window's passes of E_c x_c <= rhs`` of the battery's energy
         `windows`, E_c a column's energy with its slews (:func:`path_wh` + :func:`path_slew_wh`): the windows kept
         (indices), and the rows as CSR over them (starts, column indices, values).  At most `max_nonzeros`
         entries: beyond them the windows with the least slack under the schedule `start` (one path per pass) are
         kept first (a 200-satellite day has 258,185 windows of 33 passes each on average).  None when the columns'
-        energies are not all computed by `deadline` (a ``time.perf_counter()`` instant; those computed are kept)."""
+        energies are not all computed within `budget` (those computed are kept)."""
         prob = self.prob
         for i in range(len(self.col_wh), len(self.col_pass)):
-            if deadline is not None and i % 256 == 0 and time.perf_counter() > deadline:
+            if i % 256 == 0 and budget.expired():
                 return None
             p, path = self.col_pass[i], self.col_path[i]
             self.col_wh.append(path_wh(prob.passes[p], path) + path_slew_wh(prob, p, path))
@@ -245,7 +245,7 @@ class Master:
         t0 = time.perf_counter()
         rows = None
         if windows is not None and len(windows):
-            rows = self.energy_rows(windows, start, deadline=t0 + 0.5 * limit)
+            rows = self.energy_rows(windows, start, budget=Budget.of(0.5 * limit, start=t0))
         if rows is not None:  # without them when their energies take more than half the time
             keep, starts, idx, val = rows
             h.addRows(len(keep), np.full(len(keep), -hs.kHighsInf), windows.rhs_wh[keep], len(idx), starts, idx, val)

@@ -5,10 +5,10 @@ integer solution over its columns.
 
 from __future__ import annotations
 
-import time
 
 import numpy as np
 
+from eosp.budget import Budget
 from eosp.kinds.fleet.battery import battery_repair, offer
 from eosp.kinds.fleet.construct import construct, descend
 from eosp.kinds.fleet.coordinator import Coordinator
@@ -18,7 +18,7 @@ INTEGER_MAX_S = 30.0  # seconds the master's integer solution may take at most (
 INTEGER_NODES = 200  # its branch-and-bound nodes when the solve has no time limit (--rounds): machine-independent
 
 
-def neighbourhood(c: Coordinator, rng: np.random.Generator, deadline: float | None) -> None:
+def neighbourhood(c: Coordinator, rng: np.random.Generator, budget: Budget) -> None:
     """Free the passes meeting a random time span, rebuild them in a price-perturbed order, descend."""
     prob = c.prob
     horizon = prob.fleet.horizon.seconds
@@ -32,12 +32,12 @@ def neighbourhood(c: Coordinator, rng: np.random.Generator, deadline: float | No
         c._assign(trial, p, np.zeros(0, np.int64))
     order = hit[rng.permutation(len(hit))]
     shift = c.prices.lam * rng.uniform(0.0, 1.0)
-    construct(c, order, shift, trial, deadline)
+    construct(c, order, shift, trial, budget)
     touched = sorted({q for p in hit.tolist() for t in prob.passes[p].tasks.tolist()
                       for q in prob.task_passes[t].tolist()})
-    descend(c, trial, touched, deadline)
+    descend(c, trial, touched, budget)
     if trial.value >= c.best.value - 1e-9:
-        if battery_repair(c, trial, deadline) is None:
+        if battery_repair(c, trial, budget) is None:
             return
         if trial.value >= c.best.value - 1e-9:
             if trial.value > c.best.value + 1e-9:
@@ -46,7 +46,7 @@ def neighbourhood(c: Coordinator, rng: np.random.Generator, deadline: float | No
                 c.best = trial
 
 
-def integer_round(c: Coordinator, deadline: float | None) -> None:
+def integer_round(c: Coordinator, budget: Budget) -> None:
     """A schedule from the master's best integer solution over its columns (:meth:`Master.integer`, started
     from the best schedule), filled by coordinate descent and offered (battery repair, kept when better).
     Once, when the prices have converged: given half of the time left, at most :data:`INTEGER_MAX_S`
@@ -72,10 +72,10 @@ def integer_round(c: Coordinator, deadline: float | None) -> None:
     c.integer_done = True
     tries = ([schedule_windows(c.prob)] if c.cfg.integer_energy else []) + [None]
     for windows in tries:
-        if deadline is None:
+        if not budget.limited:
             sel = c.master.integer(c.best.paths, INTEGER_MAX_S, INTEGER_NODES, windows)
         else:
-            left = deadline - time.perf_counter()
+            left = budget.left()
             if left <= 0:
                 return
             sel = c.master.integer(c.best.paths, min(INTEGER_MAX_S, 0.5 * left), windows=windows)
@@ -87,6 +87,6 @@ def integer_round(c: Coordinator, deadline: float | None) -> None:
             if c.frozen[p]:
                 continue
             c._assign(primal, p, path)  # barred tasks too: the battery repair says what the battery allows
-        descend(c, primal, list(range(len(c.prob.passes))), deadline)
-        if offer(c, primal, deadline):
+        descend(c, primal, list(range(len(c.prob.passes))), budget)
+        if offer(c, primal, budget):
             return

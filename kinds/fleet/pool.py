@@ -15,39 +15,39 @@ graphs.
 
 from __future__ import annotations
 
-import time
 from typing import Protocol
 
 import numpy as np
 
 from eosp.kinds.fleet.config import FleetConfig
-from eosp.kinds.fleet.problem import PassResult, Problem, priced, solve_pass, solve_round_pass
+from eosp.budget import Budget
+from eosp.kinds.fleet.problem import PassResult, PassSpec, Problem, priced, solve_pass, solve_round_pass
 
 
 class PassPool(Protocol):
     """Solves passes under task prices and energy prices.  A pool whose workers run beside the driver may also
-    offer ``submit_priced(passes, prices, pass_prices, deadline)``: :meth:`solve_priced` sent now, returning a
+    offer ``submit_priced(passes, prices, pass_prices, budget)``: :meth:`solve_priced` sent now, returning a
     function that waits for its result (Ray's actors; the coordinator then solves the next price round while it
     recovers a schedule, :func:`eosp.kinds.fleet.dual.prefetch`; the function may offer
     ``idle()``: whether the workers have finished that round, so that a sweep sent now would not wait behind it);
     it then says, as ``round_solve_s``, the seconds of solves of its busiest worker in the last round it returned
     (the master LP's time limit: the time since such a round was sent counts the recovery it ran beside).  Such a
-    pool may also offer ``repair_rows(rows, deadline)``: the battery repair of some satellites
+    pool may also offer ``repair_rows(rows, budget)``: the battery repair of some satellites
     (:func:`eosp.fleet.timeline.repair_rows`, its result), each on the worker that owns it."""
 
     def solve_priced(self, passes: list[int], prices: np.ndarray, pass_prices: np.ndarray,
-                     deadline: float | None) -> dict[int, PassResult] | None:
+                     budget: Budget) -> dict[int, PassResult] | None:
         """Every pass p of `passes` with utilities weight - price - pass_prices[p] * energy of its tasks
         (:func:`eosp.kinds.fleet.problem.solve_round_pass`: its path and its term of the bound); None when the
-        deadline (a ``time.perf_counter()`` instant) came first (no pass solve runs much past it)."""
+        budget ran out first (no pass solve runs much past it)."""
         ...
 
     def solve_utilities(self, passes: list[int], util: np.ndarray, offsets: np.ndarray,
-                        deadline: float | None) -> dict[int, PassResult] | None:
+                        budget: Budget) -> dict[int, PassResult] | None:
         """Every pass ``passes[i]`` with utilities ``util[offsets[i]:offsets[i + 1]]`` (one per task of the pass,
         :attr:`PassGraph.tasks` order; non-positive ones left out) by the pass solver alone
         (:func:`eosp.kinds.fleet.problem.solve_pass_graph`: its path and value, no bound problem); None when the
-        deadline came first.  Without a deadline the exact solver is deterministic, so the result is the same
+        budget ran out first.  Without a time limit the exact solver is deterministic, so the result is the same
         wherever a pass is solved."""
         ...
 
@@ -55,48 +55,48 @@ class PassPool(Protocol):
 
 
 class InProcessPool:
-    """The passes solved in this process, one after another (the deadline checked before each)."""
+    """The passes solved in this process, one after another (the budget checked before each)."""
 
     def __init__(self, prob: Problem, cfg: FleetConfig):
-        self.prob, self.cfg = prob, cfg
+        self.prob, self.spec = prob, PassSpec.of(cfg)
 
     def solve_priced(self, passes: list[int], prices: np.ndarray, pass_prices: np.ndarray,
-                     deadline: float | None) -> dict[int, PassResult] | None:
+                     budget: Budget) -> dict[int, PassResult] | None:
         out = {}
         for p in passes:
-            if deadline is not None and time.perf_counter() > deadline:
+            if budget.expired():
                 return None
-            out[p] = solve_priced_pass(self.prob, p, prices, pass_prices, self.cfg, deadline)
+            out[p] = solve_priced_pass(self.prob, p, prices, pass_prices, self.spec, budget)
         return out
 
     def solve_utilities(self, passes: list[int], util: np.ndarray, offsets: np.ndarray,
-                        deadline: float | None) -> dict[int, PassResult] | None:
-        return solve_utility_passes(self.prob, self.cfg, passes, util, offsets, deadline)
+                        budget: Budget) -> dict[int, PassResult] | None:
+        return solve_utility_passes(self.prob, self.spec, passes, util, offsets, budget)
 
     def close(self) -> None:
         pass
 
 
-def solve_utility_passes(prob: Problem, cfg: FleetConfig, passes: list[int], util: np.ndarray, offsets: np.ndarray,
-                         deadline: float | None) -> dict[int, PassResult] | None:
-    """:meth:`PassPool.solve_utilities` in this process, one pass after another (the deadline checked before
+def solve_utility_passes(prob: Problem, spec: PassSpec, passes: list[int], util: np.ndarray, offsets: np.ndarray,
+                         budget: Budget) -> dict[int, PassResult] | None:
+    """:meth:`PassPool.solve_utilities` in this process, one pass after another (the budget checked before
     each)."""
     out = {}
     for i, p in enumerate(passes):
-        if deadline is not None and time.perf_counter() > deadline:
+        if budget.expired():
             return None
-        out[p] = solve_pass(prob, p, util[offsets[i]:offsets[i + 1]], cfg, deadline)
+        out[p] = solve_pass(prob, p, util[offsets[i]:offsets[i + 1]], spec, budget)
     return out
 
 
-def solve_priced_pass(prob: Problem, p: int, prices: np.ndarray, pass_prices: np.ndarray, cfg: FleetConfig,
-                      deadline: float | None) -> PassResult:
+def solve_priced_pass(prob: Problem, p: int, prices: np.ndarray, pass_prices: np.ndarray, spec: PassSpec,
+                      budget: Budget) -> PassResult:
     """Pass `p` of a price round (:func:`eosp.kinds.fleet.problem.solve_round_pass`) under the prices."""
     pg = prob.graph(p)
-    return solve_round_pass(pg, priced(prob.weight, prices, pg.tasks, pg.energy_wh, pass_prices[p]), cfg, deadline)
+    return solve_round_pass(pg, priced(prob.weight, prices, pg.tasks, pg.energy_wh, pass_prices[p]), spec, budget)
 
 
-_FORKED: tuple[Problem, FleetConfig] | None = None  # the problem and config a forked worker inherits
+_FORKED: tuple[Problem, PassSpec] | None = None  # the problem and pass spec a forked worker inherits
 
 
 def _ignore_sigint() -> None:
@@ -107,16 +107,16 @@ def _ignore_sigint() -> None:
     signal.signal(signal.SIGINT, signal.SIG_IGN)
 
 
-def _solve_chunk(args: tuple[list[int], np.ndarray, np.ndarray, float | None]) -> list[PassResult]:
-    passes, prices, pass_prices, deadline = args
-    prob, cfg = _FORKED
-    return [solve_priced_pass(prob, p, prices, pass_prices, cfg, deadline) for p in passes]
+def _solve_chunk(args: tuple[list[int], np.ndarray, np.ndarray, Budget]) -> list[PassResult]:
+    passes, prices, pass_prices, budget = args
+    prob, spec = _FORKED
+    return [solve_priced_pass(prob, p, prices, pass_prices, spec, budget) for p in passes]
 
 
-def _solve_utility_chunk(args: tuple[list[int], np.ndarray, np.ndarray, float | None]) -> list[PassResult]:
-    passes, util, offsets, deadline = args
-    prob, cfg = _FORKED
-    return [solve_pass(prob, p, util[offsets[i]:offsets[i + 1]], cfg, deadline) for i, p in enumerate(passes)]
+def _solve_utility_chunk(args: tuple[list[int], np.ndarray, np.ndarray, Budget]) -> list[PassResult]:
+    passes, util, offsets, budget = args
+    prob, spec = _FORKED
+    return [solve_pass(prob, p, util[offsets[i]:offsets[i + 1]], spec, budget) for i, p in enumerate(passes)]
 
 
 class ForkPool:
@@ -127,35 +127,36 @@ class ForkPool:
         import multiprocessing
 
         global _FORKED
-        _FORKED = (prob, cfg)
+        _FORKED = (prob, PassSpec.of(cfg))
         self.workers = cfg.workers
         self.pool = multiprocessing.get_context("fork").Pool(cfg.workers, initializer=_ignore_sigint)
 
     def solve_priced(self, passes: list[int], prices: np.ndarray, pass_prices: np.ndarray,
-                     deadline: float | None) -> dict[int, PassResult] | None:
-        """Every pass of `passes` (in chunks, about four per worker; the children share this machine's clock)."""
+                     budget: Budget) -> dict[int, PassResult] | None:
+        """Every pass of `passes` (in chunks, about four per worker; the children share this machine's clock, so
+        the budget goes as it is)."""
         n = max(1, len(passes) // (4 * self.workers))
-        chunks = [(passes[i:i + n], prices, pass_prices, deadline) for i in range(0, len(passes), n)]
-        return self._map(_solve_chunk, chunks, deadline)
+        chunks = [(passes[i:i + n], prices, pass_prices, budget) for i in range(0, len(passes), n)]
+        return self._map(_solve_chunk, chunks, budget)
 
     def solve_utilities(self, passes: list[int], util: np.ndarray, offsets: np.ndarray,
-                        deadline: float | None) -> dict[int, PassResult] | None:
+                        budget: Budget) -> dict[int, PassResult] | None:
         """Every pass of `passes` under its utilities (in chunks, about four per worker, each with its slice of
         the flat utilities)."""
         n = max(1, len(passes) // (4 * self.workers))
         chunks = []
         for i in range(0, len(passes), n):
             j = min(i + n, len(passes))
-            chunks.append((passes[i:j], util[offsets[i]:offsets[j]], offsets[i:j + 1] - offsets[i], deadline))
-        return self._map(_solve_utility_chunk, chunks, deadline)
+            chunks.append((passes[i:j], util[offsets[i]:offsets[j]], offsets[i:j + 1] - offsets[i], budget))
+        return self._map(_solve_utility_chunk, chunks, budget)
 
-    def _map(self, fn, chunks: list[tuple], deadline: float | None) -> dict[int, PassResult] | None:
+    def _map(self, fn, chunks: list[tuple], budget: Budget) -> dict[int, PassResult] | None:
         """`fn` over the chunks on the workers (each chunk's first item its pass ids): the results by pass, or
-        None when the deadline came first."""
+        None when the budget ran out first."""
         import multiprocessing
 
         job = self.pool.map_async(fn, chunks)
-        timeout = None if deadline is None else max(0.0, deadline - time.perf_counter())
+        timeout = budget.wire()
         try:
             results = job.get(timeout)
         except multiprocessing.TimeoutError:

@@ -17,8 +17,22 @@ from eosp.fleet.opportunities import Opportunities
 from eosp.fleet.passgraph import (PassGraph, bound_problem, build_pass, build_passes, lean_pass, priced_graph,
                                   priced_pass, walk)
 from eosp.fleet.slew import LineOfSight
+from eosp.budget import UNLIMITED, Budget
 from eosp.graphs.prune import fifo_violations
 from eosp.kinds.fleet.config import FleetConfig
+
+
+@dataclass(frozen=True)
+class PassSpec:
+    """What one pass solve reads of the solver's config, and all that is sent with it to a worker: the pass
+    solver and the seconds one solve may take."""
+
+    solver: str = "exact"
+    time_limit: float = 5.0
+
+    @classmethod
+    def of(cls, cfg: FleetConfig) -> PassSpec:
+        return cls(cfg.pass_solver, cfg.pass_time_limit)
 
 
 @dataclass
@@ -135,34 +149,30 @@ def priced(weight: np.ndarray, prices: np.ndarray, tasks: np.ndarray, energy_wh:
     return util - pass_price * energy_wh
 
 
-def pass_limit(cfg: FleetConfig, deadline: float | None) -> float:
-    """Seconds one pass solve may take: the pass time limit, or what is left before `deadline` (a
-    ``time.perf_counter()`` instant) when that is less (rounded up to 10 ms, so that the solver's config, checked
-    once per distinct value, is not checked again for every pass near the deadline)."""
-    if deadline is None:
-        return cfg.pass_time_limit
-    left = deadline - time.perf_counter()
-    return cfg.pass_time_limit if left >= cfg.pass_time_limit else max(0.01, math.ceil(left * 100) / 100)
+def pass_limit(spec: PassSpec, budget: Budget) -> float:
+    """Seconds one pass solve may take: the pass time limit, or what is left of `budget` when that is less
+    (rounded up to 10 ms, so that the solver's config, checked once per distinct value, is not checked again for
+    every pass near the end)."""
+    left = budget.left()
+    return spec.time_limit if left >= spec.time_limit else max(0.01, math.ceil(left * 100) / 100)
 
 
-def solve_pass(prob: Problem, p: int, value: np.ndarray, cfg: FleetConfig,
-               deadline: float | None = None) -> PassResult:
+def solve_pass(prob: Problem, p: int, value: np.ndarray, spec: PassSpec, budget: Budget = UNLIMITED) -> PassResult:
     """Pass `p` with utility `value[a]` per local task (non-positive ones left out)."""
-    return solve_pass_graph(prob.graph(p), value, cfg, deadline)
+    return solve_pass_graph(prob.graph(p), value, spec, budget)
 
 
-def solve_pass_graph(pg: PassGraph, value: np.ndarray, cfg: FleetConfig,
-                     deadline: float | None = None) -> PassResult:
+def solve_pass_graph(pg: PassGraph, value: np.ndarray, spec: PassSpec, budget: Budget = UNLIMITED) -> PassResult:
     """One pass graph with utility `value[a]` per local task: what a worker holding the graph runs; the solver
-    stops by `deadline` (:func:`pass_limit`)."""
+    stops within `budget` (:func:`pass_limit`)."""
     from eosp.solvers import exact
     from eosp.solvers.base import run_solver
 
     priced = priced_graph(pg, value)
     if priced is None:
         return PassResult(np.zeros(0, np.int64), 0.0, 0.0)
-    limit = pass_limit(cfg, deadline)
-    if cfg.pass_solver == "exact":  # the sweep alone first, on the graph (most passes end there), as exact.solve
+    limit = pass_limit(spec, budget)
+    if spec.solver == "exact":  # the sweep alone first, on the graph (most passes end there), as exact.solve
         t0 = time.perf_counter()
         graph, nodes, acqs = priced
         res = exact.sweep_alone(graph, value[acqs].astype(np.float64), limit, exact.MAX_LABELS)
@@ -172,28 +182,27 @@ def solve_pass_graph(pg: PassGraph, value: np.ndarray, cfg: FleetConfig,
         sol = exact.solve_steps(pp.instance, exact.ExactConfig(mode="utility", time_limit=limit), t0)
     else:
         pp = priced_pass(pg, value, *priced)
-        sol = run_solver(cfg.pass_solver, pp.instance, mode="utility",
-                         **({"time_limit": limit} if cfg.pass_solver == "ramp" else {}))
+        sol = run_solver(spec.solver, pp.instance, mode="utility",
+                         **({"time_limit": limit} if spec.solver == "ramp" else {}))
     bound = None
-    if cfg.pass_solver == "exact":
+    if spec.solver == "exact":
         bound = sol.value if sol.info.get("status") == "optimal" else float(sol.info.get("bound", math.inf))
     return PassResult(pp.nodes[np.asarray(sol.nodes, dtype=np.int64)], float(sol.value), bound)
 
 
-def solve_round_pass(pg: PassGraph, value: np.ndarray, cfg: FleetConfig,
-                     deadline: float | None = None) -> PassResult:
+def solve_round_pass(pg: PassGraph, value: np.ndarray, spec: PassSpec, budget: Budget = UNLIMITED) -> PassResult:
     """A pass of a price round: its priced problem solved (the path moves the prices and seeds the recovery), with
     its term of the Lagrangian bound as `bound`: the priced optimum where the pass graph serves the bound, else
     the pass's bound problem (:func:`eosp.fleet.passgraph.bound_problem`: bridges and repeats kept, the verifier's
     tolerance); where neither is proven (a pass solver that proves none, a bound graph that is not FIFO, a bound
-    problem cut by the pass time limit or the deadline), the sum of the pass's positive values: any sequence of its
+    problem cut by the pass time limit or the budget), the sum of the pass's positive values: any sequence of its
     observations credits each task once, so it serves at most that (and never more is taken than that anyway).
     So one unprovable pass (1 of 13,041 in a generated 200-satellite day) does not leave the fleet without a bound."""
-    res = solve_pass_graph(pg, value, cfg, deadline)
+    res = solve_pass_graph(pg, value, spec, budget)
     every = float(np.maximum(np.asarray(value, dtype=np.float64), 0.0).sum())
     proven = res.bound
     if pg.bound_graph is not None and proven is not None:
-        b = bound_problem(pg, value, pass_limit(cfg, deadline))
+        b = bound_problem(pg, value, pass_limit(spec, budget))
         proven = max(b, proven) if math.isfinite(b) else None
     term = every if proven is None or not math.isfinite(proven) else min(proven, every)
     return PassResult(res.nodes, res.value, term)

@@ -23,7 +23,9 @@ import time
 
 import numpy as np
 
+from eosp.budget import Budget
 from eosp.kinds.fleet.config import FleetConfig
+from eosp.kinds.fleet.problem import PassSpec
 
 REVIVE_S = 60.0  # seconds a lost actor may take to come back (restarted by Ray, graphs built) before its passes move
 
@@ -83,7 +85,7 @@ def graphs_summary(graphs: list, fifo: bool) -> dict:
 class PassWorker:
     """A Ray actor holding the pass graphs of some passes (built here, once) and solving them on demand."""
 
-    def __init__(self, fleet_ref: list, passes: list[int], cfg: FleetConfig):
+    def __init__(self, fleet_ref: list, passes: list[int], spec: PassSpec):
         """`fleet_ref`: [the object-store reference of (fleet, opportunities)], fetched here (inside a list Ray
         passes the reference as it is, and the pool holds it: a restart fetches it again)."""
         import ray
@@ -95,7 +97,7 @@ class PassWorker:
         fleet, opps = ray.get(fleet_ref[0])
         los = LineOfSight(fleet, Geometry(fleet))
         off = opps.pass_offsets()
-        self.cfg, self.fleet, self.los, self.sun = cfg, fleet, los, None
+        self.spec, self.fleet, self.los, self.sun = spec, fleet, los, None
         self.weight = fleet.tasks.weight.astype(np.float64)
         self._build = lambda p: build_pass(fleet, opps, los, p, off)
         self.graphs = {p: self._build(p) for p in passes}
@@ -103,7 +105,7 @@ class PassWorker:
             from eosp.kinds.fleet.problem import solve_pass_graph
 
             pg = max(self.graphs.values(), key=lambda g: len(g.rows))
-            solve_pass_graph(pg, self.weight[pg.tasks], cfg)
+            solve_pass_graph(pg, self.weight[pg.tasks], spec)
 
     def adopt(self, passes: list[int]) -> int:
         """Build the graphs of more passes (those of a lost actor); returns how many this actor holds."""
@@ -123,44 +125,43 @@ class PassWorker:
         whose bound needs a bound problem, those with none provable, and the FIFO violations."""
         return graphs_summary(list(self.graphs.values()), fifo=True)
 
-    def solve_priced(self, passes: np.ndarray, lam: np.ndarray, pass_prices: np.ndarray, left_s: float | None) -> tuple:
+    def solve_priced(self, passes: np.ndarray, lam: np.ndarray, pass_prices: np.ndarray, budget_s: float | None) -> tuple:
         """Every pass of `passes` under task prices `lam` and the passes' energy prices `pass_prices` (utility
-        weight - price - pass price * energy), each solve stopped `left_s` seconds from now (this machine's
-        clock: the driver's deadline as a duration), packed in a few arrays (a round of thousands of passes costs
+        weight - price - pass price * energy), within `budget_s` seconds from now (the driver's budget in its
+        wire form, :meth:`eosp.budget.Budget.wire`: a budget again on this machine's clock), packed in a few arrays (a round of thousands of passes costs
         thousands of small objects otherwise): pass ids, values, bounds (NaN: none), CSR offsets and nodes of the
         paths, seconds per pass."""
         from eosp.kinds.fleet.problem import priced, solve_round_pass
 
-        deadline = None if left_s is None else time.perf_counter() + left_s
+        budget = Budget.of(budget_s)
 
         def one(i: int, p: int):
             pg = self.graphs[p]
-            return solve_round_pass(pg, priced(self.weight, lam, pg.tasks, pg.energy_wh, pass_prices[p]), self.cfg,
-                                    deadline)
+            return solve_round_pass(pg, priced(self.weight, lam, pg.tasks, pg.energy_wh, pass_prices[p]), self.spec,
+                                    budget)
         return packed(passes, one)
 
-    def repair_rows(self, rows, left_s: float | None):
+    def repair_rows(self, rows, budget_s: float | None):
         """The battery repair of some of this actor's satellites (:func:`eosp.fleet.timeline.repair_rows`: whether
-        each row is kept; None when stopped `left_s` seconds from now), their sunlight computed here once."""
+        each row is kept; None when stopped `budget_s` seconds from now), their sunlight computed here once."""
         from eosp.fleet.battery import SunCache
         from eosp.fleet.timeline import repair_rows
 
         if self.sun is None:
             self.sun = SunCache(self.los.geo)
-        return repair_rows(self.fleet, self.los, rows, self.sun,
-                           None if left_s is None else time.perf_counter() + left_s)
+        return repair_rows(self.fleet, self.los, rows, self.sun, Budget.of(budget_s))
 
     def solve_utilities(self, passes: np.ndarray, util: np.ndarray, util_offsets: np.ndarray,
-                        left_s: float | None) -> tuple:
+                        budget_s: float | None) -> tuple:
         """A sweep of the coordinate descent: pass ``passes[i]`` with utilities ``util[util_offsets[i]:
-        util_offsets[i + 1]]`` (the driver's, from its schedule) by the pass solver alone, each solve stopped
-        `left_s` seconds from now; packed as :meth:`solve_priced` (each bound the solver's, NaN when none: the
+        util_offsets[i + 1]]`` (the driver's, from its schedule) by the pass solver alone, within `budget_s`
+        seconds from now; packed as :meth:`solve_priced` (each bound the solver's, NaN when none: the
         driver keeps the proven optima, as it does for its own solves)."""
         from eosp.kinds.fleet.problem import solve_pass_graph
 
-        deadline = None if left_s is None else time.perf_counter() + left_s
+        budget = Budget.of(budget_s)
         return packed(passes, lambda i, p: solve_pass_graph(self.graphs[p], util[util_offsets[i]:util_offsets[i + 1]],
-                                                             self.cfg, deadline))
+                                                             self.spec, budget))
 
 
 def assign(prob, workers: int) -> np.ndarray:
@@ -191,13 +192,13 @@ class RayPassPool:
     def __init__(self, prob, cfg: FleetConfig):
         import ray
 
-        self.prob, self.cfg = prob, cfg
+        self.prob, self.spec = prob, PassSpec.of(cfg)
         self.owner = assign(prob, cfg.workers)  # actor of every pass (-1: the driver, when no actor is left)
         # held as long as the pool: a restarted actor is built again from it (dropped, Ray deletes the object
         # once the actors are made, and a restart fails for want of its argument)
         self.fleet_ref = ray.put((prob.fleet, prob.opps))
         actor = ray.remote(num_cpus=1, max_restarts=2, max_task_retries=0)(PassWorker)
-        self.actors = [actor.remote([self.fleet_ref], np.flatnonzero(self.owner == k).tolist(), cfg)
+        self.actors = [actor.remote([self.fleet_ref], np.flatnonzero(self.owner == k).tolist(), self.spec)
                        for k in range(cfg.workers)]
         self.nodes = ray.get([a.ready.remote() for a in self.actors])  # node of each actor
         self.adopted: list[list[int]] = [[] for _ in self.actors]  # passes each actor took over from lost ones
@@ -296,14 +297,14 @@ class RayPassPool:
 
     # ------------------------------------------------------------------ calls
     def solve_priced(self, passes: list[int], lam: np.ndarray, pass_prices: np.ndarray,
-                     deadline: float | None) -> dict | None:
+                     budget: Budget) -> dict | None:
         """Every pass of `passes` under task prices `lam` and energy prices `pass_prices`: the prices go to the
         object store once, each actor solves its own passes and sends them back packed
         (:meth:`PassWorker.solve_priced`); the passes of a lost actor are solved here meanwhile."""
-        return self.submit_priced(passes, lam, pass_prices, deadline)()
+        return self.submit_priced(passes, lam, pass_prices, budget)()
 
     def submit_priced(self, passes: list[int], lam: np.ndarray, pass_prices: np.ndarray,
-                      deadline: float | None):
+                      budget: Budget):
         """:meth:`solve_priced` sent to the actors now, its result waited for when the returned function is called
         (:meth:`eosp.kinds.fleet.pool.PassPool.submit_priced`: the next price round solved while the driver
         recovers a schedule from this one)."""
@@ -317,25 +318,25 @@ class RayPassPool:
         parts, here = self._spread(ids)
         lam_ref = ray.put(np.asarray(lam, dtype=np.float64))
         pi_ref = ray.put(np.asarray(pass_prices, dtype=np.float64))
-        left = None if deadline is None else max(0.0, deadline - time.perf_counter())
+        left = budget.wire()
         refs = [self.actors[k].solve_priced.remote(ids[idx], lam_ref, pi_ref, left) for k, idx in parts]
         inject_faults(self, "round", self.calls)
         out = {}
 
         def locally(idx: np.ndarray) -> bool:
             for p in ids[idx].tolist():
-                if deadline is not None and time.perf_counter() > deadline:
+                if budget.expired():
                     return False
-                out[p] = solve_priced_pass(self.prob, p, lam, pass_prices, self.cfg, deadline)
+                out[p] = solve_priced_pass(self.prob, p, lam, pass_prices, self.spec, budget)
             return True
 
         def collect() -> dict | None:
             if not locally(here):
                 return None
-            timeout = None if deadline is None else max(0.0, deadline - time.perf_counter())
+            timeout = budget.wire()
             ready, _ = ray.wait(refs, num_returns=len(refs), timeout=timeout)
             if len(ready) < len(refs):
-                return None  # the deadline came first
+                return None  # the budget ran out first
             busy = [0.0]  # each actor's seconds of solves in this round
             for ref, (k, idx) in zip(refs, parts):
                 try:
@@ -360,10 +361,10 @@ class RayPassPool:
         return collect
 
     def solve_utilities(self, passes: list[int], util: np.ndarray, offsets: np.ndarray,
-                        deadline: float | None) -> dict | None:
+                        budget: Budget) -> dict | None:
         """A sweep of the coordinate descent (:meth:`eosp.kinds.fleet.pool.PassPool.solve_utilities`): each actor
         gets its own passes' utilities as one flat vector and offsets; the passes of a lost actor are solved here
-        (the same deterministic solver); None when the deadline came first."""
+        (the same deterministic solver); None when the budget ran out first."""
         import ray
         from ray.exceptions import RayActorError
 
@@ -373,7 +374,7 @@ class RayPassPool:
         ids = np.asarray(passes, dtype=np.int64)
         offsets = np.asarray(offsets, dtype=np.int64)
         parts, here = self._spread(ids)
-        left = None if deadline is None else max(0.0, deadline - time.perf_counter())
+        left = budget.wire()
 
         def pick(idx: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
             lo, hi = offsets[idx], offsets[idx + 1]
@@ -388,20 +389,20 @@ class RayPassPool:
         inject_faults(self, "sweep", self.sweeps)
         out = {}
         if len(here):
-            done = solve_utility_passes(self.prob, self.cfg, ids[here].tolist(), *pick(here), deadline)
+            done = solve_utility_passes(self.prob, self.spec, ids[here].tolist(), *pick(here), budget)
             if done is None:
                 return None
             out.update(done)
-        timeout = None if deadline is None else max(0.0, deadline - time.perf_counter())
+        timeout = budget.wire()
         ready, _ = ray.wait(refs, num_returns=len(refs), timeout=timeout)
         if len(ready) < len(refs):
-            return None  # the deadline came first
+            return None  # the budget ran out first
         for ref, (k, idx), (mine_util, mine_off) in zip(refs, parts, sent):
             try:
                 got, value, bound, offs, nodes, secs = ray.get(ref)
             except RayActorError:
                 self._lost(k)
-                done = solve_utility_passes(self.prob, self.cfg, ids[idx].tolist(), mine_util, mine_off, deadline)
+                done = solve_utility_passes(self.prob, self.spec, ids[idx].tolist(), mine_util, mine_off, budget)
                 if done is None:
                     return None
                 out.update(done)
@@ -409,10 +410,10 @@ class RayPassPool:
             out.update(unpack(got, value, bound, offs, nodes))
         return out
 
-    def repair_rows(self, rows, deadline: float | None) -> np.ndarray | None:
+    def repair_rows(self, rows, budget: Budget) -> np.ndarray | None:
         """The battery repair of the satellites of `rows` (:func:`eosp.fleet.timeline.repair_rows`), each on the
-        actor that owns its passes, those of a lost actor here; whether each row is kept, or None when the deadline
-        came first.  A satellite's repair reads its own rows only: the same result whoever runs it."""
+        actor that owns its passes, those of a lost actor here; whether each row is kept, or None when the budget
+        ran out first.  A satellite's repair reads its own rows only: the same result whoever runs it."""
         import ray
         from ray.exceptions import RayActorError
 
@@ -425,23 +426,23 @@ class RayPassPool:
         owner = owner_sat[rows.sats]
         parts = [(k, idx) for k in live if len(idx := np.flatnonzero(owner == k))]
         here = np.flatnonzero(~np.isin(owner, live))
-        left = None if deadline is None else max(0.0, deadline - time.perf_counter())
+        left = budget.wire()
         refs = [self.actors[k].repair_rows.remote(rows.part(idx), left) for k, idx in parts]
         inject_faults(self, "repair", self.repairs)
         kept = np.ones(len(rows.task), dtype=bool)
 
         def locally(idx: np.ndarray) -> bool:
-            got = repair_rows(self.prob.fleet, self.prob.los, rows.part(idx), self.prob.sun, deadline)
+            got = repair_rows(self.prob.fleet, self.prob.los, rows.part(idx), self.prob.sun, budget)
             if got is not None:
                 kept[rows.take(idx)] = got
             return got is not None
 
         if len(here) and not locally(here):
             return None
-        timeout = None if deadline is None else max(0.0, deadline - time.perf_counter())
+        timeout = budget.wire()
         ready, _ = ray.wait(refs, num_returns=len(refs), timeout=timeout)
         if len(ready) < len(refs):
-            return None  # the deadline came first
+            return None  # the budget ran out first
         for ref, (k, idx) in zip(refs, parts):
             try:
                 got = ray.get(ref)

@@ -6,13 +6,14 @@ from __future__ import annotations
 
 import numpy as np
 
+from eosp.budget import Budget
 from eosp.interrupt import HeldInterrupt
 from eosp.kinds.fleet.construct import descend
 from eosp.kinds.fleet.coordinator import Coordinator
 from eosp.kinds.fleet.problem import Primal
 
 
-def recover(c: Coordinator, rng: np.random.Generator, deadline: float | None) -> Primal:
+def recover(c: Coordinator, rng: np.random.Generator, budget: Budget) -> Primal:
     """A schedule from the last price round's pass schedules: passes in random order keep the tasks no
     earlier pass took (the rest of their path re-walked along the graph's arcs), then coordinate descent.
     With the master (``--price-step lp``) the columns of its last solution come first, by decreasing share."""
@@ -31,7 +32,7 @@ def recover(c: Coordinator, rng: np.random.Generator, deadline: float | None) ->
             order.append(p)
             paths.append(path)
     _take_in_order(c, primal, order, paths)
-    descend(c, primal, list(range(n_pass)), deadline)
+    descend(c, primal, list(range(n_pass)), budget)
     return primal
 
 

@@ -108,14 +108,13 @@ def dual_round(prob: Problem, lam: np.ndarray) -> tuple[float, np.ndarray]:
     """One price round under `lam`: L(lam) as a fraction of the total weight (each pass's proven term, see
     :func:`eosp.kinds.fleet.problem.solve_round_pass`, plus the prices; inf when a pass term is not proven) and
     how many passes serve each task (L's subgradient is 1 - that count)."""
-    from eosp.kinds.fleet.config import FleetConfig
-    from eosp.kinds.fleet.problem import path_tasks, priced, solve_round_pass
+    from eosp.kinds.fleet.problem import PassSpec, path_tasks, priced, solve_round_pass
 
-    cfg = FleetConfig()
+    spec = PassSpec()
     total = float(lam.sum())
     count = np.zeros(len(prob.weight))
     for pg in prob.passes:
-        res = solve_round_pass(pg, priced(prob.weight, lam, pg.tasks), cfg)
+        res = solve_round_pass(pg, priced(prob.weight, lam, pg.tasks), spec)
         total += math.inf if res.bound is None else res.bound
         count[path_tasks(prob, pg.pass_id, res.nodes)] += 1
     return total / prob.total_weight, count

@@ -29,6 +29,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from eosp.budget import Budget
 from eosp.config import WEEK_S, choice, ranged
 from eosp.solvers.base import UtilityConfig
 from eosp.errors import InputError
@@ -413,7 +414,7 @@ class Search:
                 self.place(k)
 
     def lns(self, stop: Stop, span_s: float, trace: list, t0: float) -> int:
-        """Destroy-and-repair moves until `stop` (deadline, move budget or the value of an upper bound); the number
+        """Destroy-and-repair moves until `stop` (its time budget, moves or the value of an upper bound); the number
         of moves."""
         pl = self.plan
         pl.journal = []
@@ -489,16 +490,16 @@ class Search:
 
 @dataclass(frozen=True)
 class Stop:
-    """When the search stops: at `deadline` (perf_counter seconds; None: none), after `moves` moves (None: no
-    budget), or once the plan's value reaches `target` (an upper bound)."""
+    """When the search stops: when `budget` runs out, after `moves` moves (None: no limit on them), or once the
+    plan's value reaches `target` (an upper bound)."""
 
-    deadline: float | None
+    budget: Budget
     moves: int | None
     target: float
 
     def reached(self, done: int, value: float) -> bool:
         return ((self.moves is not None and done >= self.moves) or value >= self.target - 1e-9
-                or (self.deadline is not None and time.perf_counter() >= self.deadline))
+                or self.budget.expired())
 
 
 def solve(f: OneraFleet, cfg: BoundConfig | None = None) -> Solution:
@@ -519,7 +520,7 @@ def solve(f: OneraFleet, cfg: BoundConfig | None = None) -> Solution:
             search.greedy()
             trace.append((time.perf_counter() - t0, search.objective))
             if isinstance(cfg, OneraConfig):
-                stop = Stop(None if limit is None else t0 + limit - reserve, cfg.moves, float(search.best.sum()))
+                stop = Stop(Budget.of(limit, start=t0).less(reserve), cfg.moves, float(search.best.sum()))
                 moves = search.lns(stop, cfg.span_s, trace, t0)
                 status = "optimal" if search.objective >= stop.target - 1e-9 else "budget" if moves == cfg.moves \
                     else "time_limit"
