@@ -133,11 +133,12 @@ def bridge_fleet(start: int = 150, duration: float = 15.0, gap: float = 5.0, jit
     return dataclasses.replace(fleet, tasks=tasks, satellites=sats)
 
 
-def brute_force(fleet) -> float:
+def brute_force(fleet, value: np.ndarray | None = None) -> float:
     """The best weight any schedule can serve, battery aside (which only lowers it): per satellite every sequence
     of its opportunities (every start, tasks observed again allowed and credited once) whose consecutive slews
     the checker's rule accepts (lines of sight from brahe, gap + 1e-9 s >= slew + settling), then the best union
-    over satellites."""
+    over satellites.  `value[k, t]`: what task t is worth observed by satellite k (default: its weight); a task
+    two satellites observe counts once, at the more valuable."""
     from eosp.fleet.check import Inertial
 
     geo = Geometry(fleet)
@@ -174,7 +175,16 @@ def brute_force(fleet) -> float:
                             nxt.add(s)
             frontier = nxt
         per_sat.append({d for _, d in seen} | {frozenset()})
-    return max(sum(w[list(set().union(*combo))]) for combo in itertools.product(*per_sat))
+    if value is None:
+        return max(sum(w[list(set().union(*combo))]) for combo in itertools.product(*per_sat))
+    best = 0.0
+    for combo in itertools.product(*per_sat):
+        got: dict = {}
+        for k, done in enumerate(combo):
+            for t in done:
+                got[t] = max(got.get(t, 0.0), float(value[k, t]))
+        best = max(best, sum(got.values()))
+    return best
 
 
 def lagrangian(fleet, lam: np.ndarray) -> tuple[float, float]:

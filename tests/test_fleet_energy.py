@@ -122,7 +122,7 @@ def lagrangian(prob, lam: np.ndarray, mu: np.ndarray) -> float:
     pi = prices.pass_price()
     terms = []
     for p, pg in enumerate(prob.passes):
-        value = priced(prob.weight, lam, pg.tasks, pg.energy_wh, pi[p])
+        value = priced(prob.pass_values(p), lam[pg.tasks], pg.energy_wh, pi[p])
         pp = priced_instance(pg, value)
         opt = 0.0 if pp is None else run_solver("exact", pp.instance, mode="utility").value
         terms.append(opt if pg.bound_graph is None else max(opt, bound_problem(pg, value)))

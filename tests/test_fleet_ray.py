@@ -146,6 +146,43 @@ def test_ray_sweeps_with_one_and_two_actors_give_the_in_process_schedule(cluster
         monkeypatch.delenv(f"EOSP_FAULT_KILL_ACTOR_{fault}")
 
 
+def test_a_replan_on_actors_sees_each_revaluation(clustered_fleet_dir, two_nodes):
+    """A Replanner over two actors (the driver lean) and one in this process, the values changed between calls
+    (the actors built with none; each round carries the new ones, a restarted actor included): the same schedules,
+    values and bounds, call by call, as in this process."""
+    import ray
+
+    from eosp.kinds.fleet.problem import Problem, opportunity_values
+    from eosp.kinds.fleet.replan import Replanner
+    from eosp.kinds.fleet.solve import Start
+
+    fleet, opps = read_fleet(clustered_fleet_dir)
+    full = Problem.build(fleet, opps)
+    driver = Problem.build(fleet, opps, full.geo, lean=True)
+    if not ray.is_initialized():
+        ray.init(address=two_nodes.address)
+
+    def calls(prob, pool, workers):
+        planner = Replanner(prob, FleetConfig(pass_solver="exact", rounds=ROUNDS, time_limit=None,
+                                              workers=workers, seed=4), pool=pool)
+        out = []
+        for seed in (1, 2):
+            share = np.random.default_rng(seed).uniform(0.1, 1.0, len(opps))
+            planner.revalue(opportunity_values(prob, fleet.tasks.weight[opps.task] * share))
+            sol = planner.solve(Start())
+            out.append((sol.schedule.task.tolist(), sol.schedule.start_us.tolist(), sol.value, sol.bound,
+                        sol.info["objective_value"]))
+        return out
+
+    alone = calls(full, None, 1)
+    pool = RayPassPool(driver, FleetConfig(pass_solver="exact", workers=2))
+    try:
+        assert calls(driver, pool, 2) == alone
+        assert pool.faults == 0 and pool.calls >= 2
+    finally:
+        pool.close()
+
+
 def test_four_actors_on_four_nodes_give_the_in_process_schedule(clustered_fleet_dir, two_nodes, monkeypatch):
     """Two more nodes join (four CPUs in all) and four actors, the driver lean, solve with fixed rounds: every sweep
     of 2 passes or more on the actors, filled batches included (the descent's batches change with the worker count

@@ -39,7 +39,7 @@ from eosp.interrupt import HeldInterrupt
 from eosp.kinds.fleet.master import Centre, Master
 from eosp.kinds.fleet.pool import InProcessPool, PassPool
 from eosp.kinds.fleet.prices import Prices
-from eosp.kinds.fleet.problem import PassResult, PassSpec, Primal, Problem, path_tasks, priced
+from eosp.kinds.fleet.problem import PassResult, PassSpec, Primal, Problem, priced
 
 
 def csr_take(ptr: np.ndarray, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -106,16 +106,14 @@ class Coordinator:
         self._pass_sat = np.array([pg.satellite for pg in self.prob.passes], dtype=np.int64)
         self._terms = np.zeros(len(self.prob.passes))  # the pass terms of the last price round
         self._no_shift = np.zeros(n)  # zero task prices, made once (a descent sweep prices every pass twice)
-        lens = np.array([len(pg.tasks) for pg in self.prob.passes], dtype=np.int64)
-        self._task_ptr = np.r_[0, np.cumsum(lens)].astype(np.int64)  # the passes' tasks, CSR (disjoint batches)
-        self._task_idx = (np.concatenate([pg.tasks for pg in self.prob.passes]).astype(np.int64) if len(lens)
-                          else np.zeros(0, np.int64))
-        self._task_wh = (np.concatenate([pg.energy_wh for pg in self.prob.passes]).astype(np.float64) if len(lens)
-                         else np.zeros(0))  # each pass task's least energy, as _task_idx
+        self._task_ptr, self._task_idx = self.prob.task_ptr, self.prob.task_idx  # the passes' tasks, CSR
+        self._task_val = self.prob.flat_values()  # what each pass task is worth there, as _task_idx
+        self._task_wh = (np.concatenate([pg.energy_wh for pg in self.prob.passes]).astype(np.float64)
+                         if len(self.prob.passes) else np.zeros(0))  # each pass task's least energy, as _task_idx
         self._claimed = np.zeros(n, dtype=np.bool_)
         # every pass's nodes' acquisitions, one flat vector (a round's serve counts and energies as arrays)
         self._node_ptr = np.r_[0, np.cumsum([len(pg.graph.node_acq) for pg in self.prob.passes])].astype(np.int64)
-        self._node_acq = (np.concatenate([pg.graph.node_acq for pg in self.prob.passes]) if len(lens)
+        self._node_acq = (np.concatenate([pg.graph.node_acq for pg in self.prob.passes]) if len(self.prob.passes)
                           else np.zeros(0, np.int32))
         # the last proven-optimal solve of each pass under true weights (a sweep's or a wave's): its utilities, in
         # the passes' task CSR (NaN: none, never equal), and its result (see _solve_batch)
@@ -140,16 +138,17 @@ class Coordinator:
         pass's price of the energy they take (:attr:`spend`); 0 (left out) for a task another pass serves or the
         battery repair barred from this satellite."""
         pg = self.prob.passes[p]
-        w = self.prob.weight
-        shift = self._no_shift if shift is None else np.minimum(shift, 0.999 * w)
-        util = priced(w, shift, pg.tasks, pg.energy_wh, self.spend[p])
+        value = self.prob.pass_values(p)
+        price = self._no_shift[pg.tasks] if shift is None else np.minimum(shift[pg.tasks], 0.999 * value)
+        util = priced(value, price, pg.energy_wh, self.spend[p])
         return np.where(self._available(primal, p), util, 0.0)
 
     def _path_utility(self, p: int, path: np.ndarray) -> float:
         """The utility :meth:`_utility` gives pass p's `path` (its tasks are its own)."""
         pg = self.prob.passes[p]
         acq = pg.graph.node_acq[path]
-        return float(priced(self.prob.weight, self._no_shift, pg.tasks[acq], pg.energy_wh[acq], self.spend[p]).sum())
+        return float(priced(self.prob.pass_values(p)[acq], self._no_shift[pg.tasks[acq]], pg.energy_wh[acq],
+                            self.spend[p]).sum())
 
     def _available(self, primal: Primal, p: int) -> np.ndarray:
         tasks = self.prob.passes[p].tasks
@@ -159,8 +158,10 @@ class Coordinator:
     def _assign(self, primal: Primal, p: int, path: np.ndarray) -> list[int]:
         """Give pass p the schedule `path`; returns the tasks it freed.  Whole or not at all: a Ctrl-C waits for
         the end of the edit (the first schedule, interrupted while it is built, is the answer)."""
-        old = path_tasks(self.prob, p, primal.paths[p])
-        new = path_tasks(self.prob, p, path)
+        pg = self.prob.passes[p]
+        old_acq, new_acq = pg.graph.node_acq[primal.paths[p]], pg.graph.node_acq[path]
+        old, new = pg.tasks[old_acq], pg.tasks[new_acq]
+        value = self.prob.pass_values(p)
         mark = self._claimed  # all False between uses: the tasks of `old` not in `new` (no sort, a path's are unique)
         mark[new] = True
         freed = old[~mark[old]]
@@ -169,7 +170,7 @@ class Coordinator:
             primal.served[freed] = -1
             primal.served[new] = p
             primal.paths[p] = path
-            primal.value += float(self.prob.weight[new].sum() - self.prob.weight[old].sum())
+            primal.value += float(value[new_acq].sum() - value[old_acq].sum())
         return freed.tolist()
 
     def _batch_utilities(self, primal: Primal, batch: list[int],
@@ -180,9 +181,9 @@ class Coordinator:
         b = np.asarray(batch, dtype=np.int64)
         pos, offsets = csr_take(self._task_ptr, b)
         tasks, owner = self._task_idx[pos], np.repeat(b, np.diff(offsets))
-        w = self.prob.weight
-        shift = self._no_shift if shift is None else np.minimum(shift, 0.999 * w)
-        util = priced(w, shift, tasks, self._task_wh[pos], self.spend[owner])
+        value = self._task_val[pos]
+        price = self._no_shift[tasks] if shift is None else np.minimum(shift[tasks], 0.999 * value)
+        util = priced(value, price, self._task_wh[pos], self.spend[owner])
         s = primal.served[tasks]
         free = ((s < 0) | (s == owner)) & ~self.barred[self._pass_sat[owner], tasks]
         return np.where(free, util, 0.0), offsets
@@ -255,8 +256,8 @@ class Coordinator:
         self.record()
 
     def conflict_free(self) -> float:
-        """Every task that has an opportunity, served once."""
-        return float(self.prob.weight[np.array([len(h) > 0 for h in self.prob.task_passes], dtype=bool)].sum())
+        """Every task that has an opportunity, served once (in its most valuable pass: :attr:`Problem.cap`)."""
+        return float(self.prob.cap[np.array([len(h) > 0 for h in self.prob.task_passes], dtype=bool)].sum())
 
     @property
     def bound(self) -> float:

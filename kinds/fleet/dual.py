@@ -27,8 +27,7 @@ def _dual_round(c: Coordinator, lam: np.ndarray, budget: Budget) -> tuple | None
     every pass term is proven, each task's serve count, each pass's energy and path; None when the
     budget ran out.  A price above its task's weight is taken at the weight: no pass takes the task either way (its
     utility is not positive), so the pass terms are the same and L is lower."""
-    w = c.prob.weight
-    lam = np.minimum(lam, w)
+    lam = np.minimum(lam, c.prob.cap)
     pi = c.prices.pass_price()
     todo = np.flatnonzero(~c.frozen).tolist()
     pending, c._pending = c._pending, None
@@ -52,7 +51,7 @@ def _dual_round(c: Coordinator, lam: np.ndarray, budget: Budget) -> tuple | None
         if c.frozen[p]:  # a fixed term: its schedule under the prices
             pg, path = c.prob.passes[p], c.initial.paths[p]
             acq = pg.graph.node_acq[path]
-            value = float(priced(w, lam, pg.tasks[acq], pg.energy_wh[acq], pi[p]).sum())
+            value = float(priced(c.prob.pass_values(p)[acq], lam[pg.tasks[acq]], pg.energy_wh[acq], pi[p]).sum())
             res = PassResult(path, value, value)
         else:
             res = solved[p]
@@ -85,7 +84,7 @@ def prefetch(c: Coordinator, budget: Budget) -> None:
     submit = getattr(c.pool, "submit_priced", None)
     if submit is None:
         return
-    lam = np.minimum(c.prices.lam, c.prob.weight)
+    lam = np.minimum(c.prices.lam, c.prob.cap)
     pi = c.prices.pass_price()
     c._pending = (lam, pi, submit(np.flatnonzero(~c.frozen).tolist(), lam, pi, budget),
                      time.perf_counter())
@@ -114,7 +113,7 @@ def price_round(c: Coordinator, budget: Budget) -> float | None:
     total, proven, count, pass_wh, c.round_paths = got
     _bound_from(c, total, proven, f"round {c.rounds_done + 1}", c.prices.lam.copy())
     lam = c.prices.lam.copy()
-    scale = None if c.cfg.price_step == "uniform" else c.prob.weight  # lp's fallback: weighted steps
+    scale = None if c.cfg.price_step == "uniform" else c.prob.cap  # lp's fallback: weighted steps
     search = c.cfg.energy_search and len(c.windows) > 0
     if c.master is not None:  # column generation: the round's pass optima are the master's new columns
         c.centre.observe(lam, total)
@@ -191,13 +190,12 @@ def energy_search(c: Coordinator, lam: np.ndarray, total: float, pass_wh: np.nda
     passes = np.concatenate([np.arange(a, b + 1) for a, b in zip(win.lo[chosen], win.hi[chosen])])
     owner = np.repeat(np.arange(len(chosen)), lens)  # the chosen window of each of `passes`
     live = ~c.frozen[passes]
-    w = c.prob.weight
     top = np.zeros(len(chosen))  # past this price of a Wh no observation of the window is worth anything
     for k, p in zip(owner.tolist(), passes.tolist()):
         pg = c.prob.passes[p]
         e = pg.energy_wh
         if len(e):
-            gain = (w[pg.tasks] - lam[pg.tasks]) / np.maximum(e, 1e-12)
+            gain = (c.prob.pass_values(p) - lam[pg.tasks]) / np.maximum(e, 1e-12)
             top[k] = max(top[k], float(gain.max()))
     rhs = win.rhs_wh[chosen]
     best_phi = np.bincount(owner, c._terms[passes], len(chosen))
@@ -240,7 +238,6 @@ def _window_terms(c: Coordinator, passes: np.ndarray, solved: dict, lam: np.ndar
     """Of a bisection step of :func:`energy_search`: each of `passes`'s term at pass prices `pp` (a frozen pass's
     schedule priced, the others' proven bounds from `solved`) and the energy of its path; None when a term is not
     proven."""
-    w = c.prob.weight
     terms = np.zeros(len(passes))
     used = np.zeros(len(passes))
     for i, p in enumerate(passes.tolist()):
@@ -248,7 +245,7 @@ def _window_terms(c: Coordinator, passes: np.ndarray, solved: dict, lam: np.ndar
         if c.frozen[p]:
             path = c.initial.paths[p]
             acq = pg.graph.node_acq[path]
-            terms[i] = float(priced(w, lam, pg.tasks[acq], pg.energy_wh[acq], pp[p]).sum())
+            terms[i] = float(priced(c.prob.pass_values(p)[acq], lam[pg.tasks[acq]], pg.energy_wh[acq], pp[p]).sum())
             used[i] = path_wh(pg, path)
             continue
         res = solved[p]
@@ -259,9 +256,10 @@ def _window_terms(c: Coordinator, passes: np.ndarray, solved: dict, lam: np.ndar
 
 
 def ceiling_prices(c: Coordinator) -> np.ndarray:
-    """Every task more than one pass can serve priced at its weight, the others at 0."""
+    """Every task more than one pass can serve priced at its weight (its most valuable pass's value), the
+    others at 0."""
     contested = np.array([len(h) > 1 for h in c.prob.task_passes], dtype=bool)
-    return np.where(contested, c.prob.weight, 0.0)
+    return np.where(contested, c.prob.cap, 0.0)
 
 
 def ceiling_round(c: Coordinator, budget: Budget) -> float | None:

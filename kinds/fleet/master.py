@@ -131,7 +131,7 @@ class Master:
 
     def add(self, paths: list[np.ndarray]) -> int:
         """Every pass's schedule in `paths` (one path per pass) not held yet; returns how many were added."""
-        n, w = len(self.prob.weight), self.prob.weight
+        n = len(self.prob.weight)
         cost, starts, index = [], [], []
         for p, path in enumerate(paths):
             if len(path) == 0:
@@ -143,7 +143,7 @@ class Master:
             self.seen[key] = len(self.col_pass)
             self.col_pass.append(p)
             self.col_path.append(path)
-            cost.append(float(w[tasks].sum()))
+            cost.append(self._cost(p, path))
             starts.append(len(index))
             index.extend(tasks.tolist())
             index.append(n + p)
@@ -152,6 +152,20 @@ class Master:
             self._h.addCols(len(cost), np.asarray(cost), np.zeros(len(cost)), np.full(len(cost), inf), len(index),
                             np.asarray(starts, np.int32), np.asarray(index, np.int32), np.ones(len(index)))
         return len(cost)
+
+    def _cost(self, p: int, path: np.ndarray) -> float:
+        """What column (p, path) serves: its tasks' values in pass p (:meth:`Problem.pass_values`), summed in task
+        order."""
+        acq = np.unique(self.prob.passes[p].graph.node_acq[path])
+        return float(self.prob.pass_values(p)[acq].sum())
+
+    def revalue(self) -> None:
+        """Every column's cost under the problem's values as they are now (:meth:`Problem.set_values`): the columns
+        and the LP's basis are kept across a change of values (a re-plan starts from what the last one found),
+        only what each column serves changes."""
+        if self.col_pass:
+            cost = np.array([self._cost(p, path) for p, path in zip(self.col_pass, self.col_path)])
+            self._h.changeColsCost(len(cost), np.arange(len(cost), dtype=np.int32), cost)
 
     def duals(self, budget: Budget, iterations: int | None = None) -> np.ndarray | None:
         """The task prices of the master's optimum (its task rows' duals), or None when it was not solved to

@@ -90,10 +90,12 @@ def solve_utility_passes(prob: Problem, spec: PassSpec, passes: list[int], util:
 
 
 def solve_priced_pass(prob: Problem, p: int, prices: np.ndarray, pass_prices: np.ndarray, spec: PassSpec,
-                      budget: Budget) -> PassResult:
-    """Pass `p` of a price round (:func:`eosp.kinds.fleet.problem.solve_round_pass`) under the prices."""
+                      budget: Budget, value: np.ndarray | None = None) -> PassResult:
+    """Pass `p` of a price round (:func:`eosp.kinds.fleet.problem.solve_round_pass`) under the prices; `value`:
+    what its tasks are worth (default: :meth:`Problem.pass_values`)."""
     pg = prob.graph(p)
-    return solve_round_pass(pg, priced(prob.weight, prices, pg.tasks, pg.energy_wh, pass_prices[p]), spec, budget)
+    value = prob.pass_values(p) if value is None else value
+    return solve_round_pass(pg, priced(value, prices[pg.tasks], pg.energy_wh, pass_prices[p]), spec, budget)
 
 
 _FORKED: tuple[Problem, PassSpec] | None = None  # the problem and pass spec a forked worker inherits
@@ -107,10 +109,11 @@ def _ignore_sigint() -> None:
     signal.signal(signal.SIGINT, signal.SIG_IGN)
 
 
-def _solve_chunk(args: tuple[list[int], np.ndarray, np.ndarray, Budget]) -> list[PassResult]:
-    passes, prices, pass_prices, budget = args
+def _solve_chunk(args: tuple[list[int], np.ndarray, np.ndarray, Budget, list | None]) -> list[PassResult]:
+    passes, prices, pass_prices, budget, values = args
     prob, spec = _FORKED
-    return [solve_priced_pass(prob, p, prices, pass_prices, spec, budget) for p in passes]
+    return [solve_priced_pass(prob, p, prices, pass_prices, spec, budget, None if values is None else values[i])
+            for i, p in enumerate(passes)]
 
 
 def _solve_utility_chunk(args: tuple[list[int], np.ndarray, np.ndarray, Budget]) -> list[PassResult]:
@@ -128,6 +131,7 @@ class ForkPool:
 
         global _FORKED
         _FORKED = (prob, PassSpec.of(cfg))
+        self.prob = prob
         self.workers = cfg.workers
         self.pool = multiprocessing.get_context("fork").Pool(cfg.workers, initializer=_ignore_sigint)
 
@@ -136,8 +140,14 @@ class ForkPool:
         """Every pass of `passes` (in chunks, about four per worker; the children share this machine's clock, so
         the budget goes as it is)."""
         n = max(1, len(passes) // (4 * self.workers))
-        chunks = [(passes[i:i + n], prices, pass_prices, budget) for i in range(0, len(passes), n)]
+        chunks = [(passes[i:i + n], prices, pass_prices, budget, self._values(passes[i:i + n]))
+                  for i in range(0, len(passes), n)]
         return self._map(_solve_chunk, chunks, budget)
+
+    def _values(self, passes: list[int]) -> list | None:
+        """What the tasks of `passes` are worth, when the problem has values (they may have changed since the
+        workers were forked: a re-plan's revaluation); None without."""
+        return None if self.prob.values is None else [self.prob.pass_values(p) for p in passes]
 
     def solve_utilities(self, passes: list[int], util: np.ndarray, offsets: np.ndarray,
                         budget: Budget) -> dict[int, PassResult] | None:

@@ -66,6 +66,47 @@ class Problem:
     build_s: float = 0.0
     lean: bool = False  # passes without arcs (see the class docstring)
     built: dict[int, PassGraph] = field(default_factory=dict)  # lean: the graphs built here (lost workers' passes)
+    values: np.ndarray | None = None  # what each task is worth in each pass (set_values); None: its weight
+    cap: np.ndarray = field(init=False)  # float64 [tasks]: the most a task is worth in any pass (set_values)
+    task_ptr: np.ndarray = field(init=False)  # the passes' tasks as CSR: pass p's are task_idx[ptr[p]:ptr[p+1]]
+    task_idx: np.ndarray = field(init=False)
+
+    def __post_init__(self) -> None:
+        lens = np.array([len(pg.tasks) for pg in self.passes], dtype=np.int64)
+        self.task_ptr = np.r_[0, np.cumsum(lens)].astype(np.int64)
+        self.task_idx = (np.concatenate([pg.tasks for pg in self.passes]).astype(np.int64) if len(lens)
+                         else np.zeros(0, np.int64))
+        self.set_values(self.values)
+
+    def set_values(self, values: np.ndarray | None) -> None:
+        """What serving each task in each pass is worth, one float per (pass, task) in the passes' task order
+        (:attr:`task_ptr`; e.g. a task's weight times the chance that an observation in that pass succeeds, or 0
+        for a request that has not arrived); None: every task its weight in every pass.  The schedules, the
+        moves and the bound then count these values (:attr:`Primal.value`, :func:`priced`): the Lagrangian
+        bound, built on per-pass terms, holds for them as it does for the weights, and the conflict-free bound is
+        each task at its most valuable pass (:attr:`cap`, which the prices are also clipped at).  A ValueError
+        for a vector of another length or a value below 0 or not finite."""
+        if values is None:
+            self.values, self.cap = None, self.weight
+            return
+        values = np.array(values, dtype=np.float64)  # a copy: a new object whenever the values change
+        if values.shape != self.task_idx.shape:
+            raise ValueError(f"values: one per (pass, task) ({len(self.task_idx)}), got shape {values.shape}")
+        if not np.isfinite(values).all() or (values < 0).any():
+            raise ValueError("values: every value finite and at least 0")
+        self.values = values
+        self.cap = np.zeros(len(self.weight))
+        np.maximum.at(self.cap, self.task_idx, values)
+
+    def pass_values(self, p: int) -> np.ndarray:
+        """What each of pass p's tasks (:attr:`PassGraph.tasks` order) is worth in it (:meth:`set_values`)."""
+        if self.values is None:
+            return self.weight[self.passes[p].tasks]
+        return self.values[self.task_ptr[p]:self.task_ptr[p + 1]]
+
+    def flat_values(self) -> np.ndarray:
+        """:meth:`pass_values` of every pass, one flat vector in the order of :attr:`task_idx`."""
+        return self.weight[self.task_idx] if self.values is None else self.values
 
     @property
     def bound_graphs(self) -> int | None:
@@ -127,6 +168,19 @@ class Problem:
         return float(self.weight.sum())
 
 
+def opportunity_values(prob: Problem, per_opportunity: np.ndarray) -> np.ndarray:
+    """Values per (pass, task), as :meth:`Problem.set_values` takes them, from one value per opportunity (a row of
+    :attr:`Problem.opps`; e.g. its weight times the chance that this observation succeeds): a task's value in a
+    pass is its opportunity's there (the largest, should a pass hold two of one task)."""
+    per_opportunity = np.asarray(per_opportunity, dtype=np.float64)
+    if per_opportunity.shape != (len(prob.opps),):
+        raise ValueError(f"values: one per opportunity ({len(prob.opps)}), got shape {per_opportunity.shape}")
+    out = np.zeros(len(prob.task_idx))
+    for p, pg in enumerate(prob.passes):
+        np.maximum.at(out, prob.task_ptr[p] + pg.graph.node_acq[1:], per_opportunity[pg.rows])
+    return out
+
+
 def most_wh(fleet: Fleet, pg: PassGraph) -> float:
     """An upper bound of the energy (sum of e_o) a path of pass `pg` can spend: every task once, and no more
     than imaging and slewing throughout the pass (which of the energy windows can bind)."""
@@ -137,13 +191,14 @@ def most_wh(fleet: Fleet, pg: PassGraph) -> float:
     return min(float(pg.energy_wh.sum()), busy + float(pg.energy_wh.max(initial=0.0)))
 
 
-def priced(weight: np.ndarray, prices: np.ndarray, tasks: np.ndarray, energy_wh: np.ndarray | None = None,
+def priced(value: np.ndarray, price: np.ndarray, energy_wh: np.ndarray | None = None,
            pass_price: float | np.ndarray = 0.0) -> np.ndarray:
-    """The utilities of `tasks` under task prices and the pass's price of a Wh: weight - price - pass_price *
-    energy (`energy_wh` the tasks' least energy on the pass's satellite, :attr:`PassGraph.energy_wh`; none: task
-    prices only); the one place utilities are computed, on the driver and on the workers alike.  `pass_price` may
-    be one per task (the tasks of several passes at once, each with its pass's price)."""
-    util = weight[tasks] - prices[tasks]
+    """The utilities of some tasks of a pass, given what each is worth there (`value`: :meth:`Problem.pass_values`,
+    or the weights), their prices and the pass's price of a Wh: value - price - pass_price * energy (`energy_wh`
+    the tasks' least energy on the pass's satellite, :attr:`PassGraph.energy_wh`; none: task prices only); the one
+    place utilities are computed, on the driver and on the workers alike.  `pass_price` may be one per task (the
+    tasks of several passes at once, each with its pass's price)."""
+    util = value - price
     if energy_wh is None or (np.ndim(pass_price) == 0 and pass_price == 0):
         return util
     return util - pass_price * energy_wh
@@ -301,5 +356,5 @@ def primal_of(prob: Problem, sched: Schedule) -> Primal:
         tasks = path_tasks(prob, p, path)
         primal.paths[p] = path
         primal.served[tasks] = p
-        primal.value += float(prob.weight[tasks].sum())
+        primal.value += float(prob.pass_values(p)[prob.passes[p].graph.node_acq[path]].sum())
     return primal

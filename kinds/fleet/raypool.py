@@ -7,13 +7,11 @@ once, and a round sends only pass ids and prices and gets paths back.  The coord
 construction's waves go to the same actors (each gets its passes' utilities, which depend on the driver's
 schedule, as one flat vector), and so do the battery repairs of their satellites.
 
-Faults: an actor that dies mid-round costs nothing but time: the driver solves that actor's passes of the round
-itself (the same deterministic solver, so the round's result is the same), and Ray restarts the actor where a CPU
-is free, which builds its graphs again; while it is away the driver solves its passes, and one not back within
-:data:`REVIVE_S` seconds (its node lost on a full cluster) is given up: its satellites go to the live actors.
-Tests kill an actor in round R with the environment variable ``EOSP_FAULT_KILL_ACTOR_ROUND=R``, in the S-th
-descent sweep sent to the actors with ``EOSP_FAULT_KILL_ACTOR_SWEEP=S``, in the B-th battery repair with
-``EOSP_FAULT_KILL_ACTOR_REPAIR=B``.
+Faults: an actor that dies mid-round costs nothing but time: the driver solves its passes of the round (the same
+deterministic solver, the same result), and Ray restarts it where a CPU is free, which builds its graphs again;
+meanwhile the driver solves its passes, and one not back within :data:`REVIVE_S` seconds (its node lost on a full
+cluster) is given up: its satellites go to the live actors (:func:`rehome`).  Tests kill an actor in round R
+(``EOSP_FAULT_KILL_ACTOR_ROUND=R``), sweep S (``..._SWEEP=S``) or battery repair B (``..._REPAIR=B``).
 """
 
 from __future__ import annotations
@@ -25,7 +23,7 @@ import numpy as np
 
 from eosp.budget import Budget
 from eosp.kinds.fleet.config import FleetConfig
-from eosp.kinds.fleet.problem import PassSpec
+from eosp.kinds.fleet.problem import PassSpec, priced, solve_pass_graph, solve_round_pass
 
 REVIVE_S = 60.0  # seconds a lost actor may take to come back (restarted by Ray, graphs built) before its passes move
 
@@ -102,8 +100,6 @@ class PassWorker:
         self._build = lambda p: build_pass(fleet, opps, los, p, off)
         self.graphs = {p: self._build(p) for p in passes}
         if self.graphs:  # compile the solver's kernels now, not in the first round (numba, per process)
-            from eosp.kinds.fleet.problem import solve_pass_graph
-
             pg = max(self.graphs.values(), key=lambda g: len(g.rows))
             solve_pass_graph(pg, self.weight[pg.tasks], spec)
 
@@ -125,20 +121,19 @@ class PassWorker:
         whose bound needs a bound problem, those with none provable, and the FIFO violations."""
         return graphs_summary(list(self.graphs.values()), fifo=True)
 
-    def solve_priced(self, passes: np.ndarray, lam: np.ndarray, pass_prices: np.ndarray, budget_s: float | None) -> tuple:
-        """Every pass of `passes` under task prices `lam` and the passes' energy prices `pass_prices` (utility
-        weight - price - pass price * energy), within `budget_s` seconds from now (the driver's budget in its
-        wire form, :meth:`eosp.budget.Budget.wire`: a budget again on this machine's clock), packed in a few arrays (a round of thousands of passes costs
-        thousands of small objects otherwise): pass ids, values, bounds (NaN: none), CSR offsets and nodes of the
-        paths, seconds per pass."""
-        from eosp.kinds.fleet.problem import priced, solve_round_pass
-
+    def solve_priced(self, passes: np.ndarray, lam: np.ndarray, pass_prices: np.ndarray, budget_s: float | None,
+                     values: tuple | None = None) -> tuple:
+        """Every pass of `passes` under task prices `lam` and energy prices `pass_prices` (utility value - price -
+        pass price * energy) within `budget_s` seconds (the driver's :meth:`eosp.budget.Budget.wire`), packed (pass
+        ids, values, bounds (NaN: none), CSR offsets and nodes of the paths, seconds per pass).  `values`: the
+        problem's (values per (pass, task), task offsets) when it has any (:func:`values_ref`: with every round, so
+        a restarted actor has them too), else the weights."""
         budget = Budget.of(budget_s)
 
         def one(i: int, p: int):
             pg = self.graphs[p]
-            return solve_round_pass(pg, priced(self.weight, lam, pg.tasks, pg.energy_wh, pass_prices[p]), self.spec,
-                                    budget)
+            value = self.weight[pg.tasks] if values is None else values[0][values[1][p]:values[1][p + 1]]
+            return solve_round_pass(pg, priced(value, lam[pg.tasks], pg.energy_wh, pass_prices[p]), self.spec, budget)
         return packed(passes, one)
 
     def repair_rows(self, rows, budget_s: float | None):
@@ -157,11 +152,37 @@ class PassWorker:
         util_offsets[i + 1]]`` (the driver's, from its schedule) by the pass solver alone, within `budget_s`
         seconds from now; packed as :meth:`solve_priced` (each bound the solver's, NaN when none: the
         driver keeps the proven optima, as it does for its own solves)."""
-        from eosp.kinds.fleet.problem import solve_pass_graph
-
         budget = Budget.of(budget_s)
         return packed(passes, lambda i, p: solve_pass_graph(self.graphs[p], util[util_offsets[i]:util_offsets[i + 1]],
                                                              self.spec, budget))
+
+
+def rehome(prob, owner: np.ndarray, mine: np.ndarray, live: list[int]) -> None:
+    """The passes `mine` (a lost actor's) to the `live` actors in `owner` (the actor of every pass), whole
+    satellites onto the least loaded (by opportunities), the heaviest satellites first."""
+    sat_of = np.array([prob.passes[p].satellite for p in mine.tolist()], dtype=np.int64)
+    size = np.array([len(prob.passes[p].rows) for p in mine.tolist()], dtype=np.float64)
+    all_size = np.array([len(pg.rows) for pg in prob.passes], dtype=np.float64)
+    load = np.array([all_size[owner == j].sum() for j in live])
+    sats, inv = np.unique(sat_of, return_inverse=True)
+    sat_load = np.bincount(inv, weights=size, minlength=len(sats))
+    for s in np.argsort(-sat_load, kind="stable").tolist():
+        i = int(np.argmin(load))
+        load[i] += sat_load[s]
+        owner[mine[inv == s]] = live[i]
+
+
+def values_ref(pool: RayPassPool):
+    """The problem's values per (pass, task) and its task offsets in the object store, put again when the
+    driver's problem has other values than the last put (a re-plan's revaluation); None without values."""
+    import ray
+
+    values = pool.prob.values
+    if values is None:
+        return None
+    if pool.values_put is None or pool.values_put[0] is not values:
+        pool.values_put = (values, ray.put((values, pool.prob.task_ptr)))
+    return pool.values_put[1]
 
 
 def assign(prob, workers: int) -> np.ndarray:
@@ -215,6 +236,7 @@ class RayPassPool:
         self.repairs = 0  # calls of repair_rows (battery repairs sent to the actors)
         self.kill_repair = int(os.environ.get("EOSP_FAULT_KILL_ACTOR_REPAIR", "0") or 0)
         self.pass_sat = np.array([pg.satellite for pg in prob.passes], dtype=np.int64)
+        self.values_put = None  # (the problem's values last put, their object-store reference): values_ref
         self.on_sent = None  # tests: called with ("round" or "sweep", its count) once a call's work is sent
 
     # ------------------------------------------------------------------ faults
@@ -272,16 +294,7 @@ class RayPassPool:
         if not live:
             self.owner[mine] = -1
             return
-        sat_of = np.array([self.prob.passes[p].satellite for p in mine.tolist()], dtype=np.int64)
-        size = np.array([len(self.prob.passes[p].rows) for p in mine.tolist()], dtype=np.float64)
-        all_size = np.array([len(pg.rows) for pg in self.prob.passes], dtype=np.float64)
-        load = np.array([all_size[self.owner == j].sum() for j in live])
-        sats, inv = np.unique(sat_of, return_inverse=True)
-        sat_load = np.bincount(inv, weights=size, minlength=len(sats))
-        for s in np.argsort(-sat_load, kind="stable").tolist():
-            i = int(np.argmin(load))
-            load[i] += sat_load[s]
-            self.owner[mine[inv == s]] = live[i]
+        rehome(self.prob, self.owner, mine, live)
         for j in live:
             got = mine[self.owner[mine] == j].tolist()
             if got:
@@ -319,7 +332,8 @@ class RayPassPool:
         lam_ref = ray.put(np.asarray(lam, dtype=np.float64))
         pi_ref = ray.put(np.asarray(pass_prices, dtype=np.float64))
         left = budget.wire()
-        refs = [self.actors[k].solve_priced.remote(ids[idx], lam_ref, pi_ref, left) for k, idx in parts]
+        values = values_ref(self)
+        refs = [self.actors[k].solve_priced.remote(ids[idx], lam_ref, pi_ref, left, values) for k, idx in parts]
         inject_faults(self, "round", self.calls)
         out = {}
 

@@ -57,7 +57,7 @@ def _take_in_order(c: Coordinator, primal: Primal, order: list[int], paths: list
     clean = np.ones(len(order), dtype=bool)
     clean[rank[bad]] = False
     ends = np.r_[0, np.cumsum([len(x) for x in paths])]
-    w = c.prob.weight
+    value = c._task_val[pos]
     with HeldInterrupt():
         whole = clean[rank]
         primal.served[tasks[whole]] = owner[whole]
@@ -65,7 +65,7 @@ def _take_in_order(c: Coordinator, primal: Primal, order: list[int], paths: list
             primal.paths[order[i]] = paths[i]
     for i, p in enumerate(order):
         if clean[i]:  # what _assign adds for a path taken whole into an empty pass, in the loop's order
-            primal.value += float(w[tasks[ends[i]:ends[i + 1]]].sum())
+            primal.value += float(value[ends[i]:ends[i + 1]].sum())
             continue
         path = paths[i]
         free = c._available(primal, p)[c.prob.passes[p].graph.node_acq[path]]

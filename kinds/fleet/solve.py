@@ -82,25 +82,49 @@ def solve(fleet: Fleet, opps: Opportunities, cfg: FleetConfig | None = None, pro
     cfg = cfg or FleetConfig()
     cfg.validate()  # fields set one by one (eosp.config.apply_overrides) are checked together here
     prob = problem or Problem.build(fleet, opps)
-    start = None if initial is None else primal_of(prob, initial)
-    frozen = None
-    if freeze_until_s is not None:
-        frozen = frozen_passes(prob, freeze_until_s)
-        start = start or Primal.empty(len(prob.passes), len(fleet.tasks))
     own_pool = pool is None and cfg.workers > 1
     pool = ForkPool(prob, cfg) if own_pool else pool
-    coord = Coordinator(prob, cfg, t0=t0, pool=pool, initial=start, frozen=frozen, on_round=on_round)
+    coord = coordinator(prob, cfg, Start(initial, freeze_until_s, t0), pool)
+    coord.on_round = on_round
     start_prices(coord, resume)
     try:
-        best = run(coord)
+        return run_checked(coord)
     finally:
         if own_pool:
             pool.close()
+
+
+@dataclass
+class Start:
+    """Where a solve starts: a schedule (`initial`), the passes kept as it has them (`freeze_until_s`: one time,
+    or one per satellite, :func:`frozen_passes`) and when the problem was read (`t0`, ``time.perf_counter()``;
+    None: now)."""
+
+    initial: Schedule | None = None
+    freeze_until_s: float | np.ndarray | None = None
+    t0: float | None = None
+
+
+def coordinator(prob: Problem, cfg: FleetConfig, start: Start, pool: PassPool | None) -> Coordinator:
+    """The state of a solve of `prob` from `start` (:class:`Coordinator`), its prices at zero."""
+    first = None if start.initial is None else primal_of(prob, start.initial)
+    frozen = None
+    if start.freeze_until_s is not None:
+        frozen = frozen_passes(prob, start.freeze_until_s)
+        first = first or Primal.empty(len(prob.passes), len(prob.fleet.tasks))
+    return Coordinator(prob, cfg, t0=time.perf_counter() if start.t0 is None else start.t0, pool=pool,
+                       initial=first, frozen=frozen)
+
+
+def run_checked(coord: Coordinator) -> FleetSolution:
+    """Run a solve (:func:`eosp.kinds.fleet.loop.run`) and check its schedule: the solution and its record."""
+    best = run(coord)
+    cfg, prob, fleet = coord.cfg, coord.prob, coord.prob.fleet
     t_final = time.perf_counter()
     sched, res, dropped = checked(fleet, coord.schedule(best), prob.geo)
     W = prob.total_weight
     value = float(res.metrics.get("WCR", 0.0))
-    if coord.bound_source == "lagrangian" and W > 0 and value > coord.bound / W + 1e-9:
+    if prob.values is None and coord.bound_source == "lagrangian" and W > 0 and value > coord.bound / W + 1e-9:
         coord.keep(coord.best)  # the checked schedule above the bound: the bound was wrong, refused (never expected)
     bound = coord.bound
     source = coord.bound_source
@@ -126,6 +150,9 @@ def solve(fleet: Fleet, opps: Opportunities, cfg: FleetConfig | None = None, pro
                 else "none was lower than the conflict-free bound" if coord.rounds_done
                 else "none needed: the conflict-free bound is met" if coord.best_bound <= coord.best.value + 1e-9
                 else "no price round finished")}
+    if prob.values is not None:  # the objective is the values; the bound bounds it, not the WCR
+        info["objective"] = "values"
+        info["objective_value"] = coord.best.value / W if W > 0 else 0.0
     hist = [(t, v / W, b / W) for t, v, b in coord.history]
     return FleetSolution(sched, value, min(1.0, bound / W) if W > 0 else 0.0, hist, info, res)
 

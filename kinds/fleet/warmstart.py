@@ -114,7 +114,7 @@ def dual_round(prob: Problem, lam: np.ndarray) -> tuple[float, np.ndarray]:
     total = float(lam.sum())
     count = np.zeros(len(prob.weight))
     for pg in prob.passes:
-        res = solve_round_pass(pg, priced(prob.weight, lam, pg.tasks), spec)
+        res = solve_round_pass(pg, priced(prob.pass_values(pg.pass_id), lam[pg.tasks]), spec)
         total += math.inf if res.bound is None else res.bound
         count[path_tasks(prob, pg.pass_id, res.nodes)] += 1
     return total / prob.total_weight, count
