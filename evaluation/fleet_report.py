@@ -42,6 +42,8 @@ from eosp.fleet.model import US, Fleet, Schedule, iso_z
 from eosp.ownership import check_output, html_mark
 
 REPORT_KIND = "report"
+PAGE = ("One self-contained HTML page of a constellation day: Gantt per satellite (UTC), map with tracks and "
+        "targets, every task with the reason it was missed, summaries, differences.")  # eosp report's description
 TRACK_STEP_S = 60
 MAX_TRACK_POINTS = 400_000  # over all satellites
 BATTERY_BINS = 700

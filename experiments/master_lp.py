@@ -36,7 +36,8 @@ def main(argv: list[str] | None = None) -> int:
     from eosp.kinds.fleet.coordinator import Coordinator
     from eosp.kinds.fleet.dual import _dual_round
     from eosp.kinds.fleet.loop import run
-    from eosp.kinds.fleet.master import SMOOTHING, quiet_highs
+    from eosp.kinds.fleet.master import SMOOTHING
+    from eosp.kinds.lagrange import quiet_highs
     from eosp.kinds.fleet.problem import path_slew_wh, path_tasks, path_wh
     from eosp.kinds.fleet.warmstart import heuristic_prices
 

@@ -42,9 +42,9 @@ def package_dirs() -> dict[str, Path]:
     return {pkg: ROOT / folder for pkg, folder in cfg["package-dir"].items()}
 
 
-def layer_of(module: str) -> int:
+def layer_of(module: str, layers: list[set[str]] | None = None) -> int:
     best = None
-    for i, names in enumerate(LAYERS):
+    for i, names in enumerate(LAYERS if layers is None else layers):
         for name in names:
             if module == name or (name != "eosp" and module.startswith(name + ".")):
                 best = i
@@ -171,6 +171,121 @@ def test_circle_check_catches_a_lazy_import_circle(tmp_path):
     graph["eosp.search.b"] = import_edges(b, "eosp.search.b", known)
     assert graph["eosp.search.b"] == {"eosp.search.a"}
     assert import_circles(graph) == [["eosp.search.a", "eosp.search.b"]]
+
+
+# Where a benchmark lives (docs/architecture.md): each kind folder kinds/<folder>/ and the package, below the
+# environments, that holds its data model, reader and checker
+KIND_DATA = {"single": "eosp.instances", "fleet": "eosp.fleet", "onera": "eosp.onera", "eosbench": "eosp.eosbench"}
+SHARED_KIND_MODULES = {"eosp.kinds", "eosp.kinds.base", "eosp.kinds.lagrange"}  # what every kind folder may import
+
+
+def imported_names(path: Path) -> set[tuple[str, str]]:
+    """(module, name) of every ``from module import name`` of `path`, lazy ones included."""
+    return {(node.module, a.name) for node in ast.walk(ast.parse(path.read_text()))
+            if isinstance(node, ast.ImportFrom) and node.module and not node.level for a in node.names}
+
+
+def precedent_breaches(mods: dict[str, Path], layers: list[set[str]], kind_data: dict[str, str],
+                       registry: dict[str, str]) -> list[str]:
+    """What breaks the precedent of where a benchmark lives, over the modules `mods` (name -> file): every kind
+    folder has its data package below the environments and is registered from its own folder; no kind folder
+    imports another kind folder (shared pieces go to SHARED_KIND_MODULES); a data package imports no kind; no
+    module outside a kind folder imports a private (underscore) name of one."""
+    bad = []
+    folders = {name.split(".")[2] for name in mods if name.startswith("eosp.kinds.") and name.count(".") >= 3}
+    for folder in sorted(folders - set(kind_data)):
+        bad.append(f"kinds/{folder}/ has no data package (KIND_DATA)")
+    for folder, data in kind_data.items():
+        if layer_of(data, layers) >= layer_of("eosp.envs", layers):
+            bad.append(f"{data} (the data of kinds/{folder}/) is not below the environments")
+        if not any(ref.startswith(f"eosp.kinds.{folder}.") for ref in registry.values()):
+            bad.append(f"kinds/{folder}/ is not registered from its own folder")
+    graph = {name: import_edges(path, name, set(mods)) for name, path in mods.items()}
+    for name, targets in sorted(graph.items()):
+        own = name.split(".")[2] if name.startswith("eosp.kinds.") and name.count(".") >= 3 else None
+        for t in sorted(targets):
+            other = t.split(".")[2] if t.startswith("eosp.kinds.") and t.count(".") >= 3 else None
+            if own and other and other != own:
+                bad.append(f"{name} (kinds/{own}/) imports {t}, another kind's folder")
+            if name in kind_data.values() or any(name.startswith(d + ".") for d in kind_data.values()):
+                if t.startswith("eosp.kinds"):
+                    bad.append(f"{name} (a benchmark's data) imports {t}")
+        if own is None:
+            for module, imp in imported_names(mods[name]):
+                if module.startswith("eosp.kinds.") and module.count(".") >= 3 and imp.startswith("_"):
+                    bad.append(f"{name} imports {module}.{imp}, a kind's private name")
+    return bad
+
+
+def test_every_kind_follows_where_a_benchmark_lives():
+    from eosp.kinds import REGISTRY
+
+    registry = {k: v for k, v in REGISTRY.items() if isinstance(v, str)}
+    bad = precedent_breaches(dict(modules()), LAYERS, KIND_DATA, registry)
+    assert not bad, "\n".join(bad)
+
+
+def test_a_toy_benchmark_touches_only_its_folders_and_the_registry(tmp_path):
+    """A toy benchmark laid out as the precedent says, in a copy of the package's modules: its data package and
+    its kind folder are new, the registry and the package list gain a line each, nothing else changes, and the
+    layers and the precedent hold; the same toy importing the fleet kind's folder, or a private name of it, or its
+    data importing a kind, is caught."""
+    mods = dict(modules())
+    copy = tmp_path / "tree"
+    for name, path in mods.items():
+        rel = path.relative_to(ROOT)
+        (copy / rel).parent.mkdir(parents=True, exist_ok=True)
+        shutil.copy2(path, copy / rel)
+    shutil.copy2(ROOT / "pyproject.toml", copy / "pyproject.toml")
+    added = {"toy/__init__.py": "",
+             "toy/model.py": "from eosp.errors import InputError\n\ndef read(path):\n    return path\n",
+             "toy/check.py": "from eosp.problem import Verdict\nfrom eosp.toy.model import read\n",
+             "kinds/toy/__init__.py": "",
+             "kinds/toy/kind.py": "from eosp.kinds.base import KindBase\nfrom eosp.kinds.lagrange import Prices\n"
+                                  "from eosp.toy.check import Verdict\n\nclass Toy(KindBase):\n    name = 'toy'\n\n"
+                                  "KIND = Toy()\n"}
+    for rel, text in added.items():
+        (copy / rel).parent.mkdir(parents=True, exist_ok=True)
+        (copy / rel).write_text(text)
+    reg = copy / "kinds" / "__init__.py"
+    reg.write_text(reg.read_text().replace('    "eosbench": "eosp.kinds.eosbench.kind:KIND",\n',
+                                           '    "eosbench": "eosp.kinds.eosbench.kind:KIND",\n'
+                                           '    "toy": "eosp.kinds.toy.kind:KIND",\n'))
+    pyproject = copy / "pyproject.toml"
+    pyproject.write_text(pyproject.read_text().replace('"eosp.kinds.eosbench"]', '"eosp.kinds.eosbench", "eosp.toy", '
+                                                       '"eosp.kinds.toy"]')
+                         .replace('"eosp" = "core"', '"eosp" = "core"\n"eosp.toy" = "toy"\n"eosp.kinds.toy" = "kinds/toy"'))
+    changed = {str(p.relative_to(copy)) for p in copy.rglob("*") if p.is_file()
+               and (not (ROOT / p.relative_to(copy)).exists()
+                    or (ROOT / p.relative_to(copy)).read_bytes() != p.read_bytes())}
+    assert changed == set(added) | {"kinds/__init__.py", "pyproject.toml"}
+    toy_mods = {**{name: copy / path.relative_to(ROOT) for name, path in mods.items()},
+                "eosp.toy": copy / "toy/__init__.py", "eosp.toy.model": copy / "toy/model.py",
+                "eosp.toy.check": copy / "toy/check.py", "eosp.kinds.toy": copy / "kinds/toy/__init__.py",
+                "eosp.kinds.toy.kind": copy / "kinds/toy/kind.py"}
+    layers = [*LAYERS[:LAYERS.index({"eosp.envs"})], {"eosp.toy"}, *LAYERS[LAYERS.index({"eosp.envs"}):]]
+    from eosp.kinds import REGISTRY
+
+    registry = {"toy": "eosp.kinds.toy.kind:KIND", **{k: v for k, v in REGISTRY.items() if isinstance(v, str)}}
+    kind_data = {**KIND_DATA, "toy": "eosp.toy"}
+    assert precedent_breaches(toy_mods, layers, kind_data, registry) == []
+    for name, target in toy_mods.items():
+        for t in imported(target, name):
+            assert t == "eosp" or layer_of(t, layers) <= layer_of(name, layers), (name, t)
+    kind = copy / "kinds/toy/kind.py"
+    for wrong, caught in (("from eosp.kinds.fleet.solve import solve\n", "another kind's folder"),
+                          ("from eosp.kinds.fleet.dual import _dual_round\n", "another kind's folder")):
+        kind.write_text(added["kinds/toy/kind.py"] + wrong)
+        assert any(caught in b for b in precedent_breaches(toy_mods, layers, kind_data, registry))
+    kind.write_text(added["kinds/toy/kind.py"])
+    (copy / "toy/model.py").write_text(added["toy/model.py"] + "from eosp.kinds.base import KindBase\n")
+    assert any("a benchmark's data" in b for b in precedent_breaches(toy_mods, layers, kind_data, registry))
+    (copy / "toy/model.py").write_text(added["toy/model.py"])
+    job = copy / "jobs/toy_job.py"
+    job.write_text("from eosp.kinds.toy.kind import _secret\n")
+    assert "eosp.jobs.toy_job imports eosp.kinds.toy.kind._secret, a kind's private name" in \
+        precedent_breaches({**toy_mods, "eosp.jobs.toy_job": job}, layers, kind_data, registry)
+    assert "kinds/toy/ has no data package (KIND_DATA)" in precedent_breaches(toy_mods, layers, KIND_DATA, registry)
 
 
 MAX_PARAMETERS = 10

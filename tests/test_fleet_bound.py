@@ -418,7 +418,7 @@ def test_the_weighted_step_moves_each_price_in_proportion_to_its_weight(seed, sh
     """Polyak's step in the metric of the weights: from prices proportional to the weights, the tasks that no
     pass serves all lose the same share of their price, those served twice gain the same share, and the step
     closes the same gap as the uniform one (sum of scale * g * move = target)."""
-    from eosp.kinds.fleet.prices import Prices
+    from eosp.kinds.lagrange import Prices
 
     rng = np.random.default_rng(seed)
     w = rng.integers(1, 10, 40).astype(np.float64)

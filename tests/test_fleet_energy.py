@@ -1,4 +1,4 @@
-"""Energy in the fleet's Lagrangian bound (eosp.fleet.energy, eosp.kinds.fleet.prices), against a brute force over
+"""Energy in the fleet's Lagrangian bound (eosp.fleet.energy, eosp.kinds.lagrange), against a brute force over
 the verifier's rules on tiny fleets whose battery binds.
 
 The brute force knows nothing of passes or windows: per satellite it enumerates every sequence of opportunities
@@ -114,7 +114,7 @@ def lagrangian(prob, lam: np.ndarray, mu: np.ndarray) -> float:
     problem where the pass needs one, else the exact optimum of its priced problem), plus the prices and the
     multipliers times the windows' right-hand sides."""
     from eosp.fleet.passgraph import bound_problem, priced_instance
-    from eosp.kinds.fleet.prices import Prices
+    from eosp.kinds.lagrange import Prices
     from eosp.kinds.fleet.problem import priced
     from eosp.solvers.base import run_solver
 

@@ -36,7 +36,7 @@ class PriceLP:
     def __init__(self, prio: np.ndarray, n_passes: int) -> None:
         import highspy
 
-        from eosp.kinds.fleet.master import packing_highs
+        from eosp.kinds.lagrange import packing_highs
 
         self._hs = highspy
         self.prio = prio

@@ -5,7 +5,7 @@ What maps onto the fleet solver's machinery and what does not.  Their scenario i
 task is served at most once across passes, and within a pass a satellite observes one task after another with a
 transition between them.  So the pass graphs are the project's discrete graphs (:mod:`eosp.kinds.eosbench.passes`)
 swept by :func:`eosp.planning.labels.label_search` (exact), and the prices and their update are the fleet solver's
-(:class:`eosp.kinds.fleet.prices.Prices`).  What differs: their windows and attitudes are given (no orbits to
+(:class:`eosp.kinds.lagrange.Prices`).  What differs: their windows and attitudes are given (no orbits to
 propagate: the fleet's geometry, line-of-sight and battery model do not apply), transitions follow their model,
 and the per-(satellite, orbit) power and storage sums are hard caps inside a pass rather than a battery running
 from pass to pass, so the fleet's coordinator (battery repair, pass pools over aeossp fleets) is not used.
@@ -50,7 +50,7 @@ from eosp.eosbench.transition import PROFILES, READINGS, Rules, to_us, transitio
 from eosp.errors import InputError
 from eosp.kinds.eosbench.dual import PriceLP
 from eosp.kinds.eosbench.passes import NO_CAP, Pass, best_path, build_passes, graph
-from eosp.kinds.fleet.prices import Prices
+from eosp.kinds.lagrange import Prices
 from eosp.problem import Result
 from eosp.solvers.base import UtilityConfig
 
@@ -469,7 +469,7 @@ def pack(st: State, limit: float | None, nodes: int | None = None) -> bool:
     half a second)."""
     import highspy
 
-    from eosp.kinds.fleet.master import packing_highs, run_from
+    from eosp.kinds.lagrange import packing_highs, run_from
 
     keys = list(st.columns)
     if not keys:

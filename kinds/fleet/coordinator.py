@@ -17,8 +17,8 @@ The fleet solver is a package of phases, each a module of functions over this st
 
 A constellation-day is hundreds of passes (:mod:`eosp.fleet.passgraph`) coupled by two constraints: a task is
 served at most once, and each satellite's battery runs from one pass to the next (its consequences as energy
-windows over runs of passes, :mod:`eosp.fleet.energy`).  Relaxing both with prices separates the passes (:mod:`eosp.
-kinds.fleet.prices`); schedules come from the same pass solver with true weights.  A phase module imports this one
+windows over runs of passes, :mod:`eosp.fleet.energy`).  Relaxing both with prices separates the passes
+(:mod:`eosp.kinds.lagrange`); schedules come from the same pass solver with true weights.  A phase module imports this one
 and those below it (construct, then dual, recovery and battery, then moves, then loop); this one imports none.
 """
 
@@ -38,7 +38,7 @@ from eosp.kinds.fleet.config import FleetConfig
 from eosp.interrupt import HeldInterrupt
 from eosp.kinds.fleet.master import Centre, Master
 from eosp.kinds.fleet.pool import InProcessPool, PassPool
-from eosp.kinds.fleet.prices import Prices
+from eosp.kinds.lagrange import Prices
 from eosp.kinds.fleet.problem import PassResult, PassSpec, Primal, Problem, priced
 
 
@@ -265,7 +265,7 @@ class Coordinator:
         solver; each pass's term its priced optimum where its graph serves the bound, else its bound problem, see
         :func:`eosp.fleet.passgraph.bound_problem`), else the conflict-free bound (every task that has an
         opportunity, served once).  With ``energy_bound`` energy enters the Lagrangian bound through the
-        battery's energy windows (:mod:`eosp.fleet.energy`, their multipliers in :mod:`eosp.kinds.fleet.prices`);
+        battery's energy windows (:mod:`eosp.fleet.energy`, their multipliers in :mod:`eosp.kinds.lagrange`);
         else it is relaxed.  With frozen passes the Lagrangian bound holds for the schedules that keep them as
         given."""
         return self.best_bound

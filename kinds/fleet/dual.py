@@ -12,7 +12,7 @@ import numpy as np
 
 from eosp.budget import Budget
 from eosp.kinds.fleet.coordinator import Coordinator
-from eosp.kinds.fleet.prices import Prices
+from eosp.kinds.lagrange import Prices
 from eosp.kinds.fleet.problem import PassResult, path_wh, priced
 
 MASTER_MIN_S = 1.0  # seconds a master LP solve may always take (else at most the round's pass solves' time)

@@ -140,10 +140,6 @@ def export_globe(fmt: str):
 export_czml, export_kml = export_globe("czml"), export_globe("kml")
 
 
-PAGE = ("One self-contained HTML page of a constellation day: Gantt per satellite (UTC), map with tracks and "
-        "targets, every task with the reason it was missed, summaries, differences.")  # eosp report's description
-
-
 def late_because(res: Result) -> str:
     """Why a first schedule came after the time limit, in the solve's line: the seconds spent compiling kernels not
     yet cached (`make demo`, or ``python -m eosp.cli.warmup``, compiles them once), those building the pass graphs (their share
@@ -352,6 +348,8 @@ class FleetKind(KindBase):
         if command == "generate":
             p.description = "Draw a synthetic fleet (Walker-delta orbits, tasks on land, in cities or clusters)."
         elif command == "report":
+            from eosp.evaluation.fleet_report import PAGE
+
             p.description = PAGE
         super().arguments(command, p, solver)
 

@@ -1,6 +1,6 @@
 """The restricted master linear program of the fleet solver's price rounds (``--price-step lp``).
 
-The best Lagrangian bound, the minimum over task prices lam >= 0 of L(lam) (:mod:`eosp.kinds.fleet.prices`), is
+The best Lagrangian bound, the minimum over task prices lam >= 0 of L(lam) (:mod:`eosp.kinds.lagrange`), is
 the value of the linear program
 
     max sum over c of v_c x_c   s.t.   sum over the c holding task i of x_c <= 1   (every task i)
@@ -35,59 +35,10 @@ import numpy as np
 from eosp.budget import UNLIMITED, Budget
 from eosp.fleet.energy import EnergyWindows
 from eosp.kinds.fleet.problem import Problem, path_slew_wh, path_tasks, path_wh
+from eosp.kinds.lagrange import packing_highs, quiet_highs, run_from
 
 SMOOTHING = 0.5  # Wentges' a: the share of the centre in the prices of the next round
 ENERGY_ROW_NONZEROS = 2_000_000  # entries of the integer program's energy rows at most (Master.energy_rows)
-
-
-def quiet_highs():
-    """A HiGHS instance that prints nothing: its constructor writes a banner to the process's standard output
-    (file descriptor 1, below Python's sys.stdout), which would land in the middle of a command's output."""
-    import os
-    import sys
-
-    import highspy
-
-    sys.stdout.flush()
-    saved, null = os.dup(1), os.open(os.devnull, os.O_WRONLY)
-    try:
-        os.dup2(null, 1)
-        h = highspy.Highs()
-        h.setOptionValue("output_flag", False)
-    finally:
-        os.dup2(saved, 1)
-        os.close(saved)
-        os.close(null)
-    return h
-
-
-def packing_highs(rows: int):
-    """A quiet, one-thread HiGHS model that maximises, with `rows` rows ``sum of its columns <= 1`` and no column
-    yet: a set packing's (one row per task and per pass; the columns, each a pass's schedule, come later)."""
-    import highspy
-
-    h = quiet_highs()
-    h.setOptionValue("threads", 1)
-    h.changeObjectiveSense(highspy.ObjSense.kMaximize)
-    h.addRows(rows, np.full(rows, -highspy.kHighsInf), np.ones(rows), 0, np.zeros(0, np.int32), np.zeros(0, np.int32),
-              np.zeros(0))
-    return h
-
-
-def run_from(h, x0: np.ndarray) -> list[int]:
-    """Run the binary program `h` (HiGHS) from the solution `x0` (0/1 per column; the solver keeps it if it finds
-    none better); the columns set in the best solution found, [] when there is none."""
-    import highspy
-
-    sol = highspy.HighsSolution()
-    sol.col_value = np.asarray(x0, dtype=np.float64).tolist()
-    sol.value_valid = True
-    h.setSolution(sol)
-    h.run()
-    x = np.asarray(h.getSolution().col_value, dtype=np.float64)
-    if len(x) != len(x0):
-        return []
-    return np.flatnonzero(x > 0.5).tolist()
 
 
 @dataclass

@@ -2,7 +2,7 @@
 in-process and forked implementations (the Ray actors' is :class:`eosp.kinds.fleet.raypool.RayPassPool`).
 
 For a price round a pool takes pass ids, the task prices and the passes' energy prices (one vector each,
-:mod:`eosp.kinds.fleet.prices`), never utilities: whoever holds a pass's graph prices its tasks
+:mod:`eosp.kinds.lagrange`), never utilities: whoever holds a pass's graph prices its tasks
 (:func:`eosp.kinds.fleet.problem.priced`), so a round sends two vectors of prices and gets paths back.  A sweep of
 the coordinate descent (:func:`eosp.kinds.fleet.construct.descend`) depends on the schedule (a task
 another pass serves is worth 0 to this one), which only the driver holds: it sends each pass's utilities,

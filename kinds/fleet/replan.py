@@ -33,7 +33,7 @@ import numpy as np
 from eosp.kinds.fleet.config import FleetConfig
 from eosp.kinds.fleet.master import Master
 from eosp.kinds.fleet.pool import ForkPool, PassPool
-from eosp.kinds.fleet.prices import Prices
+from eosp.kinds.lagrange import Prices
 from eosp.kinds.fleet.problem import Problem
 from eosp.kinds.fleet.solve import FleetSolution, Start, coordinator, run_checked, start_prices
 

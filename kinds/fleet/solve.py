@@ -17,7 +17,7 @@ from eosp.kinds.fleet.config import FleetConfig, GreedyConfig
 from eosp.kinds.fleet.coordinator import Coordinator
 from eosp.kinds.fleet.loop import run
 from eosp.kinds.fleet.pool import ForkPool, PassPool
-from eosp.kinds.fleet.prices import Prices
+from eosp.kinds.lagrange import Prices
 from eosp.kinds.fleet.problem import Primal, Problem, primal_of
 from eosp.problem import Result
 

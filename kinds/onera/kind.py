@@ -146,7 +146,7 @@ class OneraKind(KindBase):
 
     def arguments(self, command: str, p: argparse.ArgumentParser, solver: str | None) -> None:
         if command == "report":
-            from eosp.kinds.fleet.kind import PAGE
+            from eosp.evaluation.fleet_report import PAGE
 
             p.description = PAGE
         super().arguments(command, p, solver)

@@ -1,9 +1,13 @@
-"""The prices of the fleet solver and their update: the Lagrangian dual of "a task is served at most once" and of
-the battery's energy windows (:mod:`eosp.fleet.energy`).
+"""The Lagrangian pieces two kinds share (the fleet solver, :mod:`eosp.kinds.fleet`, and the EOS-Bench solver,
+:mod:`eosp.kinds.eosbench`): the prices and their steps (:class:`Prices`), the set-packing model of a master LP or
+integer program over pass schedules (:func:`packing_highs`) and a binary program run from a start
+(:func:`run_from`).  Written here for the fleet's terms: the Lagrangian dual of "a task is served at most once" and
+of the battery's energy windows (:mod:`eosp.fleet.energy`; EOS-Bench has none, ``windows=None``).
 
 With a price ``lam[i] >= 0`` per task and a multiplier ``mu[w] >= 0`` per energy window w (its inequality
 ``sum of e_o over the observations of its passes <= R_w``), each pass p is solved on its own with utilities
-``w[i] - lam[i] - pi[p] * e[i]``, ``pi[p]`` the sum of the multipliers of the windows holding p (per Wh), and
+``w[i] - lam[i] - pi[p] * e[i]`` (w[i] the task's weight, or its value in pass p when the problem has values:
+:meth:`eosp.kinds.fleet.problem.Problem.set_values`; the argument below holds for either), ``pi[p]`` the sum of the multipliers of the windows holding p (per Wh), and
 
     L(lam, mu) = sum over passes of (the pass optimum under these utilities) + sum of lam + sum of mu[w] R_w
 
@@ -103,3 +107,53 @@ class Prices:
         self.stall = 0 if improved else self.stall + 1
         if self.stall >= STALL_ROUNDS:
             self.factor, self.stall = self.factor / 2, 0
+
+
+def quiet_highs():
+    """A HiGHS instance that prints nothing: its constructor writes a banner to the process's standard output
+    (file descriptor 1, below Python's sys.stdout), which would land in the middle of a command's output."""
+    import os
+    import sys
+
+    import highspy
+
+    sys.stdout.flush()
+    saved, null = os.dup(1), os.open(os.devnull, os.O_WRONLY)
+    try:
+        os.dup2(null, 1)
+        h = highspy.Highs()
+        h.setOptionValue("output_flag", False)
+    finally:
+        os.dup2(saved, 1)
+        os.close(saved)
+        os.close(null)
+    return h
+
+
+def packing_highs(rows: int):
+    """A quiet, one-thread HiGHS model that maximises, with `rows` rows ``sum of its columns <= 1`` and no column
+    yet: a set packing's (one row per task and per pass; the columns, each a pass's schedule, come later)."""
+    import highspy
+
+    h = quiet_highs()
+    h.setOptionValue("threads", 1)
+    h.changeObjectiveSense(highspy.ObjSense.kMaximize)
+    h.addRows(rows, np.full(rows, -highspy.kHighsInf), np.ones(rows), 0, np.zeros(0, np.int32), np.zeros(0, np.int32),
+              np.zeros(0))
+    return h
+
+
+def run_from(h, x0: np.ndarray) -> list[int]:
+    """Run the binary program `h` (HiGHS) from the solution `x0` (0/1 per column; the solver keeps it if it finds
+    none better); the columns set in the best solution found, [] when there is none."""
+    import highspy
+
+    sol = highspy.HighsSolution()
+    sol.col_value = np.asarray(x0, dtype=np.float64).tolist()
+    sol.value_valid = True
+    h.setSolution(sol)
+    h.run()
+    x = np.asarray(h.getSolution().col_value, dtype=np.float64)
+    if len(x) != len(x0):
+        return []
+    return np.flatnonzero(x > 0.5).tolist()
