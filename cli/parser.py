@@ -21,6 +21,8 @@ COMMANDS = {  # what `eosp --help` lists
                        "validate take a fleet directory too)",
     "report": "one self-contained HTML page: map, timeline, roll/pitch and a summary table of schedules of one "
               "instance",
+    "scenario": "a fleet's day in operation: requests that arrive, ground stations and contacts, clouds "
+                "(docs/operations.md)",
 }
 
 

