@@ -136,11 +136,15 @@ def intervals(los: LineOfSight, tl: Timeline, sat: int) -> tuple[Intervals, Inte
 
 
 def repair_battery(fleet: Fleet, los: LineOfSight, tls: list[Timeline] | dict[int, Timeline], sats=None,
-                   sun: SunCache | None = None, budget: Budget = UNLIMITED) -> int | None:
+                   sun: SunCache | None = None, budget: Budget = UNLIMITED, kept_until: dict | None = None
+                   ) -> int | None:
     """Drop the least valuable observations until every battery stays above zero; returns drops, or None when
     `budget` ran out first (the timelines are then half repaired).
 
-    `sats`: only these satellites' timelines (default: all); `sun`: a cache of sunlight kept between calls."""
+    `sats`: only these satellites' timelines (default: all); `sun`: a cache of sunlight kept between calls;
+    `kept_until`: satellite -> seconds up to which its observations are kept as they are (a plan already uploaded,
+    the passes a solve froze): an observation starting then or before is dropped only when none after it comes
+    before the battery runs dry."""
     sun = sun or SunCache(los.geo)
     w, dur = fleet.tasks.weight, fleet.tasks.duration_s
     dropped = 0
@@ -153,6 +157,9 @@ def repair_battery(fleet: Fleet, los: LineOfSight, tls: list[Timeline] | dict[in
             if run.ok or not tl.start:
                 break
             before = [k for k in range(len(tl.start)) if tl.start[k] * US <= run.fail_us] or list(range(len(tl.start)))
+            guard = (kept_until or {}).get(sat)
+            if guard is not None:
+                before = [k for k in before if tl.start[k] > guard] or before
             k = min(before, key=lambda k: (w[tl.task[k]], w[tl.task[k]] / dur[tl.task[k]], -tl.start[k]))
             tl.remove(k)
             dropped += 1
@@ -170,6 +177,7 @@ class Rows(NamedTuple):
     task: np.ndarray
     start: np.ndarray
     end: np.ndarray
+    kept_until: np.ndarray | None = None  # per satellite of `sats`: see repair_battery (None: nothing kept)
 
     @classmethod
     def of(cls, tls: list[Timeline]) -> Rows:
@@ -190,7 +198,7 @@ class Rows(NamedTuple):
         lo, hi = self.offsets[idx], self.offsets[idx + 1]
         take = self.take(idx)
         return Rows(self.sats[idx], np.r_[0, np.cumsum(hi - lo)].astype(np.int64), self.task[take],
-                    self.start[take], self.end[take])
+                    self.start[take], self.end[take], None if self.kept_until is None else self.kept_until[idx])
 
 
 def repair_rows(fleet: Fleet, los: LineOfSight, rows: Rows, sun: SunCache,
@@ -200,7 +208,9 @@ def repair_rows(fleet: Fleet, los: LineOfSight, rows: Rows, sun: SunCache,
     wherever it runs and however the satellites are split."""
     tls = {int(k): timeline(los, int(k), rows.task[a:b], rows.start[a:b], rows.end[a:b])
            for k, a, b in zip(rows.sats.tolist(), rows.offsets[:-1].tolist(), rows.offsets[1:].tolist())}
-    if repair_battery(fleet, los, tls, sats=list(tls), sun=sun, budget=budget) is None:
+    kept = None if rows.kept_until is None else {int(k): float(t) for k, t in zip(rows.sats, rows.kept_until)
+                                                 if np.isfinite(t)}
+    if repair_battery(fleet, los, tls, sats=list(tls), sun=sun, budget=budget, kept_until=kept) is None:
         return None
     kept = np.ones(len(rows.task), dtype=bool)
     for i, k in enumerate(rows.sats.tolist()):

@@ -249,6 +249,9 @@ def test_actors_repair_the_batteries_of_their_satellites_as_the_driver_does(two_
     rows = Rows.of(schedule_timelines(weak, solve(fleet, opps), prob.los))
     here = repair_rows(weak, prob.los, rows, SunCache(prob.geo))
     assert 0 < int((~here).sum()) < len(here)
+    guarded = rows._replace(kept_until=np.full(len(rows.sats), 0.4 * weak.horizon.seconds))  # a frozen prefix
+    kept_here = repair_rows(weak, prob.los, guarded, SunCache(prob.geo))
+    assert not np.array_equal(kept_here, here)  # the guard changes what goes: the actors must honour it too
     if not ray.is_initialized():
         ray.init(address=two_nodes.address)
     for fault in ("", "1"):
@@ -259,6 +262,7 @@ def test_actors_repair_the_batteries_of_their_satellites_as_the_driver_does(two_
             assert np.array_equal(pool.repair_rows(rows, UNLIMITED), here)
             assert pool.faults == (1 if fault else 0)
             assert np.array_equal(pool.repair_rows(rows, UNLIMITED), here)  # and once more, the actor back or not
+            assert np.array_equal(pool.repair_rows(guarded, UNLIMITED), kept_here)
         finally:
             pool.close()
 

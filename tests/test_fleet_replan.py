@@ -147,3 +147,74 @@ def test_values_are_checked():
     with pytest.raises(ValueError, match="one per opportunity"):
         opportunity_values(prob, np.ones(len(opps) + 2))
     assert prob.values is None and prob.cap is prob.weight  # nothing half set
+
+
+@pytest.fixture(scope="module")
+def weak_day():
+    """A greedy schedule of a generated fleet, and the same fleet with batteries too weak for it."""
+    import dataclasses
+
+    from eosp.fleet.generate import FleetGenConfig, generate
+    from eosp.fleet.greedy import solve as greedy
+
+    fleet = generate(FleetGenConfig(satellites=5, tasks=300, hours=4.0, window_min_h=1.0, window_max_h=3.0, seed=2))
+    geo = Geometry(fleet)
+    opps = compute(fleet, geo)
+    sched = greedy(fleet, opps, geo)
+    b = fleet.satellites.battery
+    weak = dataclasses.replace(b, initial_wh=0.05 * b.capacity_wh, sunlit_w=0.3 * b.sunlit_w)
+    weak = dataclasses.replace(fleet, satellites=dataclasses.replace(fleet.satellites, battery=weak))
+    return weak, opps, geo, sched
+
+
+def prefix_holds(fleet, sched, geo, until_s: float) -> bool:
+    from eosp.fleet.check import validate
+    from eosp.fleet.model import Schedule
+
+    keep = sched.start_us <= until_s * 1e6
+    part = Schedule(sched.satellite[keep], sched.task[keep], sched.start_us[keep], sched.end_us[keep])
+    return validate(fleet, part, geo).valid
+
+
+def test_the_battery_repair_keeps_what_is_kept_until_a_time_when_later_observations_can_go(weak_day):
+    """repair_battery with `kept_until` (per satellite): when the observations up to that time hold the battery on
+    their own, none of them is dropped (the repair takes later ones), and the result still holds; without it, the
+    same repair drops some of them (so the test can fail)."""
+    from eosp.fleet.reasons import schedule_timelines
+    from eosp.fleet.slew import LineOfSight
+    from eosp.fleet.timeline import repair_battery, to_schedule
+
+    weak, opps, geo, sched = weak_day
+    los = LineOfSight(weak, geo)
+    horizon = weak.horizon.seconds
+    guard = next(t for t in np.linspace(0.6, 0.1, 11) * horizon if prefix_holds(weak, sched, geo, t))
+    plain = schedule_timelines(weak, sched, los)
+    repair_battery(weak, los, plain)
+    tls = schedule_timelines(weak, sched, los)
+    kept = {k: guard for k in range(len(weak.satellites))}
+    assert repair_battery(weak, los, tls, kept_until=kept) > 0
+    before = {(k, t, s) for k, tl in enumerate(schedule_timelines(weak, sched, los)) for t, s in zip(tl.task, tl.start)
+              if s <= guard}
+    after = {(k, t, s) for k, tl in enumerate(tls) for t, s in zip(tl.task, tl.start)}
+    assert before <= after  # every observation up to the guard kept
+    assert not before <= {(k, t, s) for k, tl in enumerate(plain) for t, s in zip(tl.task, tl.start)}
+    from eosp.fleet.check import validate
+
+    assert validate(weak, to_schedule(weak, tls), geo).valid
+
+
+def test_a_solve_keeps_its_frozen_passes_when_the_battery_binds(weak_day):
+    """--init with --freeze-until on batteries too weak for the initial schedule: the frozen passes' observations
+    all stay (they hold the battery on their own); the repair takes what it must from the passes after them."""
+    weak, opps, geo, sched = weak_day
+    prob = Problem.build(weak, opps, geo)
+    until = next(t for t in np.linspace(0.6, 0.1, 11) * weak.horizon.seconds if prefix_holds(weak, sched, geo, t))
+    sol = solve(weak, opps, FleetConfig(rounds=2, time_limit=None, seed=1), problem=prob, initial=sched,
+                freeze_until_s=until)
+    frozen_end = prob.pass_time[prob.pass_time[:, 0] < until, 1].max()
+    assert sol.check.valid and sol.info["repair_removed"] > 0
+    want = {r for r in zip(sched.satellite.tolist(), sched.task.tolist(), sched.start_us.tolist())
+            if r[2] <= frozen_end * 1e6}
+    got = set(zip(sol.schedule.satellite.tolist(), sol.schedule.task.tolist(), sol.schedule.start_us.tolist()))
+    frozen_rows = {r for r in want if r[2] < until * 1e6}
+    assert frozen_rows and frozen_rows <= got

@@ -26,10 +26,14 @@ def battery_repair(c: Coordinator, primal: Primal, budget: Budget = UNLIMITED, w
     :attr:`repair_drops`), or None when `budget` ran out first: `primal` is then not repaired and must not be
     kept.  `whole` (the first schedule): the repair runs to its end whatever the budget (the re-solves
     still stop at its end).  Only the satellites whose observations changed since their battery was last seen to
-    hold are simulated, on the pool when it offers it (:func:`_repair_rows`)."""
+    hold are simulated, on the pool when it offers it (:func:`_repair_rows`).  The frozen passes' observations
+    are dropped only when nothing after them comes before a battery runs dry (:func:`kept_until`)."""
     total = 0
+    guard = kept_until(c)
     for attempt in range(2):  # the last attempt only repairs: what it returns holds
         rows = c.rows(primal)
+        if guard is not None:
+            rows = rows._replace(kept_until=guard[rows.sats])
         keys = [rows.task[a:b].tobytes() + rows.start[a:b].tobytes()
                 for a, b in zip(rows.offsets[:-1].tolist(), rows.offsets[1:].tolist())]
         todo = np.array([i for i, k in enumerate(rows.sats.tolist()) if c.battery_ok.get(k) != keys[i]],
@@ -59,6 +63,18 @@ def battery_repair(c: Coordinator, primal: Primal, budget: Budget = UNLIMITED, w
             descend(c, primal, sorted({q for t in drop_task.tolist() for q in c.prob.task_passes[t].tolist()}),
                          budget)
     return total
+
+
+def kept_until(c: Coordinator) -> np.ndarray | None:
+    """Per satellite, the end of its last frozen pass (-inf: none); None when no pass is frozen.  Why: a frozen
+    pass is kept as given (a plan already uploaded, in operation one already executed), so the battery repair
+    takes what the battery cannot hold from the passes after it (:func:`eosp.fleet.timeline.repair_battery`,
+    `kept_until`), and from a frozen pass only when the battery runs dry before any of them."""
+    if not c.frozen.any():
+        return None
+    guard = np.full(len(c.prob.fleet.satellites), -np.inf)
+    np.maximum.at(guard, c._pass_sat[c.frozen], c.prob.pass_time[c.frozen, 1])
+    return guard
 
 
 def _repair_rows(c: Coordinator, rows: Rows, budget: Budget) -> np.ndarray | None:
