@@ -14,7 +14,8 @@ order), its value, bound and rounds.  The set covers the solver's risky paths: t
 ``--rounds 6``; three generated fleets; uniform and lp price steps; ``--energy-bound``; ``--warm-start`` none,
 heuristic and learned; ``--init`` with ``--freeze-until``; the Ray job with one and two workers, its driver lean or
 not; four ONERA instances (generated here, seeded) with ``--moves``.  Inputs are made once under ``--work`` and
-reused.  ``--compare`` prints the runs whose hashes differ and exits 1 when any does.
+reused.  ``--ray-fleet DIR`` records the Ray job's three runs alone, on another fleet (a 200-satellite day).
+``--compare`` prints the runs whose hashes differ and exits 1 when any does.
 """
 
 from __future__ import annotations
@@ -208,10 +209,19 @@ def main() -> int:
     p.add_argument("--work", default="/tmp/fleet-record", help="where the inputs and schedules are kept")
     p.add_argument("--out", help="the record (JSON lines)")
     p.add_argument("--no-ray", action="store_true", help="skip the Ray job's runs")
+    p.add_argument("--ray-fleet", help="record only the Ray job's three runs, on this fleet directory (e.g. a "
+                                       "generated 200-satellite day)")
     p.add_argument("--compare", nargs=2, metavar=("A", "B"), help="compare two records")
     args = p.parse_args()
     if args.compare:
         return compare(Path(args.compare[0]), Path(args.compare[1]))
+    if args.ray_fleet and args.out:
+        fleet_dir = Path(args.ray_fleet)
+        rows = record_ray(Path(args.work), fleet_dir, fleet_dir.name)
+        Path(args.out).write_text("".join(json.dumps(r) + "\n" for r in rows))
+        for r in rows:
+            print(json.dumps(r))
+        return 0
     if not args.astro or not args.out:
         p.error("--astro and --out are needed to record")
     return record(args)
