@@ -9,6 +9,7 @@ a parameter such as ``hidden_dim`` goes from the command line
 
 from __future__ import annotations
 
+import numbers
 from dataclasses import Field, dataclass, field, fields, is_dataclass
 from typing import Any
 
@@ -221,6 +222,26 @@ def _coerce(owner: str, name: str, current: Any, value: Any) -> Any:
             raise bad("a list")
         value = tuple(value)
     return value
+
+
+def validate_fields(cfg: Any) -> Any:
+    """`cfg` when every field holds what it declares (:func:`check_value`: finite numbers in range, strings among
+    the choices; a number where a range is declared, not a string or a bool), nested configs included; else a
+    one-line ValueError naming the field.  For configs built in code (a library user's), which skip the parsing
+    that checks command lines and dicts."""
+    for f in fields(cfg):
+        value = getattr(cfg, f.name)
+        if is_dataclass(value):
+            validate_fields(value)
+            continue
+        if "range" in f.metadata and value is not None:
+            for v in value if isinstance(value, tuple) else (value,):
+                if isinstance(v, bool) or not isinstance(v, numbers.Real):
+                    raise ValueError(f"{type(cfg).__name__}.{f.name}: must be a number, got {v!r}")
+            plain = tuple(v.item() if hasattr(v, "item") else v for v in (value if isinstance(value, tuple) else (value,)))
+            value = plain if isinstance(value, tuple) else plain[0]  # numpy numbers checked as the Python ones
+        check_value(type(cfg), f.name, value)
+    return cfg
 
 
 def to_dict(cfg: Any) -> dict[str, Any]:
@@ -447,6 +468,9 @@ class FleetEnvConfig:
     """Seed of the fleet draws (combined with the worker and vector index)."""
     max_cached_fleets: int = ranged(8, 1)
     """Prepared fleets each environment copy keeps in memory."""
+
+    def __post_init__(self) -> None:
+        validate_fields(self)  # built in code, as a library user does: the same checks as a command line's
 
 
 @dataclass

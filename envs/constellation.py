@@ -79,7 +79,7 @@ from typing import Any, NamedTuple
 import gymnasium as gym
 import numpy as np
 
-from eosp.config import FleetEnvConfig, from_dict
+from eosp.config import FleetEnvConfig, from_dict, validate_fields
 from eosp.envs import constellation_core as core
 from eosp.envs.constellation_data import PreparedFleet, prepare_fleet
 from eosp.envs.constellation_obs import N_EDGE_FEATURES, N_FLEET_FEATURES, ObsArrays, advance, begin, observe_done
@@ -281,7 +281,7 @@ class ConstellationEnv:
         if config is None:
             cfg = FleetEnvConfig()
         elif isinstance(config, FleetEnvConfig):
-            cfg = config
+            cfg = validate_fields(config)  # fields may have been set after it was made
         else:  # RLlib's EnvContext: a dict with its own keys besides ours
             names = {f.name for f in fields(FleetEnvConfig)}
             cfg = from_dict(FleetEnvConfig, {k: v for k, v in dict(config).items() if k in names})

@@ -504,3 +504,29 @@ def test_fleet_size_counts_are_in_the_fleets_own_units():
         if term["__all__"]:
             break
     assert seen >= 5
+
+
+@pytest.mark.parametrize("kwargs, message", [
+    ({"reward": "money"}, "FleetEnvConfig.reward: must be one of wcr, cr, got 'money'"),
+    ({"team_reward": 2.0}, "FleetEnvConfig.team_reward: must be in [0, 1], got 2.0"),
+    ({"team_reward": "half"}, "FleetEnvConfig.team_reward: must be a number"),
+    ({"max_nodes": 1}, "FleetEnvConfig.max_nodes: must be >= 2"),
+    ({"bridges": "sometimes"}, "FleetEnvConfig.bridges: must be one of off, useful, all"),
+])
+def test_an_environment_config_built_in_code_is_checked(kwargs, message):
+    """A library user's FleetEnvConfig gets the checks a command line gets, when it is made and when an
+    environment takes it after a field was set (robustness round 4, class 7: 'money' silently rewarded CR,
+    team_reward 2.0 gave agents -1 x their own reward)."""
+    from eosp.envs.constellation import ConstellationEnv
+
+    with pytest.raises(ValueError) as e:
+        FleetEnvConfig(**kwargs)
+    assert message in str(e.value) and "\n" not in str(e.value)
+    cfg = FleetEnvConfig()
+    for k, v in kwargs.items():
+        setattr(cfg, k, v)
+    with pytest.raises(ValueError, match=message.split(":")[0]):
+        ConstellationEnv(cfg)
+    assert FleetEnvConfig(seed=np.int64(3)).seed == 3  # numpy numbers are numbers, held to the same ranges
+    with pytest.raises(ValueError, match="FleetEnvConfig.seed: must be >= 0"):
+        FleetEnvConfig(seed=np.int64(-3))
