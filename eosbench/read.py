@@ -86,6 +86,10 @@ def parse_time(path: str, where: str, text: Any) -> datetime:
     return dt.astimezone(timezone.utc).replace(tzinfo=None) if dt.tzinfo is not None else dt
 
 
+MAX_ORBIT = 2**31 - 1  # an orbit number held as int32 by their schema's readers; beyond it no orbit of a year
+MAX_DURATION_S = 366 * 86400  # a scenario's horizon at most a year (theirs: hours to a day)
+
+
 def _num(path: str, where: str, value: Any, default: float | None = None) -> float:
     if value is None and default is not None:
         return default
@@ -379,7 +383,14 @@ def _tasks(path: str, raw: list) -> Tasks:
             if req.get(k) is not None:
                 raise Unsupported(path, f"{where}.observation_requirement.{k} = {req[k]!r}: unsupported constraint "
                                         "(EOS-Bench's constraint model does not check it, nor does this kind)")
-    return Tasks(ids, np.asarray(prio), np.asarray(dur))
+    prio_arr = np.asarray(prio, dtype=np.float64)
+    with np.errstate(over="ignore"):
+        total = np.cumsum(prio_arr)
+    if len(total) and not np.isfinite(total[-1]):  # each one finite, their sum (the TP they can reach) not
+        i = int(np.flatnonzero(~np.isfinite(total))[0])
+        raise InputError(path, f"missions[{i}].priority: {prio[i]!r} makes the priorities' sum overflow "
+                               "(the total profit would not be a number)")
+    return Tasks(ids, prio_arr, np.asarray(dur))
 
 
 def _us(path: str, where: str, text: Any, start: datetime) -> int:
@@ -413,8 +424,10 @@ def _windows(path: str, stream: _WindowStream, sats: Satellites, tasks: Tasks, s
         t1[r] = _us(path, f"{where}.end_time", te, start)
         if t1[r] <= t0[r]:
             raise InputError(path, f"{where}: end_time {te} is not after start_time {ts}")
-        if isinstance(orb, bool) or not isinstance(orb, (int, float, type(None))) or (orb is not None and orb != int(orb)):
-            raise InputError(path, f"{where}.orbit_number: expected an integer, got {orb!r}")
+        if isinstance(orb, bool) or not isinstance(orb, (int, float, type(None))) or (orb is not None and (
+                not np.isfinite(orb) or orb != int(orb) or abs(orb) > MAX_ORBIT)):
+            raise InputError(path, f"{where}.orbit_number: expected an integer of at most {MAX_ORBIT:,} in size, "
+                                   f"got {orb!r}")
         orbit[r] = int(orb or 0)
         step[r] = _num(path, f"{where}.time_step", st, step0) if st is not None else step0
         if step[r] <= 0:
@@ -457,8 +470,9 @@ def _assemble(path: str, sections: dict, stream: _WindowStream) -> Scenario:
             raise InputError(path, f"metadata.{k} missing")
     start = parse_time(path, "metadata.creation_time", meta["creation_time"])
     duration = _num(path, "metadata.duration", meta["duration"])
-    if duration <= 0:
-        raise InputError(path, f"metadata.duration: {meta['duration']!r} is not positive")
+    if not 0 < duration <= MAX_DURATION_S:
+        raise InputError(path, f"metadata.duration: {meta['duration']!r} is not in (0, {MAX_DURATION_S:,}] seconds "
+                               "(a scenario of at most a year)")
     step0 = _num(path, "metadata.time_step", meta.get("time_step"), 1.0) or 1.0
     sats, ignored = _satellites(path, _list(path, "satellites", sections.get("satellites")))
     tasks = _tasks(path, _list(path, "missions", sections.get("missions")))

@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 
 from eosp.eosbench.model import ONE_US, Scenario, Schedule
-from eosp.eosbench.read import AGILE_KEYS, FIXED_KEYS, Unsupported, parse_time
+from eosp.eosbench.read import AGILE_KEYS, FIXED_KEYS, MAX_ORBIT, Unsupported, parse_time
 from eosp.errors import InputError
 
 MARK = "eosbench-schedule"
@@ -57,8 +57,10 @@ def read_schedule(path: str, scenario: Scenario) -> Schedule:
         has_times = a.get("gs_start_time") is not None and a.get("gs_end_time") is not None
         num = (lambda k: _number(path, f"{where}.{k}", a.get(k, 0.0)))
         orbit = a.get("orbit_number", 0) or 0
-        if isinstance(orbit, bool) or not isinstance(orbit, (int, float)) or orbit != int(orbit):
-            raise InputError(path, f"{where}.orbit_number: expected an integer, got {orbit!r}")
+        if isinstance(orbit, bool) or not isinstance(orbit, (int, float)) or not np.isfinite(orbit) \
+                or orbit != int(orbit) or abs(orbit) > MAX_ORBIT:
+            raise InputError(path, f"{where}.orbit_number: expected an integer of at most {MAX_ORBIT:,} in size, "
+                                   f"got {orbit!r}")
         rows.append((task_of[a["task_id"]], sat_of[a["satellite_id"]], start, end, int(orbit), num("data_volume_GB"),
                      num("power_cost_W"), gs_of[gs] if gs is not None and has_times else -1, gs_start, gs_end,
                      str(a.get("sensor_id", "") or "")))

@@ -22,6 +22,7 @@ from eosp.eosbench.check import check, metrics
 from eosp.eosbench.model import Schedule
 from eosp.eosbench.read import read_scenario
 from eosp.eosbench.schedules import read_schedule, schedule_json
+from eosp.errors import InputError
 from eosp.eosbench.transition import C_SMALL, Rules, documented_s, to_us, transition_s
 from eosp.kinds.eosbench import solve as eosbench_solve
 from eosp.kinds.eosbench.passes import build_passes, graph
@@ -211,6 +212,11 @@ def test_the_generator_rules_their_checker_trusts(tmp_path):
     data2["assignments"][1].update(sat_start_time=iso(100), sat_end_time=iso(105))
     assert "not inside an observation window" in check(scen, read_schedule(write(tmp_path, data2, "w.json"),
                                                                            scen)).reason
+    for huge in (1e30, float("inf")):  # out of machine range: refused naming the entry (a traceback before)
+        data3 = json.loads(json.dumps(good))
+        data3["assignments"][0]["orbit_number"] = huge
+        with pytest.raises(InputError, match=r"assignments\[0\]\.orbit_number: expected an integer of at most"):
+            read_schedule(write(tmp_path, data3, "h.json"), scen)
 
 
 def test_the_orbit_power_cap_counts_in_file_order(tmp_path):
@@ -503,6 +509,12 @@ def test_the_command_line(tmp_path, capsys):
     (lambda d: d["observation_windows"][0]["time_windows"][0]["agile_data"].update(pitch_angles=[1.0]),
      "observation_windows[0].time_windows[0].agile_data: needs"),
     (lambda d: d["metadata"].pop("duration"), "metadata.duration missing"),
+    # numbers out of machine range (robustness round 4, class 2): tracebacks or "TP": Infinity before
+    (lambda d: d["observation_windows"][0]["time_windows"][0].update(orbit_number=1e30),
+     "observation_windows[0].time_windows[0].orbit_number: expected an integer of at most"),
+    (lambda d: d["metadata"].update(duration=1e300), "metadata.duration: 1e+300 is not in (0, 31,622,400]"),
+    (lambda d: [m.update(priority=1e308) for m in d["missions"][:2]],
+     "missions[1].priority: 1e+308 makes the priorities' sum overflow"),
 ])
 def test_a_malformed_scenario_is_one_line(tmp_path, capsys, mutate, words):
     data = dense(seed=7)
