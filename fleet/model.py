@@ -208,9 +208,10 @@ def task_fault(tasks: Tasks, horizon: Horizon) -> tuple[int, str, str] | None:
          f"must be one of {', '.join(SENSORS)}"),
     ))
     with np.errstate(over="ignore"):
-        total = np.sum(tasks.weight)
-    if fault is None and len(tasks) and not np.isfinite(total):
-        return len(tasks) - 1, "weight", "makes the sum of the weights overflow (every metric divides by it)"
+        running = np.cumsum(np.asarray(tasks.weight, dtype=np.float64))
+    if fault is None and len(tasks) and not np.isfinite(running[-1]):  # the row where the sum first overflows
+        return int(np.flatnonzero(~np.isfinite(running))[0]), "weight", \
+            "makes the sum of the weights overflow (every metric divides by it)"
     return fault
 
 

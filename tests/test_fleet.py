@@ -452,3 +452,17 @@ def test_a_battery_repair_split_by_satellites_keeps_what_the_whole_repair_keeps(
         for idx in (np.flatnonzero(side), np.flatnonzero(~side)):
             split[rows.take(idx)] = repair_rows(weak, los, rows.part(idx), SunCache(geo))
         assert np.array_equal(split, kept)
+
+
+def test_a_weight_sum_overflow_names_the_row_where_it_overflows():
+    """Three weights 1e308, 1e308, 1: the sum overflows at row 1, which the fault names (it named the last row;
+    robustness round 4, class 9)."""
+    import dataclasses
+
+    from eosp.fleet.model import task_fault
+
+    fleet = synthetic_fleet(n_tasks=3, seed=1)
+    tasks = dataclasses.replace(fleet.tasks, weight=np.array([1e308, 1e308, 1.0]))
+    assert task_fault(tasks, fleet.horizon) == (1, "weight", "makes the sum of the weights overflow (every metric "
+                                                             "divides by it)")
+    assert task_fault(fleet.tasks, fleet.horizon) is None
