@@ -271,6 +271,37 @@ class ScheduleFollower:
         return 0
 
 
+def _prepared(f) -> PreparedFleet:
+    """reset's ``options["fleet"]``: a :class:`PreparedFleet`, or (fleet, opportunities[, ...]) as
+    :func:`eosp.envs.constellation_data.prepare_fleet` takes them; a ValueError naming the option otherwise."""
+    if isinstance(f, PreparedFleet):
+        return f
+    from eosp.fleet.model import Fleet
+    from eosp.fleet.opportunities import Opportunities
+
+    if not (isinstance(f, (tuple, list)) and len(f) >= 2 and isinstance(f[0], Fleet)
+            and isinstance(f[1], Opportunities)):
+        raise ValueError(f"reset(options=...): 'fleet' must be a PreparedFleet or (Fleet, Opportunities, ...), "
+                         f"got {type(f).__name__}")
+    return prepare_fleet(*f)
+
+
+def _slot(action, agent: str) -> int:
+    """An action as a slot index: an integer (numpy's included), or a float that is one (1.0); 1.7 is refused
+    rather than truncated to slot 1."""
+    if isinstance(action, (bool, np.bool_, str, bytes)):
+        raise InvalidAction(f"action of {agent} must be a slot index, got {action!r}")
+    if isinstance(action, (int, np.integer)):
+        return int(action)
+    try:
+        value = float(np.asarray(action).item())
+    except (TypeError, ValueError):
+        raise InvalidAction(f"action of {agent} must be a slot index, got {action!r}") from None
+    if not value.is_integer():
+        raise InvalidAction(f"action of {agent} must be a slot index, got {action!r}")
+    return int(value)
+
+
 class ConstellationEnv:
     __doc__ = __doc__
 
@@ -339,9 +370,11 @@ class ConstellationEnv:
         if seed is not None:
             self._rng = np.random.default_rng([seed, self.worker_index, self.vector_index])
         options = options or {}
+        unknown = sorted(set(options) - {"fleet"})
+        if unknown:
+            raise ValueError(f"reset(options=...): unknown option {unknown[0]!r} (known: 'fleet')")
         if "fleet" in options:
-            f = options["fleet"]
-            prepared = f if isinstance(f, PreparedFleet) else prepare_fleet(*f)
+            prepared = _prepared(options["fleet"])
         else:
             prepared = self.source.sample(self._rng)
         self._check(prepared)
@@ -375,7 +408,7 @@ class ConstellationEnv:
         me = agent_id(self.actor)
         if set(action_dict) != {me}:
             raise InvalidAction(f"{me} acts now; got actions for {sorted(action_dict)}")
-        s = int(action_dict[me])
+        s = _slot(action_dict[me], me)
         mask = self._mask
         if not 0 <= s < self.n_max or not mask[s]:
             raise InvalidAction(f"action {s} of {me} is not allowed; allowed: {np.flatnonzero(mask).tolist()}")

@@ -378,6 +378,30 @@ def test_masked_actions_are_refused_and_change_nothing():
     assert all(np.array_equal(a, b) for a, b in zip(before, env.ep))
 
 
+def test_actions_that_are_no_slot_and_bad_reset_options_are_refused_naming_them():
+    """A float action that is not a whole number (1.7 was truncated to slot 1), a bool, a vector: refused, the state
+    unchanged; 1.0 is slot 1.  reset(options=...) with an unknown key or a 'fleet' of another type: a ValueError
+    naming it (internal TypeErrors before; robustness round 4, class 11)."""
+    pf, _ = greedy_case(0)
+    env = ConstellationEnv(FleetEnvConfig(), source=pf)
+    obs, _ = env.reset(seed=0)
+    (agent, o), = obs.items()
+    good = int(np.flatnonzero(o["action_mask"])[0])
+    before = [a.copy() for a in env.ep]
+    for bad in (good + 0.7, True, np.array([good, good]), "1"):
+        with pytest.raises(InvalidAction, match="must be a slot index"):
+            env.step({agent: bad})
+    assert all(np.array_equal(a, b) for a, b in zip(before, env.ep))
+    twin = ConstellationEnv(FleetEnvConfig(), source=pf)
+    twin.reset(seed=0)
+    a1, a2 = env.step({agent: float(good)}), twin.step({agent: np.int64(good)})
+    assert a1[1] == a2[1]  # the same rewards: 1.0 is slot 1
+    with pytest.raises(ValueError, match="unknown option 'fleets'"):
+        env.reset(options={"fleets": pf})
+    with pytest.raises(ValueError, match="'fleet' must be a PreparedFleet or \\(Fleet, Opportunities"):
+        env.reset(options={"fleet": "fleet-dir/"})
+
+
 def test_same_seed_same_episode():
     pf, _ = greedy_case(1)
     runs = []
