@@ -64,6 +64,8 @@ def looks_like_scenario(path: str) -> tuple[bool, str]:
             head = fh.read(65536)
     except OSError as exc:
         return False, f"cannot read ({exc.strerror})"
+    if head.startswith(BOM):
+        return False, "starts with a UTF-8 byte-order mark, which JSON readers (theirs included) refuse: save it without"
     text = head.lstrip()
     if not text.startswith(b"{"):
         return False, "not a JSON object"
@@ -86,8 +88,20 @@ def parse_time(path: str, where: str, text: Any) -> datetime:
     return dt.astimezone(timezone.utc).replace(tzinfo=None) if dt.tzinfo is not None else dt
 
 
+BOM = b"\xef\xbb\xbf"
+MAX_ANGLE_DEG = 360.0  # an attitude angle beyond a turn is no attitude (1e300 made numpy warn in the checks)
 MAX_ORBIT = 2**31 - 1  # an orbit number held as int32 by their schema's readers; beyond it no orbit of a year
 MAX_DURATION_S = 366 * 86400  # a scenario's horizon at most a year (theirs: hours to a day)
+
+
+def _angles(path: str, where: str, values: list) -> None:
+    """Attitude samples (degrees): finite and within a turn, else an InputError naming the first bad one."""
+    a = np.asarray(values, dtype=np.float64)
+    bad = ~np.isfinite(a) | (np.abs(a) > MAX_ANGLE_DEG)
+    if bad.any():
+        i = int(np.flatnonzero(bad)[0])
+        raise InputError(path, f"{where}[{i}]: {values[i]!r} is not an angle in [-{MAX_ANGLE_DEG:g}, "
+                               f"{MAX_ANGLE_DEG:g}] degrees")
 
 
 def _num(path: str, where: str, value: Any, default: float | None = None) -> float:
@@ -264,6 +278,8 @@ class _WindowStream:
                 if any(x is None for x in lists) or len({len(x) for x in lists}) != 1:
                     raise InputError(self.path, f"{w}.agile_data: needs {', '.join(AGILE_KEYS)} of one length")
                 n = len(lists[0])
+                for k, x in zip(AGILE_KEYS, lists):
+                    _angles(self.path, f"{w}.agile_data.{k}", x)
                 self.pitch += lists[0]
                 self.yaw += lists[1]
                 self.roll += lists[2]
@@ -273,6 +289,8 @@ class _WindowStream:
                 if any(k not in fixed for k in FIXED_KEYS):
                     raise InputError(self.path, f"{w}.non_agile_data: needs {', '.join(FIXED_KEYS)}")
                 fixed_row = tuple(float(fixed[k]) for k in FIXED_KEYS)
+                for k, v in zip(FIXED_KEYS, fixed_row):
+                    _angles(self.path, f"{w}.non_agile_data.{k}", [v])
             orbit = tw.get("orbit_number", f.get("orbit_number", 0))
             step = tw.get("time_step", f.get("time_step"))
             self.rows.append((self.ow, j, f["satellite_id"], f["mission_id"], str(f.get("sensor_id", "")),
@@ -473,7 +491,9 @@ def _assemble(path: str, sections: dict, stream: _WindowStream) -> Scenario:
     if not 0 < duration <= MAX_DURATION_S:
         raise InputError(path, f"metadata.duration: {meta['duration']!r} is not in (0, {MAX_DURATION_S:,}] seconds "
                                "(a scenario of at most a year)")
-    step0 = _num(path, "metadata.time_step", meta.get("time_step"), 1.0) or 1.0
+    step0 = _num(path, "metadata.time_step", meta.get("time_step"), 1.0)
+    if step0 <= 0:  # 0 was taken as 1 s without a word, -1 refused naming a window's step
+        raise InputError(path, f"metadata.time_step: {meta.get('time_step')!r} is not positive")
     sats, ignored = _satellites(path, _list(path, "satellites", sections.get("satellites")))
     tasks = _tasks(path, _list(path, "missions", sections.get("missions")))
     stations = []

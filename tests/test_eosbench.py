@@ -515,6 +515,11 @@ def test_the_command_line(tmp_path, capsys):
     (lambda d: d["metadata"].update(duration=1e300), "metadata.duration: 1e+300 is not in (0, 31,622,400]"),
     (lambda d: [m.update(priority=1e308) for m in d["missions"][:2]],
      "missions[1].priority: 1e+308 makes the priorities' sum overflow"),
+    # class 10: a time step of 0 was taken as 1 s, attitudes of 1e300 made numpy warn
+    (lambda d: d["metadata"].update(time_step=0), "metadata.time_step: 0 is not positive"),
+    (lambda d: d["metadata"].update(time_step=-1), "metadata.time_step: -1 is not positive"),
+    (lambda d: d["observation_windows"][0]["time_windows"][0]["agile_data"]["pitch_angles"].__setitem__(0, 1e300),
+     "observation_windows[0].time_windows[0].agile_data.pitch_angles[0]: 1e+300 is not an angle"),
 ])
 def test_a_malformed_scenario_is_one_line(tmp_path, capsys, mutate, words):
     data = dense(seed=7)
@@ -523,6 +528,14 @@ def test_a_malformed_scenario_is_one_line(tmp_path, capsys, mutate, words):
     assert main(["info", path]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and path in err and words in err, err
+
+
+def test_a_scenario_with_a_byte_order_mark_is_named(tmp_path, capsys):
+    path = tmp_path / "bom.json"
+    path.write_bytes(b"\xef\xbb\xbf" + json.dumps(dense(seed=8)).encode())
+    assert main(["info", str(path)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "eosbench: starts with a UTF-8 byte-order mark" in err
 
 
 def test_a_truncated_scenario_is_one_line(tmp_path, capsys):
