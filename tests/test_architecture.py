@@ -386,11 +386,13 @@ def test_wheel_holds_one_top_level_package_and_builds_without_warnings(tmp_path)
     assert "eosp/evaluation/fleet_page.js" in names  # the page's script, a package data file
 
 
-# Size ceilings: a reader takes in a function at once.  Across the package no function over MAX_FUNCTION_LINES; in
+# Size ceilings: a reader takes in a function at once.  Across the package no function over MAX_FUNCTION_LINES and no
+# class over MAX_CLASS_LINES; in
 # the fleet solver's package (kinds/fleet/, phases over one state) none over FLEET_FUNCTION_LINES, no class over
 # FLEET_CLASS_LINES, no module over FLEET_MODULE_LINES.  Listed ("path:function": why) are the numba kernels kept
 # whole; a split into inline="always" helpers compiles to the same loop, but is not yet made and measured.
 MAX_FUNCTION_LINES = 120
+MAX_CLASS_LINES = 300  # across the package too: a solver's phases read better as functions over one state
 FLEET_FUNCTION_LINES, FLEET_CLASS_LINES, FLEET_MODULE_LINES = 80, 300, 500
 LONG_KERNELS = {"planning/labels.py:_sweep": "the label sweep's one compiled loop (extension, dominance, bound)",
                 "planning/labels.py:window_sweep": "the windowed label sweep's one compiled loop"}
@@ -415,7 +417,7 @@ def test_functions_classes_and_modules_stay_small():
             if f"{rel}:{name}" in LONG_KERNELS:
                 continue
             limit = (FLEET_CLASS_LINES if kind == "class" else FLEET_FUNCTION_LINES) if fleet else \
-                (None if kind == "class" else MAX_FUNCTION_LINES)
+                (MAX_CLASS_LINES if kind == "class" else MAX_FUNCTION_LINES)
             if limit is not None and n > limit:
                 bad.append(f"{rel}: {kind} {name} has {n} lines (at most {limit})")
         lines = len(path.read_text(encoding="utf-8").splitlines())

@@ -57,6 +57,20 @@ def _min_transitions(f: OneraFleet) -> np.ndarray:
     return mt
 
 
+def incompatible(o, rows_a: np.ndarray, rows_b: np.ndarray) -> np.ndarray:
+    """Matrix: observation rows_a[i] and rows_b[j] of `o` (one satellite's) fit in neither order (same request:
+    False)."""
+    ws_a, ws_b = o.start[rows_a][:, None], o.start[rows_b][None, :]
+    ls_a = (o.end[rows_a] - o.duration[rows_a])[:, None]
+    ls_b = (o.end[rows_b] - o.duration[rows_b])[None, :]
+    same = o.request[rows_a][:, None] == o.request[rows_b][None, :]
+    tau = np.where(same, 0.0, transition(o.lat[rows_a][:, None], o.lon[rows_a][:, None], o.lat[rows_b][None, :],
+                                         o.lon[rows_b][None, :]))
+    a_first = ws_a + o.duration[rows_a][:, None] + tau <= ls_b
+    b_first = ws_b + o.duration[rows_b][None, :] + tau <= ls_a
+    return ~(a_first | b_first) & ~same
+
+
 class _Model:
     def __init__(self, f: OneraFleet):
         o, r = f.observations, f.requests
@@ -226,19 +240,6 @@ class _Model:
                     added += 1
         return added
 
-    def incompatible(self, rows_a: np.ndarray, rows_b: np.ndarray) -> np.ndarray:
-        """Matrix: observation rows_a[i] and rows_b[j] (one satellite) fit in neither order (same request: False)."""
-        o = self.f.observations
-        ws_a, ws_b = o.start[rows_a][:, None], o.start[rows_b][None, :]
-        ls_a = (o.end[rows_a] - o.duration[rows_a])[:, None]
-        ls_b = (o.end[rows_b] - o.duration[rows_b])[None, :]
-        same = o.request[rows_a][:, None] == o.request[rows_b][None, :]
-        tau = np.where(same, 0.0, transition(o.lat[rows_a][:, None], o.lon[rows_a][:, None], o.lat[rows_b][None, :],
-                                             o.lon[rows_b][None, :]))
-        a_first = ws_a + o.duration[rows_a][:, None] + tau <= ls_b
-        b_first = ws_b + o.duration[rows_b][None, :] + tau <= ls_a
-        return ~(a_first | b_first) & ~same
-
     def separate_cliques(self, x: np.ndarray, per_sat: int = 60) -> int:
         """Add violated clique rows (observations of one satellite pairwise impossible together: at most
         one of them), grown greedily from the LP point's observations and lifted with the others."""
@@ -251,7 +252,7 @@ class _Model:
             if len(pos) < 2:
                 continue
             xv = x[self.col[pos]]
-            inc = self.incompatible(pos, pos)
+            inc = incompatible(o, pos, pos)
             found = []
             for i in np.argsort(-xv).tolist():
                 members = [i]
@@ -274,12 +275,12 @@ class _Model:
                 others = allrows[lo:hi]
                 others = others[~np.isin(others, mem)]
                 if len(others):
-                    lift = others[self.incompatible(mem, others).all(axis=0)]
+                    lift = others[incompatible(o, mem, others).all(axis=0)]
                     mem = np.r_[mem, lift[np.argsort(-x[self.col[lift]])]]
                     # keep the lifted set a clique: add one at a time
                     keep = list(range(len(key)))
                     for t in range(len(key), len(mem)):
-                        if self.incompatible(mem[keep], mem[t:t + 1]).all():
+                        if incompatible(o, mem[keep], mem[t:t + 1]).all():
                             keep.append(t)
                     mem = mem[keep]
                 cols = np.unique(self.col[mem])
