@@ -65,10 +65,11 @@ def urgent_requests(fleet: Fleet, cfg: RequestConfig, rng: np.random.Generator) 
     pick = rng.integers(0, len(cat), n)
     duration = cat.duration_s[pick]
     max_lat = reach_deg(fleet)
-    if cfg.placement == "cities":
-        lat, lon, names = city_points(rng, n, max_lat) if n else (np.zeros(0), np.zeros(0), [])
-    else:
-        (lat, lon), names = land_points(rng, n, max_lat) if n else (np.zeros(0), np.zeros(0)), None
+    lat, lon, names = np.zeros(0), np.zeros(0), None
+    if n and cfg.placement == "cities":
+        lat, lon, names = city_points(rng, n, max_lat)
+    elif n:
+        lat, lon = land_points(rng, n, max_lat)
     fits = due - release >= duration  # one arriving too near the horizon's end cannot be observed: none
     arrival, release, due, duration, pick, lat, lon = (a[fits] for a in (arrival, release, due, duration, pick,
                                                                          np.asarray(lat), np.asarray(lon)))

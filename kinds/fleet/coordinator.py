@@ -85,6 +85,7 @@ class Coordinator:
     phases: list[dict] = field(default_factory=list)
     initial: Primal | None = None  # a schedule to start from (--init)
     frozen: np.ndarray | None = None  # bool per pass: kept as in `initial`, never solved again (--freeze-until)
+    claim_frozen: bool = True  # whether the frozen passes' observations serve their tasks (Start.claim_frozen)
 
     def __post_init__(self) -> None:
         n = len(self.prob.fleet.tasks)
@@ -128,6 +129,11 @@ class Coordinator:
         self.barred = np.zeros((len(self.prob.fleet.satellites), n), dtype=bool)
         if self.frozen is None:
             self.frozen = np.zeros(len(self.prob.passes), dtype=bool)
+        # whether an observation at each place of the passes' task CSR serves its task (see Start.claim_frozen)
+        self._claims = np.ones(len(self._task_idx), dtype=bool)
+        if not self.claim_frozen:
+            self._claims = ~np.repeat(self.frozen, np.diff(self._task_ptr))
+            self._task_val = np.where(self._claims, self._task_val, 0.0)  # a copy: the problem's values stay
         self.sun = self.prob.sun  # sunlight, computed once for every battery simulation
         self.battery_ok: dict[int, bytes] = {}  # satellite -> its tasks and starts last found to hold its battery
         self.best_bound = self.conflict_free()
@@ -138,7 +144,7 @@ class Coordinator:
         pass's price of the energy they take (:attr:`spend`); 0 (left out) for a task another pass serves or the
         battery repair barred from this satellite."""
         pg = self.prob.passes[p]
-        value = self.prob.pass_values(p)
+        value = self._values_of(p)
         price = self._no_shift[pg.tasks] if shift is None else np.minimum(shift[pg.tasks], 0.999 * value)
         util = priced(value, price, pg.energy_wh, self.spend[p])
         return np.where(self._available(primal, p), util, 0.0)
@@ -147,8 +153,13 @@ class Coordinator:
         """The utility :meth:`_utility` gives pass p's `path` (its tasks are its own)."""
         pg = self.prob.passes[p]
         acq = pg.graph.node_acq[path]
-        return float(priced(self.prob.pass_values(p)[acq], self._no_shift[pg.tasks[acq]], pg.energy_wh[acq],
+        return float(priced(self._values_of(p)[acq], self._no_shift[pg.tasks[acq]], pg.energy_wh[acq],
                             self.spend[p]).sum())
+
+    def _values_of(self, p: int) -> np.ndarray:
+        """What pass p's tasks are worth in it: a view of the flat vector made once (:attr:`_task_val`), not a
+        gather per call."""
+        return self._task_val[self._task_ptr[p]:self._task_ptr[p + 1]]
 
     def _available(self, primal: Primal, p: int) -> np.ndarray:
         tasks = self.prob.passes[p].tasks
@@ -160,8 +171,11 @@ class Coordinator:
         the end of the edit (the first schedule, interrupted while it is built, is the answer)."""
         pg = self.prob.passes[p]
         old_acq, new_acq = pg.graph.node_acq[primal.paths[p]], pg.graph.node_acq[path]
-        old, new = pg.tasks[old_acq], pg.tasks[new_acq]
-        value = self.prob.pass_values(p)
+        value = self._values_of(p)
+        if self.claim_frozen or not self.frozen[p]:
+            old, new = pg.tasks[old_acq], pg.tasks[new_acq]
+        else:  # observations that occupy the satellite and serve nothing (worth 0: see __post_init__)
+            old = new = pg.tasks[:0]
         mark = self._claimed  # all False between uses: the tasks of `old` not in `new` (no sort, a path's are unique)
         mark[new] = True
         freed = old[~mark[old]]
