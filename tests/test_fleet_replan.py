@@ -14,7 +14,7 @@ from eosp.kinds.fleet.problem import Problem, opportunity_values
 from eosp.kinds.fleet.replan import Replanner
 from eosp.kinds.fleet.solve import Start, solve
 from tests.test_fleet import synthetic_fleet
-from tests.test_fleet_master import narrow_fleet
+from tests.test_fleet_master import every_task_set, narrow_fleet
 
 ROUNDS = 30
 
@@ -218,3 +218,59 @@ def test_a_solve_keeps_its_frozen_passes_when_the_battery_binds(weak_day):
     got = set(zip(sol.schedule.satellite.tolist(), sol.schedule.task.tolist(), sol.schedule.start_us.tolist()))
     frozen_rows = {r for r in want if r[2] < until * 1e6}
     assert frozen_rows and frozen_rows <= got
+
+
+def best_over_passes(prob: Problem, passes: list[int]) -> float:
+    """The most the passes `passes` serve together under the problem's values, each task at most once among
+    them (their task sets enumerated along the graphs' arcs, every combination tried; the battery left out)."""
+    from itertools import product
+
+    sets = [[sorted(c) for c in every_task_set(prob, p)] for p in passes]
+    worth = [dict(zip(prob.passes[p].tasks.tolist(), prob.pass_values(p).tolist())) for p in passes]
+    best = 0.0
+    for combo in product(*sets):
+        tasks = [t for c in combo for t in c]
+        if len(tasks) == len(set(tasks)):
+            best = max(best, sum(w[t] for w, c in zip(worth, combo) for t in c))
+    return best
+
+
+@pytest.mark.parametrize("claim", [True, False])
+def test_frozen_observations_that_serve_nothing(contended, claim):
+    """The first satellite's passes frozen as a solve left them.  With ``claim_frozen=False`` (operations: an
+    acquisition found cloudy leaves its request open) the frozen observations stay, worth nothing, and their tasks
+    may be served again in the other passes; the objective equals a brute force over the other passes (the
+    frozen tasks free in them), and the Lagrangian bound is at least it.  With True they serve their tasks, which
+    the other passes then cannot take."""
+    fleet, opps = contended
+    cfg = FleetConfig(rounds=ROUNDS, time_limit=None, seed=1)
+    prob = Problem.build(fleet, opps)
+    first = solve(fleet, opps, cfg, problem=prob)
+    sat = np.array([pg.satellite for pg in prob.passes])
+    until = np.where(np.arange(len(fleet.satellites)) == 0, fleet.horizon.seconds, -1.0)
+    frozen = sat == 0  # the other satellite's passes see the same tasks (this fixture's passes contend)
+    kept = {(s, t, int(st)) for s, t, st in zip(first.schedule.satellite.tolist(), first.schedule.task.tolist(),
+                                                first.schedule.start_us.tolist())
+            if frozen[int(opps.pass_id[np.flatnonzero((opps.task == fleet.task_index()[t])
+                                                      & (opps.satellite == fleet.satellite_index()[s]))[0]])]}
+    assert kept  # the frozen passes observe something
+    values = prob.weight[prob.task_idx].copy()
+    if not claim:
+        values[np.repeat(frozen, np.diff(prob.task_ptr))] = 0.0  # what a frozen observation is worth: nothing
+    prob.set_values(values)
+    again = Replanner(prob, cfg).solve(Start(first.schedule, until, claim_frozen=claim))
+    rows = set(zip(again.schedule.satellite.tolist(), again.schedule.task.tolist(), again.schedule.start_us.tolist()))
+    assert kept <= rows and again.check.valid
+    others = [p for p in range(len(prob.passes)) if not frozen[p]]
+    if claim:
+        taken = {fleet.task_index()[t] for _, t, _ in kept}
+        expect = best_over_passes(prob, others) if not taken else None
+        again_tasks = [fleet.task_index()[t] for t in again.schedule.task.tolist()]
+        assert len(again_tasks) == len(set(again_tasks))  # each task once
+        assert expect is None or objective(again, prob) <= expect + 1e-9
+    else:
+        brute = best_over_passes(prob, others)
+        assert objective(again, prob) == pytest.approx(brute, abs=1e-9)
+        assert again.bound * prob.total_weight >= brute - 1e-9
+        repeated = len(again.schedule.task) - len(set(again.schedule.task.tolist()))
+        assert repeated > 0  # some frozen task served again by the other satellite

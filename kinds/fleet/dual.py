@@ -51,7 +51,7 @@ def _dual_round(c: Coordinator, lam: np.ndarray, budget: Budget) -> tuple | None
         if c.frozen[p]:  # a fixed term: its schedule under the prices
             pg, path = c.prob.passes[p], c.initial.paths[p]
             acq = pg.graph.node_acq[path]
-            value = float(priced(c.prob.pass_values(p)[acq], lam[pg.tasks[acq]], pg.energy_wh[acq], pi[p]).sum())
+            value = float(priced(c._values_of(p)[acq], _frozen_lam(c, p, acq, lam), pg.energy_wh[acq], pi[p]).sum())
             res = PassResult(path, value, value)
         else:
             res = solved[p]
@@ -64,12 +64,19 @@ def _dual_round(c: Coordinator, lam: np.ndarray, budget: Budget) -> tuple | None
     return total, proven, count, pass_wh, paths
 
 
+def _frozen_lam(c: Coordinator, p: int, acq: np.ndarray, lam: np.ndarray) -> np.ndarray:
+    """The task prices a frozen pass's observations `acq` pay in its fixed term: their tasks' prices where they
+    serve them, 0 where frozen observations serve nothing (:attr:`eosp.kinds.fleet.solve.Start.claim_frozen`)."""
+    tasks = c.prob.passes[p].tasks[acq]
+    return lam[tasks] if c.claim_frozen else np.zeros(len(tasks))
+
+
 def _path_stats(c: Coordinator, paths: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
     """Of one path per pass: how many paths serve each task (float64 per task), and each path's energy (the sum
     of its observations' least energy, :func:`eosp.kinds.fleet.problem.path_wh`): gathered from the flat
     node and task vectors at once, not pass by pass (at 200 satellites 13,152 passes a round)."""
     owner, _, pos = c._flat(np.arange(len(paths)), paths)
-    count = np.bincount(c._task_idx[pos], minlength=len(c.prob.weight)).astype(np.float64)
+    count = np.bincount(c._task_idx[pos], c._claims[pos], minlength=len(c.prob.weight)).astype(np.float64)
     return count, np.bincount(owner, weights=c._task_wh[pos], minlength=len(paths))
 
 
@@ -245,7 +252,7 @@ def _window_terms(c: Coordinator, passes: np.ndarray, solved: dict, lam: np.ndar
         if c.frozen[p]:
             path = c.initial.paths[p]
             acq = pg.graph.node_acq[path]
-            terms[i] = float(priced(c.prob.pass_values(p)[acq], lam[pg.tasks[acq]], pg.energy_wh[acq], pp[p]).sum())
+            terms[i] = float(priced(c._values_of(p)[acq], _frozen_lam(c, p, acq, lam), pg.energy_wh[acq], pp[p]).sum())
             used[i] = path_wh(pg, path)
             continue
         res = solved[p]

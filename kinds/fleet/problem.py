@@ -332,9 +332,10 @@ def path_tasks(prob: Problem, p: int, path: np.ndarray) -> np.ndarray:
     return pg.tasks[pg.graph.node_acq[path]]
 
 
-def primal_of(prob: Problem, sched: Schedule) -> Primal:
+def primal_of(prob: Problem, sched: Schedule, repeats: bool = False) -> Primal:
     """A schedule as pass paths: each action at its opportunity's node (an action that is no opportunity, or a
-    task's second observation, is left out)."""
+    task's second observation in a pass, or in any pass unless `repeats`, is left out; ``served`` holds a task's
+    first)."""
     f, o = prob.fleet, prob.opps
     step_us = f.horizon.action_step_s * 1_000_000
     row_of = {key: r for r, key in enumerate(zip(o.task.tolist(), o.satellite.tolist(), o.start.tolist()))}
@@ -346,15 +347,18 @@ def primal_of(prob: Problem, sched: Schedule) -> Primal:
     seen = set()
     for sat, task, st in zip(sched.satellite.tolist(), sched.task.tolist(), sched.start_us.tolist()):
         r = row_of.get((ti.get(task, -1), si.get(sat, -1), int(st // step_us)))
-        if r is None or task in seen or st % step_us:
+        if r is None or st % step_us:
             continue
-        seen.add(task)
+        key = (task, int(o.pass_id[r])) if repeats else task
+        if key in seen:
+            continue
+        seen.add(key)
         per_pass.setdefault(int(o.pass_id[r]), []).append((int(st), int(node_of[r])))
     primal = Primal.empty(len(prob.passes), len(f.tasks))
     for p, acts in per_pass.items():
         path = np.asarray([n for _, n in sorted(acts)], dtype=np.int64)
         tasks = path_tasks(prob, p, path)
         primal.paths[p] = path
-        primal.served[tasks] = p
+        primal.served[tasks] = np.where(primal.served[tasks] < 0, p, primal.served[tasks])
         primal.value += float(prob.pass_values(p)[prob.passes[p].graph.node_acq[path]].sum())
     return primal

@@ -103,17 +103,25 @@ class Start:
     initial: Schedule | None = None
     freeze_until_s: float | np.ndarray | None = None
     t0: float | None = None
+    claim_frozen: bool = True
+    """Whether the frozen passes' observations serve their tasks.  False in operations (:mod:`eosp.ops`): what a
+    satellite has executed or been sent stays in its timeline (it took the time, the slews and the energy), but
+    its outcome is the planner's to say through the values: an acquisition found cloudy leaves its request open,
+    one not yet reported is worth what the planner expects of a second try.  The frozen observations are then
+    worth 0 and the task prices pass them by (their fixed terms of the Lagrangian bound are their energy's price
+    alone), so the bound is over the schedules that keep them as they are and serve each task at most once in
+    the other passes; a task may then appear twice in a schedule (the checker counts it once)."""
 
 
 def coordinator(prob: Problem, cfg: FleetConfig, start: Start, pool: PassPool | None) -> Coordinator:
     """The state of a solve of `prob` from `start` (:class:`Coordinator`), its prices at zero."""
-    first = None if start.initial is None else primal_of(prob, start.initial)
+    first = None if start.initial is None else primal_of(prob, start.initial, repeats=not start.claim_frozen)
     frozen = None
     if start.freeze_until_s is not None:
         frozen = frozen_passes(prob, start.freeze_until_s)
         first = first or Primal.empty(len(prob.passes), len(prob.fleet.tasks))
     return Coordinator(prob, cfg, t0=time.perf_counter() if start.t0 is None else start.t0, pool=pool,
-                       initial=first, frozen=frozen)
+                       initial=first, frozen=frozen, claim_frozen=start.claim_frozen)
 
 
 def run_checked(coord: Coordinator) -> FleetSolution:
