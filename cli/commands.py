@@ -9,9 +9,11 @@ from eosp.cli.info import cmd_info
 from eosp.cli.plot import cmd_plot
 from eosp.cli.report import cmd_report
 from eosp.cli.scenario import cmd_scenario
+from eosp.cli.simulate import cmd_simulate
 from eosp.cli.solve import cmd_solve
 from eosp.cli.validate import cmd_validate
 
 COMMAND_FUNCTIONS = {"generate": cmd_generate, "import": cmd_import, "export": cmd_export, "info": cmd_info,
                      "validate": cmd_validate, "solve": cmd_solve, "build-shards": None, "plot": cmd_plot,
-                     "export-schedule": cmd_export_schedule, "report": cmd_report, "scenario": cmd_scenario}
+                     "export-schedule": cmd_export_schedule, "report": cmd_report, "scenario": cmd_scenario,
+                     "simulate": cmd_simulate}

@@ -23,6 +23,8 @@ COMMANDS = {  # what `eosp --help` lists
               "instance",
     "scenario": "a fleet's day in operation: requests that arrive, ground stations and contacts, clouds "
                 "(docs/operations.md)",
+    "simulate": "a planner run through realizations of an operations scenario, scored against a clairvoyant bound "
+                "(docs/operations.md)",
 }
 
 

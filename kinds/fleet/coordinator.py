@@ -137,6 +137,8 @@ class Coordinator:
         self.sun = self.prob.sun  # sunlight, computed once for every battery simulation
         self.battery_ok: dict[int, bytes] = {}  # satellite -> its tasks and starts last found to hold its battery
         self.best_bound = self.conflict_free()
+        if self.frozen.any():  # the frozen passes are in every schedule, the best so far too (worth 0 or not)
+            self.best = self.empty()
 
     # ------------------------------------------------------------------ shared edits
     def _utility(self, primal: Primal, p: int, shift: np.ndarray | None = None) -> np.ndarray:

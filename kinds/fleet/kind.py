@@ -165,7 +165,7 @@ class FleetKind(KindBase):
                   overwrite_written="replace a fleet directory eosp wrote",
                   generate_flag="generate a fleet (not a single pass)")
     schedule_mark = "fleet-schedule"
-    extra_commands = ("scenario",)
+    extra_commands = ("scenario", "simulate")
     memory_checked = ("import", "generate", "solve", "validate", "report", "export-schedule")
     solvers = {"greedy": Solver("greedy", "eosp.kinds.fleet.config:GreedyConfig", "eosp.kinds.fleet.solve:solve_greedy",
                                 "each task once, by weight"),
@@ -363,6 +363,19 @@ class FleetKind(KindBase):
             p.add_argument("--out", required=True, help="the scenario directory to write")
             p.add_argument("--overwrite", action="store_true", help="replace a scenario directory eosp wrote")
             add_config_args(p, ScenarioConfig)
+        elif command == "simulate":
+            from eosp.args import add_config_args
+            from eosp.kinds.fleet.operations import SimulateConfig
+
+            p.description = ("A planner run through realizations of an operations scenario: planning calls on its "
+                             "cadence, plans uploaded at ground contacts, acquisitions met by the realized clouds, "
+                             "every executed timeline checked; served weight against the clairvoyant bound "
+                             "(docs/operations.md).")
+            p.add_argument("problem", metavar="SCEN", help="a scenario directory (eosp scenario)")
+            p.add_argument("--out", required=True, help="the run directory to write (RUN/summary.json)")
+            p.add_argument("--resume", action="store_true", help="go on from the realizations RUN holds")
+            p.add_argument("--overwrite", action="store_true", help="start a run directory eosp wrote again")
+            add_config_args(p, SimulateConfig)
         super().arguments(command, p, solver)
 
 

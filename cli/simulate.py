@@ -1,0 +1,64 @@
+"""``eosp simulate SCEN --planner NAME --realizations N --out RUN/``: a planner run through realizations of an
+operations scenario (:mod:`eosp.ops.simulate`, the fleet solver's planners in :mod:`eosp.kinds.fleet.operations`).
+
+RUN/summary.json is written after every realization (replaced whole), so Ctrl-C keeps the realizations finished
+so far, says so in one line and exits 130; ``--resume`` goes on from them (the same scenario and options)."""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import sys
+from pathlib import Path
+
+
+def cmd_simulate(kind, ns: argparse.Namespace) -> int:  # noqa: ARG001 - the fleet kind, the one offering it
+    from eosp.args import config_from_args
+    from eosp.errors import InputError
+    from eosp.kinds.fleet.operations import SimulateConfig, Simulation, read_run, summary_line, write_summary
+    from eosp.ops import scenario
+
+    cfg = config_from_args(SimulateConfig, ns)
+    out = Path(ns.out)
+    scen = scenario.read(ns.problem)  # a bad scenario is refused before anything is written
+    done: list[dict] = []
+    if out.exists() or out.is_symlink():
+        prior = read_run(out) if out.is_dir() else None
+        if prior is None:
+            raise InputError(out, "exists and is not a run directory written by eosp simulate: refusing to write "
+                                  "into it")
+        same = (prior["scenario"] == str(Path(ns.problem).resolve())
+                and {k: v for k, v in prior["config"].items() if k != "realizations"}
+                == {k: v for k, v in dataclasses.asdict(cfg).items() if k != "realizations"})
+        if ns.resume and not same:
+            raise InputError(out, "holds a run of another scenario or other options: --resume goes on with the "
+                                  "same ones")
+        if not (ns.resume or ns.overwrite):
+            raise InputError(out, "already exists (--resume goes on from its realizations, --overwrite starts "
+                                  "again)")
+        done = [r for r in prior["realizations"] if r["realization"] < cfg.realizations] if ns.resume else []
+    out.mkdir(parents=True, exist_ok=True)
+    have = {r["realization"] for r in done}
+    sim = Simulation.of(scen, cfg)
+    try:
+        for index in range(cfg.realizations):
+            if index not in have:
+                done.append(sim.run(index))
+                write_summary(out, ns.problem, cfg, done)
+    except KeyboardInterrupt:
+        if done:
+            m = write_summary(out, ns.problem, cfg, done)
+            print(f"eosp simulate: interrupted: {summary_line(out / 'summary.json', cfg, m)}", file=sys.stderr)
+        else:
+            print("eosp simulate: interrupted: no realization finished, nothing written", file=sys.stderr)
+        return 130
+    finally:
+        sim.close()
+    m = write_summary(out, ns.problem, cfg, done)
+    print(summary_line(out / "summary.json", cfg, m))
+    if m["valid"] < m["realizations"]:
+        bad = next(r for r in done if not r["valid"])
+        print(f"eosp simulate: an executed timeline is invalid (a defect; realization {bad['realization']}): "
+              f"{bad['violation']}", file=sys.stderr)
+        return 1
+    return 0

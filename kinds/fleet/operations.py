@@ -1,0 +1,217 @@
+"""The fleet solver as a planner in operations (:mod:`eosp.ops.simulate`): plan once, re-plan on weights, re-plan
+on expected values.
+
+Every call is one solve of the day's problem (built once, :class:`eosp.kinds.fleet.replan.Replanner`: prices and
+columns kept from call to call) from the timelines as they stand, each satellite's passes frozen up to its next
+upload (what it was sent and what it did stays, :func:`eosp.kinds.fleet.solve.frozen_passes`).  The frozen
+observations serve nothing in the solve (``Start.claim_frozen=False``): what they are worth is said through the
+values of the other passes, which is where the planners differ:
+
+* ``plan-once``: the first call only, every request that has arrived at its weight;
+* ``replan``: every call; a request at its weight unless it is known served or an acquisition of it is pending
+  (sent, or made and not reported yet: taken as a success), 0 before it arrives;
+* ``ev-replan``: every call; an opportunity is worth the request's weight times the chance that it is still
+  open (each pending acquisition failing, by the forecast it was planned under) times the forecast's chance that
+  this acquisition succeeds.  Serving a task twice is then priced right: a second try of a pending one is worth
+  what it adds.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from eosp.config import WEEK_S, choice, ranged
+from eosp.fleet.model import Schedule
+from eosp.kinds.fleet.config import FleetConfig
+from eosp.kinds.fleet.problem import Problem, opportunity_values
+from eosp.kinds.fleet.replan import Replanner
+from eosp.kinds.fleet.solve import Start, frozen_passes
+from eosp.ops.simulate import Day, Knowledge, Plan, simulate
+
+PLANNERS = ("plan-once", "replan", "ev-replan")
+RUN_KIND = "eosp-simulation"
+MEANS = ("served", "served_catalogue", "served_urgent", "bound", "regret", "cloud_lost", "urgent_latency_h", "churn")
+
+
+@dataclass
+class SimulateConfig:
+    """A planner run through realizations of an operations scenario (``eosp simulate SCEN --out RUN/``)."""
+
+    planner: str = choice("ev-replan", *PLANNERS)
+    """plan-once: the fleet solver at the start, on the weights; replan: the same on every planning call;
+    ev-replan: every call, each opportunity worth its weight times the forecast's chance of success and the
+    chance the request is still open (docs/operations.md)."""
+    realizations: int = ranged(4, 1, 100_000)
+    """Realizations of the clouds (numbers 0 to this, less one; the same for every planner)."""
+    time_limit: float = ranged(30.0, 0.0, WEEK_S, lo_open=True)
+    """Seconds of compute a planning call may take; its plan is uploaded at the first contact after the call's
+    time plus this."""
+    rounds: int | None = ranged(None, 1)
+    """Price rounds of a planning call instead of its time limit (the same plans on any machine); uploads still
+    wait for the time limit."""
+    seed: int = ranged(0, 0)
+    """Seed of the fleet solver."""
+
+    def solver(self) -> FleetConfig:
+        return FleetConfig(time_limit=None if self.rounds else self.time_limit, rounds=self.rounds, seed=self.seed)
+
+
+@dataclass
+class FleetPlanner:
+    """One of :data:`PLANNERS` over a problem built once (see the module docstring); :meth:`reset` before each
+    realization (prices and columns start again), :meth:`close` at the end."""
+
+    name: str
+    prob: Problem
+    cfg: FleetConfig
+
+    def __post_init__(self) -> None:
+        if self.name not in PLANNERS:
+            raise ValueError(f"planner {self.name!r}: one of {', '.join(PLANNERS)}")
+        o = self.prob.opps
+        self._task = o.task.astype(np.int64)
+        step_us = self.prob.fleet.horizon.action_step_s * 1_000_000
+        self._row_of = {k: r for r, k in enumerate(zip(o.task.tolist(), o.satellite.tolist(), o.start.tolist()))}
+        self._step_us = step_us
+        self._pair_pass = np.repeat(np.arange(len(self.prob.passes)), np.diff(self.prob.task_ptr))
+        self.replanner = Replanner(self.prob, self.cfg)
+
+    def reset(self) -> None:
+        self.replanner.prices = None
+        self.replanner.master = None
+        self.replanner.calls = 0
+
+    def close(self) -> None:
+        self.replanner.close()
+
+    def plan(self, know: Knowledge) -> Plan | None:
+        if self.name == "plan-once" and know.call > 0:
+            return None
+        prob, o = self.prob, self.prob.opps
+        until = np.where(np.isfinite(know.upload_s), know.upload_s, prob.fleet.horizon.seconds + 1.0)
+        frozen = frozen_passes(prob, until)
+        values = opportunity_values(prob, self.opportunity_values(know, frozen[o.pass_id[know.rows]]))
+        values[frozen[self._pair_pass]] = 0.0
+        self.replanner.revalue(values)
+        t = time.perf_counter()
+        sol = self.replanner.solve(Start(self.schedule(know.rows), until, t, claim_frozen=False))
+        compute = time.perf_counter() - t
+        info = {"objective": sol.info.get("objective_value"), "bound": sol.bound, "rounds": sol.info["rounds"]}
+        return Plan(self.rows(sol.schedule), compute, info)
+
+    def opportunity_values(self, know: Knowledge, fixed: np.ndarray) -> np.ndarray:
+        """What an acquisition at each opportunity is worth to this planner, from what the ground knows;
+        `fixed`: per row of ``know.rows``, whether the solve keeps it (its pass frozen)."""
+        w = self.prob.weight
+        n = len(w)
+        open_ = know.arrived & ~know.served(self._task, n)
+        pending = fixed & (know.outcome < 0)
+        task = self._task[know.rows]
+        if self.name == "ev-replan":
+            still = np.ones(n)
+            np.multiply.at(still, task[pending], 1.0 - know.planned_p[pending])
+            return (w * open_ * still)[self._task] * know.forecast
+        waiting = np.zeros(n, dtype=bool)
+        waiting[task[pending]] = True
+        return (w * (open_ & ~waiting))[self._task]
+
+    def schedule(self, rows: np.ndarray) -> Schedule:
+        """Opportunity rows as a schedule of the day's fleet."""
+        f, o = self.prob.fleet, self.prob.opps
+        start = o.start[rows].astype(np.int64) * self._step_us
+        dur = (f.tasks.duration_s[o.task[rows]] * 1_000_000).astype(np.int64)
+        return Schedule(f.satellites.ids[o.satellite[rows]], f.tasks.ids[o.task[rows]], start, start + dur)
+
+    def rows(self, sched: Schedule) -> np.ndarray:
+        """A schedule of the day's fleet as opportunity rows (every action is one: the solver's are)."""
+        ti, si = self.prob.fleet.task_index(), self.prob.fleet.satellite_index()
+        return np.array(sorted(self._row_of[(ti[t], si[s], int(st // self._step_us))]
+                               for s, t, st in zip(sched.satellite.tolist(), sched.task.tolist(),
+                                                   sched.start_us.tolist())), dtype=np.int64)
+
+
+@dataclass
+class Simulation:
+    """What the realizations of one scenario share: the scenario, its problem (pass graphs built once), the day's
+    arrays and the planner."""
+
+    scen: object
+    cfg: SimulateConfig
+    day: Day
+    planner: FleetPlanner
+
+    @classmethod
+    def of(cls, scen, cfg: SimulateConfig) -> Simulation:
+        prob = Problem.build(scen.fleet, scen.opps)
+        return cls(scen, cfg, Day.of(scen), FleetPlanner(cfg.planner, prob, cfg.solver()))
+
+    def run(self, index: int) -> dict:
+        """Realization `index` simulated: its figures and each planning call's record."""
+        from eosp.fleet.check import validate
+        from eosp.ops.world import realize
+
+        prob = self.planner.prob
+
+        def check(rows: np.ndarray) -> tuple[bool, str | None]:
+            res = validate(prob.fleet, self.planner.schedule(rows), prob.geo)
+            return res.valid, None if res.valid else str(res.first)
+
+        got = self.simulate(realize(self.scen, index), check)
+        return {**got.figures, "calls": got.calls}
+
+    def simulate(self, world, check=None):
+        """The planner, reset, through `world` (:func:`eosp.ops.simulate.simulate`)."""
+        self.planner.reset()
+        return simulate(self.day, world, self.planner, self.cfg.time_limit, check)
+
+    def close(self) -> None:
+        self.planner.close()
+
+
+def means(done: list[dict]) -> dict:
+    """The mean of each figure over the realizations that have it (None where none has)."""
+    out = {}
+    for key in MEANS:
+        vals = [r[key] for r in done if r.get(key) is not None]
+        out[key] = float(np.mean(vals)) if vals else None
+    calls = [c for r in done for c in r["compute_s"]]
+    out["compute_s_per_call"] = float(np.mean(calls)) if calls else None
+    out["valid"] = sum(bool(r["valid"]) for r in done)
+    out["realizations"] = len(done)
+    return out
+
+
+def summary_line(out: str | Path, cfg: SimulateConfig, m: dict) -> str:
+    urgent = "" if m["served_urgent"] is None else f", urgent {m['served_urgent']:.4f}"
+    per_call = "" if m["compute_s_per_call"] is None else f", {m['compute_s_per_call']:.1f} s a call"
+    return (f"{out}: {cfg.planner} over {m['realizations']} realizations: served {m['served']:.4f} of the weight "
+            f"(catalogue {m['served_catalogue']:.4f}{urgent}), clairvoyant bound {m['bound']:.4f}, regret "
+            f"{m['regret']:.4f}; {m['valid']} of {m['realizations']} executions valid{per_call}")
+
+
+def read_run(out: Path) -> dict | None:
+    """The summary of a run directory eosp wrote (None when there is none)."""
+    try:
+        got = json.loads((out / "summary.json").read_text())
+    except (OSError, ValueError):
+        return None
+    return got if isinstance(got, dict) and got.get("kind") == RUN_KIND else None
+
+
+def write_summary(out: Path, scen_path: str, cfg: SimulateConfig, done: list[dict]) -> dict:
+    """RUN/summary.json, replaced whole (atomically) after each realization."""
+    import dataclasses
+
+    from eosp.atomic import atomic_path
+
+    m = means(done)
+    body = {"kind": RUN_KIND, "scenario": str(Path(scen_path).resolve()), "config": dataclasses.asdict(cfg),
+            "means": m, "realizations": sorted(done, key=lambda r: r["realization"])}
+    with atomic_path(out / "summary.json") as tmp:
+        tmp.write_text(json.dumps(body, indent=1) + "\n")
+    return m

@@ -1,0 +1,161 @@
+"""The operations simulator (eosp.ops.simulate) with the fleet solver's planners (eosp.kinds.fleet.operations) and
+``eosp simulate``: every executed timeline valid by the checker, nothing served above the clairvoyant bound, the
+same run for the same realization, plans that use nothing known only later (non-anticipativity), and the command's
+run directory, Ctrl-C and resume."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from eosp.cli import main
+from eosp.fleet.generate import FleetGenConfig, generate
+from eosp.fleet.geometry import Geometry
+from eosp.fleet.io import write_fleet
+from eosp.fleet.opportunities import compute
+from eosp.kinds.fleet.operations import PLANNERS, SimulateConfig, Simulation
+from eosp.ops import scenario
+from eosp.ops.scenario import ScenarioConfig, make
+from eosp.ops.simulate import Plan, clairvoyant_bound, simulate
+from eosp.ops.world import realize
+
+
+@pytest.fixture(scope="module")
+def scen_dir(tmp_path_factory):
+    root = tmp_path_factory.mktemp("sim")
+    f = generate(FleetGenConfig(satellites=12, tasks=80, hours=6.0, placement="cities", seed=6))
+    write_fleet(f, compute(f, Geometry(f)), root / "fleet")
+    make(str(root / "fleet"), ScenarioConfig(urgent_per_hour=6, cadence_h=1, seed=3), str(root / "scen"))
+    return root / "scen"
+
+
+@pytest.fixture(scope="module")
+def scen(scen_dir):
+    return scenario.read(scen_dir)
+
+
+@pytest.mark.parametrize("planner", PLANNERS)
+def test_every_execution_is_valid_and_below_the_clairvoyant_bound(scen, planner):
+    """Three realizations: the checker accepts every executed timeline (failed acquisitions included), what is
+    served never exceeds the clairvoyant bound, some acquisitions fail (clouds) and a planner that re-plans makes
+    more than one call; a realization run twice gives the same run."""
+    sim = Simulation.of(scen, SimulateConfig(planner=planner, rounds=3, time_limit=60.0))
+    try:
+        got = [sim.run(i) for i in range(3)]
+        again = sim.run(1)
+    finally:
+        sim.close()
+    for r in got:
+        assert r["valid"] is True and r["violation"] is None
+        assert 0 < r["served"] <= r["bound"] + 1e-12 and r["regret"] >= -1e-12
+        assert len(r["calls"]) == (1 if planner == "plan-once" else len(realize(scen, 0).calls_s))
+    assert sum(r["failed"] for r in got) > 0
+    timed = ("calls", "compute_s")
+    assert {k: v for k, v in again.items() if k not in timed} == {k: v for k, v in got[1].items() if k not in timed}
+
+
+def test_the_clairvoyant_bound_is_the_weight_of_requests_with_a_clear_opportunity(scen):
+    """Recomputed request by request, each opportunity's outcome from the world."""
+    day = Simulation.of(scen, SimulateConfig(rounds=1)).day
+    w = realize(scen, 0)
+    want = sum(day.weight[j] for j in range(len(day.weight))
+               if any(w.clear[r] and day.start_s[r] >= w.arrival_s[j] for r in np.flatnonzero(day.task == j)))
+    assert clairvoyant_bound(day, w) == pytest.approx(want, abs=1e-9)
+
+
+class Peeking:
+    """A planner that reads the realized clouds (what no planner may know): it keeps only the opportunities that
+    will succeed.  The non-anticipativity check must catch it."""
+
+    name = "peeking"
+
+    def __init__(self, inner, world):
+        self.inner, self.world = inner, world
+
+    def plan(self, know):
+        got = self.inner.plan(know)
+        return Plan(got.rows[self.world.clear[got.rows]], got.compute_s, got.info)
+
+
+def plans_before(run, world, t: float) -> list:
+    return [(call, rows.tolist()) for call, rows in run.plans if world.calls_s[call] <= t]
+
+
+@pytest.mark.parametrize("planner", ["replan", "ev-replan"])
+def test_plans_use_nothing_known_only_later(scen, planner):
+    """Non-anticipativity: clouds, forecasts and arrivals redrawn after a time t leave every plan made up to t
+    (every plan uploaded up to t among them) unchanged, for three times t; the runs do differ after t (the test
+    can fail), and a planner that peeks at the realized clouds is caught."""
+    sim = Simulation.of(scen, SimulateConfig(planner=planner, rounds=3, time_limit=60.0))
+    w = realize(scen, 2)
+    base = sim.simulate(w)
+    rng = np.random.default_rng(0)
+    differ = 0
+    for t in w.calls_s[1:4] + 600.0:
+        other = w.perturbed_after(float(t), rng, sim.day.start_s)
+        run = sim.simulate(other)
+        assert plans_before(run, other, t) == plans_before(base, w, t), t
+        differ += [r.tolist() for _, r in run.plans] != [r.tolist() for _, r in base.plans]
+    assert differ > 0
+    t = float(w.calls_s[2] + 600.0)
+    other = w.perturbed_after(t, rng, sim.day.start_s)
+    a = simulate(sim.day, w, Peeking(sim.planner, w), 60.0)
+    sim.planner.reset()
+    b = simulate(sim.day, other, Peeking(sim.planner, other), 60.0)
+    assert plans_before(a, w, t) != plans_before(b, other, t)
+    sim.close()
+
+
+def test_eosp_simulate_writes_a_summary_resumes_and_keeps_what_ctrl_c_leaves(scen_dir, tmp_path, capsys,
+                                                                             monkeypatch):
+    out = tmp_path / "run"
+    argv = ["simulate", str(scen_dir), "--planner", "replan", "--rounds", "2", "--time-limit", "60", "--out",
+            str(out)]
+    real_run = Simulation.run
+    calls = []
+
+    def stop_at_second(self, index):
+        calls.append(index)
+        if len(calls) == 2:
+            raise KeyboardInterrupt
+        return real_run(self, index)
+
+    monkeypatch.setattr(Simulation, "run", stop_at_second)
+    assert main([*argv, "--realizations", "3"]) == 130
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "interrupted" in err and "over 1 realizations" in err
+    assert len(json.loads((out / "summary.json").read_text())["realizations"]) == 1
+    monkeypatch.setattr(Simulation, "run", real_run)
+    assert main([*argv, "--realizations", "3"]) == 2  # exists: --resume or --overwrite
+    assert "already exists" in capsys.readouterr().err
+    assert main([*argv, "--realizations", "3", "--resume"]) == 0
+    line = capsys.readouterr().out
+    assert line.count("\n") == 1 and "replan over 3 realizations" in line and "3 of 3 executions valid" in line
+    body = json.loads((out / "summary.json").read_text())
+    assert [r["realization"] for r in body["realizations"]] == [0, 1, 2]
+    assert body["means"]["served"] == pytest.approx(np.mean([r["served"] for r in body["realizations"]]))
+    assert main([*argv, "--realizations", "3", "--resume", "--seed", "5"]) == 2  # other options
+    assert "another scenario or other options" in capsys.readouterr().err
+
+
+def test_bad_scenarios_and_run_directories_are_refused_in_one_line(scen_dir, tmp_path, capsys):
+    mine = tmp_path / "notes"
+    mine.mkdir()
+    (mine / "keep.txt").write_text("a user's file")
+    assert main(["simulate", str(scen_dir), "--out", str(mine), "--rounds", "1"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "not a run directory written by eosp simulate" in err
+    assert sorted(p.name for p in mine.iterdir()) == ["keep.txt"]
+    broken = tmp_path / "scen"
+    broken.mkdir()
+    (broken / "meta.json").write_text(json.dumps({"kind": "eosp-operations-scenario", "schema_version": 99}))
+    out = tmp_path / "run"
+    assert main(["simulate", str(broken), "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "schema_version" in err and not out.exists()
+    with pytest.raises(SystemExit) as stop:  # argparse's exit, as for every option
+        main(["simulate", str(scen_dir), "--out", str(out), "--planner", "oracle"])
+    assert stop.value.code == 2 and not out.exists()
+    assert "--planner: must be one of plan-once, replan, ev-replan" in capsys.readouterr().err
