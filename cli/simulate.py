@@ -7,36 +7,20 @@ so far, says so in one line and exits 130; ``--resume`` goes on from them (the s
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import sys
 from pathlib import Path
 
 
 def cmd_simulate(kind, ns: argparse.Namespace) -> int:  # noqa: ARG001 - the fleet kind, the one offering it
     from eosp.args import config_from_args
-    from eosp.errors import InputError
-    from eosp.kinds.fleet.operations import SimulateConfig, Simulation, read_run, summary_line, write_summary
+    from eosp.kinds.fleet.operations import (SimulateConfig, Simulation, prior_realizations, summary_line,
+                                             write_summary)
     from eosp.ops import scenario
 
     cfg = config_from_args(SimulateConfig, ns)
     out = Path(ns.out)
     scen = scenario.read(ns.problem)  # a bad scenario is refused before anything is written
-    done: list[dict] = []
-    if out.exists() or out.is_symlink():
-        prior = read_run(out) if out.is_dir() else None
-        if prior is None:
-            raise InputError(out, "exists and is not a run directory written by eosp simulate: refusing to write "
-                                  "into it")
-        same = (prior["scenario"] == str(Path(ns.problem).resolve())
-                and {k: v for k, v in prior["config"].items() if k != "realizations"}
-                == {k: v for k, v in dataclasses.asdict(cfg).items() if k != "realizations"})
-        if ns.resume and not same:
-            raise InputError(out, "holds a run of another scenario or other options: --resume goes on with the "
-                                  "same ones")
-        if not (ns.resume or ns.overwrite):
-            raise InputError(out, "already exists (--resume goes on from its realizations, --overwrite starts "
-                                  "again)")
-        done = [r for r in prior["realizations"] if r["realization"] < cfg.realizations] if ns.resume else []
+    done = prior_realizations(out, ns.problem, cfg, resume=ns.resume, overwrite=ns.overwrite)
     out.mkdir(parents=True, exist_ok=True)
     have = {r["realization"] for r in done}
     sim = Simulation.of(scen, cfg)

@@ -159,3 +159,36 @@ def test_bad_scenarios_and_run_directories_are_refused_in_one_line(scen_dir, tmp
         main(["simulate", str(scen_dir), "--out", str(out), "--planner", "oracle"])
     assert stop.value.code == 2 and not out.exists()
     assert "--planner: must be one of plan-once, replan, ev-replan" in capsys.readouterr().err
+
+
+@pytest.mark.ray
+def test_the_ray_job_runs_realizations_resumes_and_logs_to_mlflow(scen, scen_dir, tmp_path, capsys):
+    """jobs/simulate_operations.py on a local Ray (two actors): the same realizations as in this process, resumed
+    by a rerun with more of them, each run in MLflow with its figures and summary.json."""
+    import mlflow
+    import ray
+
+    from eosp.jobs import simulate_operations as job
+
+    uri = f"sqlite:///{tmp_path}/mlflow.db"
+    out = tmp_path / "run"
+    argv = ["--scenario", str(scen_dir), "--out", str(out), "--sim.planner", "ev-replan", "--sim.rounds", "2",
+            "--sim.time-limit", "60", "--mlflow-uri", uri, "--ray.num-cpus", "2"]
+    try:
+        assert job.main([*argv, "--sim.realizations", "2"]) == 0
+        body = json.loads((out / "summary.json").read_text())
+        assert [r["realization"] for r in body["realizations"]] == [0, 1] and body["means"]["valid"] == 2
+        here = Simulation.of(scen, SimulateConfig(planner="ev-replan", rounds=2, time_limit=60.0)).run(1)
+        timed = ("calls", "compute_s")
+        assert {k: v for k, v in body["realizations"][1].items() if k not in timed} == \
+            {k: v for k, v in here.items() if k not in timed}
+        capsys.readouterr()
+        assert job.main([*argv, "--sim.realizations", "3"]) == 0
+        printed = capsys.readouterr().out
+        assert "resuming: 2 of 3 realizations done" in printed and printed.count("] realization ") == 1
+        mlflow.set_tracking_uri(uri)
+        runs = mlflow.search_runs(experiment_names=["eosp-operations"])
+        assert len(runs) == 2 and runs["metrics.mean/served"].notna().all()
+        assert set(runs["params.sim.planner"]) == {"ev-replan"}
+    finally:
+        ray.shutdown()

@@ -203,6 +203,31 @@ def read_run(out: Path) -> dict | None:
     return got if isinstance(got, dict) and got.get("kind") == RUN_KIND else None
 
 
+def prior_realizations(out: Path, scen_path: str, cfg: SimulateConfig, resume: bool, overwrite: bool) -> list[dict]:
+    """The realizations a run directory holds to go on from: none when `out` does not exist or `overwrite`; those
+    below ``cfg.realizations`` when `resume` and it is a run of the same scenario and options (the number of
+    realizations aside).  An InputError for anything else (a directory eosp did not write, another run without
+    --resume or --overwrite, another scenario or other options with --resume)."""
+    import dataclasses
+
+    from eosp.errors import InputError
+
+    if not (out.exists() or out.is_symlink()):
+        return []
+    prior = read_run(out) if out.is_dir() else None
+    if prior is None:
+        raise InputError(out, "exists and is not a run directory written by eosp simulate: refusing to write into it")
+    if not (resume or overwrite):
+        raise InputError(out, "already exists (--resume goes on from its realizations, --overwrite starts again)")
+    if not resume:
+        return []
+    mine = {k: v for k, v in dataclasses.asdict(cfg).items() if k != "realizations"}
+    if prior.get("scenario") != str(Path(scen_path).resolve()) or \
+            {k: v for k, v in (prior.get("config") or {}).items() if k != "realizations"} != mine:
+        raise InputError(out, "holds a run of another scenario or other options: --resume goes on with the same ones")
+    return [r for r in prior.get("realizations") or [] if r["realization"] < cfg.realizations]
+
+
 def write_summary(out: Path, scen_path: str, cfg: SimulateConfig, done: list[dict]) -> dict:
     """RUN/summary.json, replaced whole (atomically) after each realization."""
     import dataclasses
