@@ -47,6 +47,7 @@ def main() -> None:
     ap.add_argument("--realizations", type=int, default=8)
     ap.add_argument("--time-limit", type=float, default=10.0)
     ap.add_argument("--scenario-args", default="", help="extra options of eosp scenario, e.g. '--cadence-h 2'")
+    ap.add_argument("--simulate-args", default="", help="extra options of eosp simulate, e.g. '--bound-time-limit 15'")
     args = ap.parse_args()
     work = Path(args.work)
     rows, pairs = [], []
@@ -59,7 +60,8 @@ def main() -> None:
         for planner in PLANNERS:
             run = work / f"{name}.{planner}"
             print(eosp("simulate", str(scen), "--planner", planner, "--realizations", str(args.realizations),
-                       "--time-limit", str(args.time_limit), "--out", str(run), "--resume"), flush=True)
+                       "--time-limit", str(args.time_limit), "--out", str(run), "--resume",
+                       *args.simulate_args.split()), flush=True)
             got[planner] = json.loads((run / "summary.json").read_text())
             m = got[planner]["means"]
             rows.append(f"| {name} | {planner} | {m['served']:.4f} | {m['served_catalogue']:.4f} | "

@@ -20,8 +20,8 @@ an invalid one is reported as a defect of the planner, never scored.
 The bound printed with each realization is the clairvoyant conflict-free bound: the weight of the requests that
 have at least one opportunity where the realized clouds let an acquisition succeed.  It bounds every planner,
 because a request is served only by a successful acquisition and every acquisition a planner can make is an
-opportunity (after the request's arrival: its window opens then).  A tighter clairvoyant bound (the fleet solver's
-on the realized day) is issue 75's stage 2.
+opportunity (after the request's arrival: its window opens then).  The fleet kind adds a tighter one, the fleet
+solver's on the realized day (:func:`eosp.kinds.fleet.operations.clairvoyant_values`).
 
 Planners live above this module (the fleet solver's are in :mod:`eosp.kinds.fleet.operations`); they are
 objects with ``plan(knowledge) -> Plan | None`` (None: no new plan) and a ``name``.

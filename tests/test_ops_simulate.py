@@ -50,6 +50,7 @@ def test_every_execution_is_valid_and_below_the_clairvoyant_bound(scen, planner)
     for r in got:
         assert r["valid"] is True and r["violation"] is None
         assert 0 < r["served"] <= r["bound"] + 1e-12 and r["regret"] >= -1e-12
+        assert r["clairvoyant_schedule"] <= r["bound"] + 1e-12 and r["bound"] <= r["conflict_free_bound"]
         assert len(r["calls"]) == (1 if planner == "plan-once" else len(realize(scen, 0).calls_s))
     assert sum(r["failed"] for r in got) > 0
     timed = ("calls", "compute_s")
@@ -63,6 +64,55 @@ def test_the_clairvoyant_bound_is_the_weight_of_requests_with_a_clear_opportunit
     want = sum(day.weight[j] for j in range(len(day.weight))
                if any(w.clear[r] and day.start_s[r] >= w.arrival_s[j] for r in np.flatnonzero(day.task == j)))
     assert clairvoyant_bound(day, w) == pytest.approx(want, abs=1e-9)
+
+
+def clairvoyant_optimum(prob, values) -> float:
+    """The most any day of pass paths serves under per-(pass, task) `values`, each task credited once at a pass
+    where its value is positive, the battery left out: every task set of every pass enumerated along its graph's
+    arcs, then an exact integer program over them (scipy's milp; nothing of the solver)."""
+    from scipy.optimize import Bounds, LinearConstraint, milp
+
+    from tests.test_fleet_master import every_task_set
+
+    cols = []  # (pass, the tasks it credits)
+    for p, pg in enumerate(prob.passes):
+        v = dict(zip(pg.tasks.tolist(), values[prob.task_ptr[p]:prob.task_ptr[p + 1]].tolist()))
+        credit = {frozenset(t for t in c if v[t] > 0) for c in every_task_set(prob, p)}
+        cols += [(p, c) for c in credit if c]
+    n, P, C = len(prob.weight), len(prob.passes), len(cols)
+    # variables: x_c (a pass's task set), then y_j (task j credited)
+    cover = np.zeros((n, C + n))  # y_j <= sum of the x_c crediting j
+    one = np.zeros((P, C + n))  # a pass takes one set
+    for i, (p, c) in enumerate(cols):
+        one[p, i] = 1
+        for t in c:
+            cover[t, i] = -1
+    cover[np.arange(n), C + np.arange(n)] = 1
+    cost = np.r_[np.zeros(C), -prob.weight]
+    res = milp(cost, integrality=np.ones(C + n), bounds=Bounds(0, 1),
+               constraints=[LinearConstraint(cover, -np.inf, 0), LinearConstraint(one, 0, 1)])
+    assert res.success
+    return -res.fun / prob.weight.sum()
+
+
+def test_the_clairvoyant_bound_against_an_exact_optimum(scen):
+    """Four realizations: what every planner serves <= the clairvoyant optimum (an exact integer program over
+    every pass's task sets, battery left out) <= the clairvoyant bound the fleet solver proves; the clairvoyant
+    schedule executed serves at most the optimum."""
+    from eosp.kinds.fleet.operations import clairvoyant_values
+
+    sims = [Simulation.of(scen, SimulateConfig(planner=p, rounds=4, time_limit=60.0)) for p in PLANNERS]
+    for index in range(4):
+        w = realize(scen, index)
+        runs = [s.run(index) for s in sims]
+        prob = sims[0].planner.prob
+        best = clairvoyant_optimum(prob, clairvoyant_values(prob, w))
+        for r in runs:
+            assert r["served"] <= best + 1e-12 <= r["bound"] + 2e-12, (index, r["served"], best, r["bound"])
+            assert r["clairvoyant_schedule"] <= best + 1e-12
+        assert runs[0]["bound"] == runs[1]["bound"] == runs[2]["bound"]  # the realization's, whoever planned
+    for s in sims:
+        s.close()
 
 
 class Peeking:

@@ -35,7 +35,8 @@ from eosp.ops.simulate import Day, Knowledge, Plan, simulate
 
 PLANNERS = ("plan-once", "replan", "ev-replan")
 RUN_KIND = "eosp-simulation"
-MEANS = ("served", "served_catalogue", "served_urgent", "bound", "regret", "cloud_lost", "urgent_latency_h", "churn")
+MEANS = ("served", "served_catalogue", "served_urgent", "bound", "regret", "cloud_lost", "urgent_latency_h", "churn",
+         "conflict_free_bound", "clairvoyant_schedule", "clairvoyant_gap")
 
 
 @dataclass
@@ -56,6 +57,9 @@ class SimulateConfig:
     wait for the time limit."""
     seed: int = ranged(0, 0)
     """Seed of the fleet solver."""
+    bound_time_limit: float = ranged(30.0, 0.0, WEEK_S)
+    """Seconds of the fleet solver's clairvoyant solve of each realization, for its bound (0: the conflict-free
+    clairvoyant bound alone); with --rounds, that many price rounds instead."""
 
     def solver(self) -> FleetConfig:
         return FleetConfig(time_limit=None if self.rounds else self.time_limit, rounds=self.rounds, seed=self.seed)
@@ -161,8 +165,38 @@ class Simulation:
             res = validate(prob.fleet, self.planner.schedule(rows), prob.geo)
             return res.valid, None if res.valid else str(res.first)
 
-        got = self.simulate(realize(self.scen, index), check)
-        return {**got.figures, "calls": got.calls}
+        world = realize(self.scen, index)
+        got = self.simulate(world, check)
+        return {**got.figures, **self.clairvoyant(world, got.figures), "calls": got.calls}
+
+    def clairvoyant(self, world, figures: dict) -> dict:
+        """The fleet solver on the realized day (see :func:`clairvoyant_values`): its proven bound, kept as the
+        realization's bound when below the conflict-free one; the realized value of its schedule (a clairvoyant
+        plan executed: its tasks served where their chosen start is clear) and its gap to the bound."""
+        from eosp.kinds.fleet.solve import solve
+
+        cfg, conflict_free = self.cfg, figures["bound"]
+        if cfg.bound_time_limit <= 0 and not cfg.rounds:
+            return {"bound_source": "conflict-free clairvoyant"}
+        prob = self.planner.prob
+        prob.set_values(clairvoyant_values(prob, world))
+        solver = FleetConfig(time_limit=None if cfg.rounds else cfg.bound_time_limit, rounds=cfg.rounds,
+                             seed=cfg.seed)
+        sol = solve(prob.fleet, prob.opps, solver, problem=prob)
+        rows = self.planner.rows(sol.schedule)
+        served = np.zeros(len(prob.weight), dtype=bool)
+        served[prob.opps.task[rows[world.clear[rows]]]] = True
+        found = float(prob.weight[served].sum() / prob.total_weight) if prob.total_weight > 0 else 0.0
+        bound, source = conflict_free, "conflict-free clairvoyant"
+        if sol.bound is not None and sol.bound < bound:
+            bound, source = sol.bound, f"clairvoyant fleet solver ({sol.info['bound_source']})"
+        if found > bound + 1e-9:
+            raise RuntimeError(f"realization {world.index}: a clairvoyant schedule of {found} above the bound {bound}")
+        if figures["served"] > bound + 1e-9:
+            raise RuntimeError(f"realization {world.index}: served {figures['served']} above the bound {bound}")
+        return {"bound": bound, "regret": bound - figures["served"], "bound_source": source,
+                "conflict_free_bound": conflict_free,
+                "clairvoyant_schedule": found, "clairvoyant_gap": (bound - found) / bound if bound > 0 else 0.0}
 
     def simulate(self, world, check=None):
         """The planner, reset, through `world` (:func:`eosp.ops.simulate.simulate`)."""
@@ -171,6 +205,24 @@ class Simulation:
 
     def close(self) -> None:
         self.planner.close()
+
+
+def clairvoyant_values(prob: Problem, world) -> np.ndarray:
+    """Values per (pass, task) of the realized day: a task's weight in a pass where one of its opportunities is
+    clear (after its arrival), else 0.
+
+    Why the fleet solver's bound under these values bounds what every planner serves in this realization: an
+    executed day is a schedule the checker accepts (each satellite's timeline, failed acquisitions included, and
+    tasks observed twice), and a request it serves has a clear executed acquisition, whose pass is worth the
+    request's weight here; so its value under these values, each task credited once at its best pass, is at least
+    the weight it served.  The solver's Lagrangian bound holds for every such schedule: each pass's term is the
+    best over every sequence the verifier accepts, tasks observed again included and credited once, of the
+    positive priced values (:func:`eosp.fleet.passgraph.bound_problem`), and the task prices are non-negative;
+    its conflict-free bound too.  Uploads, knowledge and compute are relaxed (the clairvoyant knows every
+    outcome and arrival at the start and plans everything at once)."""
+    o = prob.opps
+    ok = world.clear & (o.start.astype(np.float64) * prob.fleet.horizon.action_step_s >= world.arrival_s[o.task])
+    return opportunity_values(prob, np.where(ok, prob.weight[o.task], 0.0))
 
 
 def means(done: list[dict]) -> dict:
