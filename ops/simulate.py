@@ -32,7 +32,7 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass, field
-from typing import Protocol
+from typing import Callable, Protocol
 
 import numpy as np
 
@@ -43,11 +43,13 @@ from eosp.ops.world import World
 class Knowledge:
     """What the ground knows at a planning call, and what its plan may change.
 
-    `rows`: the day's timelines as sent and as executed so far (opportunity rows, sorted); `outcome` per row: 1
-    succeeded, 0 failed (reported at a contact before `t`), -1 not known (not executed, or not reported yet);
-    `planned_p` per row: the success probability of the forecast the row was planned under (the latest call at or
-    before its start, never a later one than this); `upload_s` per satellite: when a plan made now reaches it
-    (inf: never); `arrived` per task; `forecast` per opportunity: the success probability issued now."""
+    `rows`: the day's timelines as the ground knows them (opportunity rows, sorted): what was sent and what was
+    reported done, the alternates sent (`alternate`) unless reported not taken; `outcome` per row: 1 succeeded, 0
+    failed (reported at a contact before `t`), -1 not known (not done, or not reported yet); `planned_p` per row:
+    the chance it serves its task by the forecasts it was planned under (the latest call at or before its start,
+    never a later one than this; an alternate's, that its primary fails and it succeeds); `upload_s` per
+    satellite: when a plan made now reaches it (inf: never); `arrived` per task; `forecast` per opportunity: the
+    success probability issued now."""
 
     t: float
     call: int
@@ -57,6 +59,7 @@ class Knowledge:
     upload_s: np.ndarray
     arrived: np.ndarray
     forecast: np.ndarray
+    alternate: np.ndarray
 
     def served(self, task_of_row: np.ndarray, n_tasks: int) -> np.ndarray:
         """Bool per task: an acquisition of it succeeded and was reported."""
@@ -67,12 +70,16 @@ class Knowledge:
 
 @dataclass
 class Plan:
-    """A planner's answer: the opportunity rows of every satellite's timeline (those before each satellite's
-    upload as the knowledge had them), the compute it used (seconds) and what it wants reported."""
+    """A planner's answer: the opportunity rows of every satellite's timeline (those of the passes that start
+    before each satellite's upload as the knowledge had them), the compute it used (seconds) and what it wants
+    reported; with the onboard rule, `alternates` (rows) each taken only when the primary `alternate_of` (a row
+    of `rows`) fails."""
 
     rows: np.ndarray
     compute_s: float
     info: dict = field(default_factory=dict)
+    alternates: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    alternate_of: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
 
 
 class Planner(Protocol):
@@ -95,17 +102,28 @@ class Day:
     contact_start: list[np.ndarray]
     contact_end: list[np.ndarray]
     horizon_s: float
+    pass_id: np.ndarray  # per opportunity: its pass
+    pass_start: np.ndarray  # per pass: when it starts (a plan governs the passes that start after its upload)
 
     @classmethod
-    def of(cls, scen) -> Day:
+    def of(cls, scen, pass_start: np.ndarray | None = None) -> Day:
+        """The day of scenario `scen`; `pass_start`: when each pass starts as the planners see it (default: its
+        first opportunity's start)."""
         f, o = scen.fleet, scen.opps
         step = f.horizon.action_step_s
         start = o.start.astype(np.float64) * step
         end = start + f.tasks.duration_s[o.task]
         cs, ce = zip(*(scen.contacts.of(k) for k in range(len(f.satellites)))) if len(f.satellites) else ((), ())
+        if pass_start is None:
+            pass_start = np.full(o.n_passes, np.inf)
+            np.minimum.at(pass_start, o.pass_id, start)
         return cls(o.task.astype(np.int64), o.satellite.astype(np.int64), start, end,
                    np.asarray(f.tasks.weight, dtype=np.float64), np.asarray(scen.urgent, bool), list(cs), list(ce),
-                   float(f.horizon.seconds))
+                   float(f.horizon.seconds), o.pass_id.astype(np.int64), np.asarray(pass_start, dtype=np.float64))
+
+    def fixed(self, rows: np.ndarray, upload: np.ndarray) -> np.ndarray:
+        """Bool per row: its pass starts before its satellite's upload (what a plan uploaded then cannot change)."""
+        return self.pass_start[self.pass_id[rows]] < upload[self.sat[rows]]
 
     def next_contact(self, sat: np.ndarray, t: np.ndarray) -> np.ndarray:
         """Per (satellite, time): the first instant at or after it in contact (inf: none left)."""
@@ -121,16 +139,74 @@ class Day:
         return out
 
 
-def knowledge(day: Day, world: World, rows: np.ndarray, call: int, upload_s: np.ndarray) -> Knowledge:
-    """What the ground knows at planning call `call` (:class:`Knowledge`), the timelines being `rows`."""
+@dataclass
+class Sent:
+    """What the satellites were sent and what they did: primaries and alternates (opportunity rows; each alternate
+    with the primary whose failure lets it be taken), the rows done in the order done (primaries, and alternates
+    the onboard rule took), and the time up to which what they do is decided."""
+
+    prim: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    alt: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    alt_of: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    done: list[int] = field(default_factory=list)
+    taken: set[int] = field(default_factory=set)
+    until: float = 0.0
+
+
+def execute(day: Day, world: World, sent: Sent, t: float, onboard: Callable | None) -> None:
+    """The satellites' work up to time `t`: every primary starting before it done; with the onboard rule
+    (`onboard`: a function of a satellite and its timeline's rows saying whether its battery holds), a primary
+    found cloudy lets the satellite take the alternate sent for it, when its task is not one the satellite has
+    served itself and its battery holds with it (what it did, the alternate, the primaries it was sent after it).
+    What was decided is never decided again."""
+    s = day.start_s
+    new = sent.prim[(s[sent.prim] >= sent.until) & (s[sent.prim] < t)]
+    for r in new[np.argsort(s[new], kind="stable")].tolist():
+        sent.done.append(r)
+        if onboard is None or world.clear[r]:
+            continue
+        k = day.sat[r]
+        for a in sent.alt[sent.alt_of == r].tolist():
+            mine = np.asarray(sent.done, dtype=np.int64)
+            mine = mine[day.sat[mine] == k]
+            if (world.clear[mine] & (day.task[mine] == day.task[a])).any():
+                continue  # served already, by this satellite
+            later = sent.prim[(day.sat[sent.prim] == k) & (s[sent.prim] > s[a])]
+            if onboard(int(k), np.concatenate([mine, [a], later])):
+                sent.done.append(a)
+                sent.taken.add(a)
+                break
+    sent.until = max(sent.until, t)
+
+
+def knowledge(day: Day, world: World, sent: Sent, call: int, upload_s: np.ndarray) -> Knowledge:
+    """What the ground knows at planning call `call` (:class:`Knowledge`), after :func:`execute` up to it."""
     t = float(world.calls_s[call])
+    s = day.start_s
+    alt_report = day.next_contact(day.sat[sent.alt], day.end_s[sent.alt])
+    decided = s[sent.alt_of] < sent.until
+    taken = np.isin(sent.alt, np.fromiter(sent.taken, np.int64, len(sent.taken)))
+    keep = ~decided | taken | (alt_report > t)  # an alternate not taken is known only once reported
+    rows = np.concatenate([sent.prim, sent.alt[keep]])
+    is_alt = np.r_[np.zeros(len(sent.prim), bool), np.ones(int(keep.sum()), bool)]
+    order = np.argsort(rows, kind="stable")
+    rows, is_alt = rows[order], is_alt[order]
     report = day.next_contact(day.sat[rows], day.end_s[rows])
-    known = (day.start_s[rows] < t) & (report <= t)
+    known = (s[rows] < t) & (report <= t)
     outcome = np.where(known, world.clear[rows].astype(np.int64), -1)
-    # the forecast each row was planned under: the latest call at or before its start, this one at the latest
+    planned = _planned(day, world, rows, call)
+    if is_alt.any():  # an alternate serves when its primary fails and it succeeds
+        of = dict(zip(sent.alt.tolist(), sent.alt_of.tolist()))
+        prim = np.array([of[r] for r in rows[is_alt].tolist()], dtype=np.int64)
+        planned[is_alt] *= 1.0 - _planned(day, world, prim, call)
+    return Knowledge(t, call, rows, outcome, planned, upload_s, world.arrival_s <= t, world.forecast[:, call],
+                     is_alt)
+
+
+def _planned(day: Day, world: World, rows: np.ndarray, call: int) -> np.ndarray:
+    """The forecast each row was planned under: the latest call at or before its start, this one at the latest."""
     at = np.minimum(np.searchsorted(world.calls_s, day.start_s[rows], side="right") - 1, call)
-    planned = world.forecast[rows, np.maximum(at, 0)]
-    return Knowledge(t, call, rows, outcome, planned, upload_s, world.arrival_s <= t, world.forecast[:, call])
+    return world.forecast[rows, np.maximum(at, 0)].copy()
 
 
 @dataclass
@@ -144,38 +220,52 @@ class Run:
     plans: list[tuple[int, np.ndarray]] = field(default_factory=list)  # (call, the rows it answered), in order
 
 
-def simulate(day: Day, world: World, planner: Planner, time_limit: float, check=None) -> Run:
+def simulate(day: Day, world: World, planner: Planner, time_limit: float, check=None,
+             onboard: Callable | None = None) -> Run:
     """Run `planner` through `world` (see the module docstring).  `time_limit`: the compute budget of a call (its
     plan is uploaded at the first contact after the call's time plus this); `check`: a function of the executed
-    rows returning (valid, first violation or None), e.g. the fleet checker's."""
+    rows returning (valid, first violation or None), e.g. the fleet checker's; `onboard`: the onboard rule's
+    battery test (:func:`execute`; None: no onboard rule, alternates are never taken)."""
     n_sat = len(day.contact_start)
-    rows = np.zeros(0, np.int64)
+    sent = Sent()
     calls, plans = [], []
     for call, t in enumerate(world.calls_s.tolist()):
+        execute(day, world, sent, t, onboard)
         upload = day.next_contact(np.arange(n_sat), np.full(n_sat, t + time_limit))
-        know = knowledge(day, world, rows, call, upload)
+        know = knowledge(day, world, sent, call, upload)
         wall = time.perf_counter()
         plan = planner.plan(know)
         wall = time.perf_counter() - wall
         if plan is None:
             continue
         plans.append((call, np.asarray(plan.rows, dtype=np.int64)))
-        rows, churn = _upload(day, rows, plans[-1][1], upload)
+        churn = _upload(day, sent, know, plan, upload)
         calls.append({"t_s": t, "compute_s": round(plan.compute_s, 3), "wall_s": round(wall, 3), "churn": churn,
-                      "uploads": int(np.isfinite(upload).sum()), **plan.info})
-    return Run(rows, calls, figures(day, world, rows, calls, check), plans)
+                      "uploads": int(np.isfinite(upload).sum()), "alternates": int(len(plan.alternates)),
+                      **plan.info})
+    execute(day, world, sent, math.inf, onboard)
+    done = np.asarray(sent.done, dtype=np.int64)
+    return Run(done, calls, figures(day, world, done, calls, check, len(sent.taken)), plans)
 
 
-def _upload(day: Day, rows: np.ndarray, new: np.ndarray, upload: np.ndarray) -> tuple[np.ndarray, int]:
-    """The timelines after a plan's uploads: each satellite's rows before its upload as they were, the plan's
-    from it on; and the churn (rows that changed among those the plan could change).  A plan that changes a row
-    before an upload is refused (a ValueError: a planner's defect)."""
-    old_fixed = day.start_s[rows] < upload[day.sat[rows]]
-    new_fixed = day.start_s[new] < upload[day.sat[new]]
-    if not np.array_equal(np.sort(rows[old_fixed]), np.sort(new[new_fixed])):
-        raise ValueError("the plan changes what its satellites were sent before its upload")
-    churn = len(np.setxor1d(rows[~old_fixed], new[~new_fixed]))
-    return np.sort(np.concatenate([rows[old_fixed], new[~new_fixed]])), churn
+def _upload(day: Day, sent: Sent, know: Knowledge, plan: Plan, upload: np.ndarray) -> int:
+    """Each satellite's passes that start after its upload take the plan's primaries and alternates, the others
+    keep theirs; returns the churn (primaries that changed among those the plan could change).  A plan whose
+    rows in the passes it cannot change are not those the ground knew is refused (a ValueError: a planner's
+    defect)."""
+    new = np.asarray(plan.rows, dtype=np.int64)
+    if not np.array_equal(np.sort(know.rows[day.fixed(know.rows, upload)]), np.sort(new[day.fixed(new, upload)])):
+        raise ValueError("the plan changes passes its satellites were sent before its upload")
+    keep = day.fixed(sent.prim, upload)
+    take = new[~day.fixed(new, upload)]
+    churn = len(np.setxor1d(sent.prim[~keep], take))
+    sent.prim = np.sort(np.concatenate([sent.prim[keep], take]))
+    alt, alt_of = np.asarray(plan.alternates, np.int64), np.asarray(plan.alternate_of, np.int64)
+    mine = ~day.fixed(alt, upload) & np.isin(alt_of, take)
+    kept = day.fixed(sent.alt, upload)
+    sent.alt = np.concatenate([sent.alt[kept], alt[mine]])
+    sent.alt_of = np.concatenate([sent.alt_of[kept], alt_of[mine]])
+    return churn
 
 
 def clairvoyant_bound(day: Day, world: World) -> float:
@@ -185,7 +275,7 @@ def clairvoyant_bound(day: Day, world: World) -> float:
     return float(day.weight[ok].sum())
 
 
-def figures(day: Day, world: World, rows: np.ndarray, calls: list[dict], check=None) -> dict:
+def figures(day: Day, world: World, rows: np.ndarray, calls: list[dict], check=None, alternates: int = 0) -> dict:
     """A realization's figures: served weight as fractions of all, of the catalogue's and of the urgent requests'
     weight; the clairvoyant bound and the regret (bound - served, of all); acquisitions made and failed; the
     weight of requests attempted and never served (cloud losses); mean hours from an urgent request's arrival to
@@ -208,7 +298,7 @@ def figures(day: Day, world: World, rows: np.ndarray, calls: list[dict], check=N
             "served_urgent": float(w[served & day.urgent].sum() / Wu) if Wu > 0 else None,
             "bound": bound / W if W > 0 else 0.0,
             "regret": float((bound - w[served].sum()) / W) if W > 0 else 0.0,
-            "acquisitions": int(len(rows)), "failed": int((~ok).sum()),
+            "acquisitions": int(len(rows)), "failed": int((~ok).sum()), "alternates_taken": alternates,
             "cloud_lost": float(w[attempted & ~served].sum() / W) if W > 0 else 0.0,
             "urgent_latency_h": (float(np.mean((first_end[late] - world.arrival_s[late]) / 3600.0))
                                  if late.any() else None),

@@ -6,6 +6,7 @@ run directory, Ctrl-C and resume."""
 from __future__ import annotations
 
 import json
+import math
 
 import numpy as np
 import pytest
@@ -242,3 +243,55 @@ def test_the_ray_job_runs_realizations_resumes_and_logs_to_mlflow(scen, scen_dir
         assert set(runs["params.sim.planner"]) == {"ev-replan"}
     finally:
         ray.shutdown()
+
+
+@pytest.fixture(scope="module")
+def clustered(tmp_path_factory):
+    """Targets in four clusters: passes with several primaries, where a thinned plan leaves gaps to fill."""
+    root = tmp_path_factory.mktemp("clustered")
+    f = generate(FleetGenConfig(satellites=6, tasks=120, hours=4.0, placement="clusters", clusters=4,
+                                cluster_km=150.0, seed=6))
+    write_fleet(f, compute(f, Geometry(f)), root / "fleet")
+    make(str(root / "fleet"), ScenarioConfig(urgent_per_hour=4, cadence_h=1, seed=3), str(root / "scen"))
+    return scenario.read(root / "scen")
+
+
+def test_the_onboard_rule_takes_alternates_that_keep_every_timeline_valid(clustered):
+    """A plan thinned to leave gaps (every other primary of the first plan dropped), alternates chosen for it
+    (one per gap, fitting there, battery held), then flown in two worlds: where every primary is cloudy each
+    alternate whose task is still open is taken, where every primary is clear none is; both executions pass the
+    checker, as does the plan with every alternate in."""
+    import dataclasses
+
+    from eosp.fleet.check import validate
+    from eosp.kinds.fleet.operations import alternates, battery_test
+    from eosp.ops.simulate import Sent, execute
+
+    sim = Simulation.of(clustered, SimulateConfig(planner="replan", rounds=3, time_limit=60.0))
+    prob, day = sim.planner.prob, sim.day
+    w = realize(clustered, 0)
+    first = sim.simulate(w).plans[0][1]
+    first = first[np.lexsort((day.start_s[first], day.sat[first]))]
+    thin = first[::2]
+    frozen = np.zeros(len(prob.passes), dtype=bool)
+    alt, alt_of = alternates(prob, thin, frozen, prob.weight[prob.opps.task])
+    assert len(alt) >= 3 and set(alt_of.tolist()) <= set(thin.tolist())  # 4 here
+    assert validate(prob.fleet, sim.planner.schedule(np.sort(np.r_[thin, alt])), prob.geo).valid
+    for clear, expect in ((False, len(alt)), (True, 0)):
+        world = dataclasses.replace(w, clear=np.where(np.isin(np.arange(len(w.clear)), thin), clear, True))
+        sent = Sent(prim=np.sort(thin), alt=alt, alt_of=alt_of)
+        execute(day, world, sent, math.inf, battery_test(prob))
+        done = np.asarray(sent.done)
+        assert len(sent.taken) == expect and len(done) == len(thin) + expect
+        assert validate(prob.fleet, sim.planner.schedule(np.sort(done)), prob.geo).valid
+    sim.close()
+
+
+@pytest.mark.parametrize("onboard", ["none", "rule"])
+def test_every_execution_is_valid_with_and_without_the_onboard_rule(clustered, onboard):
+    sim = Simulation.of(clustered, SimulateConfig(planner="ev-replan", onboard=onboard, rounds=3, time_limit=60.0))
+    for index in range(2):
+        r = sim.run(index)
+        assert r["valid"] is True and r["served"] <= r["bound"] + 1e-12
+        assert onboard == "rule" or r["alternates_taken"] == 0
+    sim.close()

@@ -57,6 +57,9 @@ class SimulateConfig:
     wait for the time limit."""
     seed: int = ranged(0, 0)
     """Seed of the fleet solver."""
+    onboard: str = choice("none", "none", "rule")
+    """rule: a satellite that finds its target cloudy takes the alternate sent for it (each plan sends one per gap
+    between primaries that fits there and with the battery); none: it flies what it was sent."""
     bound_time_limit: float = ranged(30.0, 0.0, WEEK_S)
     """Seconds of the fleet solver's clairvoyant solve of each realization, for its bound (0: the conflict-free
     clairvoyant bound alone); with --rounds, that many price rounds instead."""
@@ -73,6 +76,7 @@ class FleetPlanner:
     name: str
     prob: Problem
     cfg: FleetConfig
+    alternates: bool = False  # with each plan, alternates for the onboard rule (:func:`alternates`)
 
     def __post_init__(self) -> None:
         if self.name not in PLANNERS:
@@ -99,14 +103,19 @@ class FleetPlanner:
         prob, o = self.prob, self.prob.opps
         until = np.where(np.isfinite(know.upload_s), know.upload_s, prob.fleet.horizon.seconds + 1.0)
         frozen = frozen_passes(prob, until)
-        values = opportunity_values(prob, self.opportunity_values(know, frozen[o.pass_id[know.rows]]))
+        per_opp = self.opportunity_values(know, frozen[o.pass_id[know.rows]])
+        values = opportunity_values(prob, per_opp)
         values[frozen[self._pair_pass]] = 0.0
         self.replanner.revalue(values)
         t = time.perf_counter()
         sol = self.replanner.solve(Start(self.schedule(know.rows), until, t, claim_frozen=False))
+        rows = self.rows(sol.schedule)
+        alt = alt_of = np.zeros(0, np.int64)
+        if self.alternates:
+            alt, alt_of = alternates(prob, rows, frozen, np.where(frozen[o.pass_id], 0.0, per_opp))
         compute = time.perf_counter() - t
         info = {"objective": sol.info.get("objective_value"), "bound": sol.bound, "rounds": sol.info["rounds"]}
-        return Plan(self.rows(sol.schedule), compute, info)
+        return Plan(rows, compute, info, alt, alt_of)
 
     def opportunity_values(self, know: Knowledge, fixed: np.ndarray) -> np.ndarray:
         """What an acquisition at each opportunity is worth to this planner, from what the ground knows;
@@ -116,6 +125,8 @@ class FleetPlanner:
         open_ = know.arrived & ~know.served(self._task, n)
         pending = fixed & (know.outcome < 0)
         task = self._task[know.rows]
+        if self.name != "ev-replan":  # an alternate is taken when its primary fails, which these take as served
+            pending &= ~know.alternate
         if self.name == "ev-replan":
             still = np.ones(n)
             np.multiply.at(still, task[pending], 1.0 - know.planned_p[pending])
@@ -139,6 +150,83 @@ class FleetPlanner:
                                                    sched.start_us.tolist())), dtype=np.int64)
 
 
+def alternates(prob: Problem, rows: np.ndarray, frozen: np.ndarray, value: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Alternates for the onboard rule (:func:`eosp.ops.simulate.execute`) of a plan's primaries `rows` in the
+    passes it may change (not `frozen`): after each primary, the most valuable opportunity (`value`, per
+    opportunity; 0: never) of the same satellite and pass that fits between it and the next primary (the slew and
+    settling from it and to the next, no overlap: the checker's rules, :func:`eosp.fleet.timeline.fits`), of a
+    task no primary holds and no other alternate took; then, per satellite, alternates dropped from the least
+    valuable until its battery holds with all of them.  Why one per gap: taken or not, every sequence the
+    satellite can then fly (a primary, perhaps its alternate, the next primary) is one the checker accepts, and
+    with every alternate in, the battery held on the ground.  Returns the alternates and their primaries."""
+    from eosp.fleet.battery import SunCache
+    from eosp.fleet.battery import simulate as battery
+    from eosp.fleet.timeline import Arrays, Candidates, fits, intervals, timeline
+
+    o, los = prob.opps, prob.los
+    step = float(prob.fleet.horizon.action_step_s)
+    start = o.start.astype(np.float64) * step
+    end = start + prob.fleet.tasks.duration_s[o.task]
+    task = o.task.astype(np.int64)
+    sun = prob.sun or SunCache(prob.geo)
+    taken = np.zeros(len(prob.weight), dtype=bool)
+    taken[task[rows]] = True
+    out_alt, out_of = [], []
+    live = ~frozen[o.pass_id] & (value > 0)
+    for k in np.unique(o.satellite[rows[~frozen[o.pass_id[rows]]]]).tolist():
+        mine = rows[o.satellite[rows] == k]
+        mine = mine[np.lexsort((end[mine], start[mine]))]
+        cand = np.flatnonzero(live & (o.satellite == k) & ~taken[task])
+        if not len(cand):
+            continue
+        tl = Arrays.of(timeline(los, k, task[mine], start[mine], end[mine]))
+        pos = np.searchsorted(tl.start, start[cand], side="right")
+        prev = mine[np.maximum(pos - 1, 0)]
+        ok = (pos > 0) & (o.pass_id[prev] == o.pass_id[cand]) & ~frozen[o.pass_id[prev]]
+        cand, pos, prev = cand[ok], pos[ok], prev[ok]
+        if not len(cand):
+            continue
+        c = Candidates(start[cand], end[cand], los.los(k, task[cand], start[cand]), los.los(k, task[cand], end[cand]))
+        ok = fits(los, k, tl, c, pos)
+        cand, prev = cand[ok], prev[ok]
+        got: dict[int, int] = {}
+        for i in np.argsort(-value[cand], kind="stable").tolist():  # the most valuable first, one per gap and task
+            if prev[i] not in got and not taken[task[cand[i]]]:
+                got[int(prev[i])] = int(cand[i])
+                taken[task[cand[i]]] = True
+        alt = sorted(got.items(), key=lambda kv: value[kv[1]])  # the least valuable first: dropped first
+        while alt:
+            both = np.concatenate([mine, [a for _, a in alt]])
+            both = both[np.lexsort((end[both], start[both]))]
+            tlb = timeline(los, k, task[both], start[both], end[both])
+            if battery(prob.fleet, sun, k, *intervals(los, tlb, k)).ok:
+                break
+            alt = alt[1:]
+        out_of += [p for p, _ in alt]
+        out_alt += [a for _, a in alt]
+    return np.asarray(out_alt, dtype=np.int64), np.asarray(out_of, dtype=np.int64)
+
+
+def battery_test(prob: Problem):
+    """The onboard rule's test (:func:`eosp.ops.simulate.execute`): whether satellite k's battery holds over a
+    timeline of opportunity rows (the checker's battery model, :mod:`eosp.fleet.battery`)."""
+    from eosp.fleet.battery import SunCache
+    from eosp.fleet.battery import simulate as battery
+    from eosp.fleet.timeline import intervals, timeline
+
+    o, los = prob.opps, prob.los
+    start = o.start.astype(np.float64) * float(prob.fleet.horizon.action_step_s)
+    end = start + prob.fleet.tasks.duration_s[o.task]
+    sun = prob.sun or SunCache(prob.geo)
+
+    def holds(k: int, rows: np.ndarray) -> bool:
+        rows = rows[np.lexsort((end[rows], start[rows]))]
+        tl = timeline(los, k, o.task[rows].astype(np.int64), start[rows], end[rows])
+        return battery(prob.fleet, sun, k, *intervals(los, tl, k)).ok
+
+    return holds
+
+
 @dataclass
 class Simulation:
     """What the realizations of one scenario share: the scenario, its problem (pass graphs built once), the day's
@@ -152,7 +240,8 @@ class Simulation:
     @classmethod
     def of(cls, scen, cfg: SimulateConfig) -> Simulation:
         prob = Problem.build(scen.fleet, scen.opps)
-        return cls(scen, cfg, Day.of(scen), FleetPlanner(cfg.planner, prob, cfg.solver()))
+        planner = FleetPlanner(cfg.planner, prob, cfg.solver(), alternates=cfg.onboard == "rule")
+        return cls(scen, cfg, Day.of(scen, prob.pass_time[:, 0]), planner)
 
     def run(self, index: int) -> dict:
         """Realization `index` simulated: its figures and each planning call's record."""
@@ -201,7 +290,8 @@ class Simulation:
     def simulate(self, world, check=None):
         """The planner, reset, through `world` (:func:`eosp.ops.simulate.simulate`)."""
         self.planner.reset()
-        return simulate(self.day, world, self.planner, self.cfg.time_limit, check)
+        onboard = battery_test(self.planner.prob) if self.cfg.onboard == "rule" else None
+        return simulate(self.day, world, self.planner, self.cfg.time_limit, check, onboard)
 
     def close(self) -> None:
         self.planner.close()
