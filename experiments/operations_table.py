@@ -1,11 +1,15 @@
 """The planners of the operations world side by side (docs/results.md, "A constellation in operation"): for each
-fleet, a scenario made with the given options, then every planner through the same realizations through
-``eosp simulate`` (one process per planner, one after the other), and the paired differences between planners
-with 95% intervals (Student t over the realizations; the same clouds, forecasts and arrivals for every planner).
+fleet, a scenario made with the given options (and its twin with perfect forecasts: the same seed, so the same
+requests and clouds), then every variant through the same realizations through ``eosp simulate`` (one process
+each, one after the other), and the paired differences between variants with 95% intervals (Student t over the
+realizations; the same clouds, forecasts and arrivals for every variant).
 
-    python experiments/operations_table.py --fleets FLEET_DIR ... --work DIR --realizations 8 --time-limit 10
+    python experiments/operations_table.py --fleets FLEET_DIR ... --work DIR --realizations 6 --time-limit 10 \\
+        --simulate-args "--bound-time-limit 15"
 
-Prints one markdown table of means and one of paired differences; every run's summary stays under ``--work``.
+Variants: plan-once, replan, ev-replan, ev-replan with the onboard rule, ev-replan started cold at every call, and
+ev-replan with perfect forecasts.  Prints one markdown table of means and one of paired differences; every run's
+summary stays under ``--work`` (a rerun resumes them).
 """
 
 from __future__ import annotations
@@ -17,8 +21,16 @@ import subprocess
 import sys
 from pathlib import Path
 
-PLANNERS = ("plan-once", "replan", "ev-replan")
-PAIRS = (("replan", "plan-once"), ("ev-replan", "replan"), ("ev-replan", "plan-once"))
+VARIANTS = {  # name: (scenario twin, eosp simulate options)
+    "plan-once": ("", ["--planner", "plan-once"]),
+    "replan": ("", ["--planner", "replan"]),
+    "ev-replan": ("", ["--planner", "ev-replan"]),
+    "ev-replan + onboard rule": ("", ["--planner", "ev-replan", "--onboard", "rule"]),
+    "ev-replan, cold calls": ("", ["--planner", "ev-replan", "--warm", "false"]),
+    "ev-replan, perfect forecasts": ("perfect", ["--planner", "ev-replan"]),
+}
+PAIRS = (("replan", "plan-once"), ("ev-replan", "replan"), ("ev-replan + onboard rule", "ev-replan"),
+         ("ev-replan", "ev-replan, cold calls"), ("ev-replan, perfect forecasts", "ev-replan"))
 
 
 def eosp(*args: str) -> str:
@@ -40,6 +52,10 @@ def interval(diffs: list[float]) -> tuple[float, float]:
     return mean, float(student.ppf(0.975, n - 1)) * sd / math.sqrt(n)
 
 
+def fmt(v, digits: int = 4) -> str:
+    return "-" if v is None else f"{v:.{digits}f}"
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--fleets", nargs="+", required=True)
@@ -48,33 +64,36 @@ def main() -> None:
     ap.add_argument("--time-limit", type=float, default=10.0)
     ap.add_argument("--scenario-args", default="", help="extra options of eosp scenario, e.g. '--cadence-h 2'")
     ap.add_argument("--simulate-args", default="", help="extra options of eosp simulate, e.g. '--bound-time-limit 15'")
+    ap.add_argument("--variants", nargs="+", default=list(VARIANTS), choices=list(VARIANTS))
     args = ap.parse_args()
     work = Path(args.work)
     rows, pairs = [], []
     for fleet in args.fleets:
         name = Path(fleet).name
-        scen = work / f"{name}.scen"
-        if not scen.exists():
-            print(eosp("scenario", fleet, "--out", str(scen), *args.scenario_args.split()), flush=True)
         got = {}
-        for planner in PLANNERS:
-            run = work / f"{name}.{planner}"
-            print(eosp("simulate", str(scen), "--planner", planner, "--realizations", str(args.realizations),
-                       "--time-limit", str(args.time_limit), "--out", str(run), "--resume",
-                       *args.simulate_args.split()), flush=True)
-            got[planner] = json.loads((run / "summary.json").read_text())
-            m = got[planner]["means"]
-            rows.append(f"| {name} | {planner} | {m['served']:.4f} | {m['served_catalogue']:.4f} | "
-                        f"{m['served_urgent'] if m['served_urgent'] is None else round(m['served_urgent'], 4)} | "
-                        f"{m['bound']:.4f} | {m['regret']:.4f} | {m['cloud_lost']:.4f} | "
-                        f"{'-' if m['urgent_latency_h'] is None else round(m['urgent_latency_h'], 2)} | "
-                        f"{m['churn']:.0f} | {m['compute_s_per_call']:.1f} | {m['valid']}/{m['realizations']} |")
+        for variant in args.variants:
+            twin, opts = VARIANTS[variant]
+            scen = work / f"{name}{'.' + twin if twin else ''}.scen"
+            if not scen.exists():
+                extra = ["--forecast-sigma-day", "0"] if twin == "perfect" else []
+                print(eosp("scenario", fleet, "--out", str(scen), *args.scenario_args.split(), *extra), flush=True)
+            run = work / f"{name}.{variant.replace(' ', '').replace(',', '.').replace('+', '.')}"
+            print(eosp("simulate", str(scen), *opts, "--realizations", str(args.realizations), "--time-limit",
+                       str(args.time_limit), "--out", str(run), "--resume", *args.simulate_args.split()), flush=True)
+            got[variant] = json.loads((run / "summary.json").read_text())
+            m = got[variant]["means"]
+            rows.append(f"| {name} | {variant} | {fmt(m['served'])} | {fmt(m['served_catalogue'])} | "
+                        f"{fmt(m['served_urgent'])} | {fmt(m['bound'])} | {fmt(m['regret'])} | "
+                        f"{fmt(m['cloud_lost'])} | {fmt(m['urgent_latency_h'], 2)} | {fmt(m['churn'], 0)} | "
+                        f"{fmt(m['compute_s_per_call'], 1)} | {m['valid']}/{m['realizations']} |")
         for a, b in PAIRS:
+            if a not in got or b not in got:
+                continue
             ra = {r["realization"]: r["served"] for r in got[a]["realizations"]}
             rb = {r["realization"]: r["served"] for r in got[b]["realizations"]}
             mean, half = interval([ra[i] - rb[i] for i in sorted(ra) if i in rb])
             pairs.append(f"| {name} | {a} - {b} | {mean:+.4f} | [{mean - half:+.4f}, {mean + half:+.4f}] |")
-    print("\n| fleet | planner | served | catalogue | urgent | clairvoyant bound | regret | cloud-lost | urgent "
+    print("\n| fleet | variant | served | catalogue | urgent | clairvoyant bound | regret | cloud-lost | urgent "
           "latency h | churn | s a call | valid |\n|---|---|---|---|---|---|---|---|---|---|---|---|")
     print("\n".join(rows))
     print("\n| fleet | pair | served, mean difference | 95% interval |\n|---|---|---|---|")

@@ -57,6 +57,9 @@ class SimulateConfig:
     wait for the time limit."""
     seed: int = ranged(0, 0)
     """Seed of the fleet solver."""
+    warm: bool = True
+    """Keep the solver's prices and master columns from one planning call to the next (false: every call starts
+    cold, as a separate solve would)."""
     onboard: str = choice("none", "none", "rule")
     """rule: a satellite that finds its target cloudy takes the alternate sent for it (each plan sends one per gap
     between primaries that fits there and with the battery); none: it flies what it was sent."""
@@ -77,6 +80,7 @@ class FleetPlanner:
     prob: Problem
     cfg: FleetConfig
     alternates: bool = False  # with each plan, alternates for the onboard rule (:func:`alternates`)
+    warm: bool = True  # prices and columns kept from call to call (else every call starts cold)
 
     def __post_init__(self) -> None:
         if self.name not in PLANNERS:
@@ -100,6 +104,8 @@ class FleetPlanner:
     def plan(self, know: Knowledge) -> Plan | None:
         if self.name == "plan-once" and know.call > 0:
             return None
+        if not self.warm:
+            self.reset()
         prob, o = self.prob, self.prob.opps
         until = np.where(np.isfinite(know.upload_s), know.upload_s, prob.fleet.horizon.seconds + 1.0)
         frozen = frozen_passes(prob, until)
@@ -240,7 +246,7 @@ class Simulation:
     @classmethod
     def of(cls, scen, cfg: SimulateConfig) -> Simulation:
         prob = Problem.build(scen.fleet, scen.opps)
-        planner = FleetPlanner(cfg.planner, prob, cfg.solver(), alternates=cfg.onboard == "rule")
+        planner = FleetPlanner(cfg.planner, prob, cfg.solver(), alternates=cfg.onboard == "rule", warm=cfg.warm)
         return cls(scen, cfg, Day.of(scen, prob.pass_time[:, 0]), planner)
 
     def run(self, index: int) -> dict:
@@ -363,9 +369,16 @@ def prior_realizations(out: Path, scen_path: str, cfg: SimulateConfig, resume: b
         raise InputError(out, "already exists (--resume goes on from its realizations, --overwrite starts again)")
     if not resume:
         return []
-    mine = {k: v for k, v in dataclasses.asdict(cfg).items() if k != "realizations"}
-    if prior.get("scenario") != str(Path(scen_path).resolve()) or \
-            {k: v for k, v in (prior.get("config") or {}).items() if k != "realizations"} != mine:
+    from eosp.config import apply_overrides
+
+    try:  # options the run's eosp did not have yet are at their defaults
+        theirs = dataclasses.asdict(apply_overrides(SimulateConfig(), dict(prior.get("config") or {})))
+    except (ValueError, TypeError):
+        theirs = None
+    mine = dataclasses.asdict(cfg)
+    if theirs is not None:
+        theirs["realizations"] = mine["realizations"]
+    if prior.get("scenario") != str(Path(scen_path).resolve()) or theirs != mine:
         raise InputError(out, "holds a run of another scenario or other options: --resume goes on with the same ones")
     return [r for r in prior.get("realizations") or [] if r["realization"] < cfg.realizations]
 
