@@ -477,14 +477,14 @@ class FleetEnvConfig:
 class ModelConfig:
     """The GNN agent (models/agent.py).  Presets: MODEL_PRESETS."""
 
-    hidden_dim: int = 64
+    hidden_dim: int = ranged(64, 1, 1024)
     """Width of node and edge embeddings and of every GNN layer's output."""
-    n_layers: int = 10
+    n_layers: int = ranged(10, 1, 64)
     """Number of GATv2 layers (each: 4-head attention, an MLP back to hidden_dim, a residual)."""
-    heads: int = 4
-    n_values: int = 1
+    heads: int = ranged(4, 1, 32)
+    n_values: int = ranged(1, 1, 64)
     """Outputs of the value head: 1, or one per priority class for the lexicographic reward."""
-    value_scale: float = 0.0
+    value_scale: float = ranged(0.0, 0.0)
     """The value head's output is multiplied by this (and the value loss divided by its square), so
     that returns of tens are learned as numbers of order 1; 0 = estimate it from random episodes."""
 

@@ -280,8 +280,10 @@ def run(cfg: PriceTrainConfig) -> dict:
         if not val:
             raise InputError(opt, "required")
     data = check_output(cfg.data, KIND, directory=True, reuse=True)
-    if (Path(cfg.out) / "prices.json").exists() or (Path(cfg.out) / "prices.pt").exists():
-        raise InputError(f"--out {cfg.out}", "holds a price model already: choose another directory")
+    out = Path(cfg.out)
+    if out.is_symlink() or (out.exists() and (not out.is_dir() or any(out.iterdir()))):
+        what = "holds a price model already" if (out / "prices.json").exists() else "exists and is not an empty directory"
+        raise InputError(f"--out {cfg.out}", f"{what}: the model goes to a new or empty directory")
     data.mkdir(parents=True, exist_ok=True)
     if kind_of(data) != KIND:
         mark_dir(data, KIND)
@@ -353,6 +355,12 @@ def _main(argv: list[str] | None) -> int:
     p = Parser(prog=errors.PROG, description=__doc__.splitlines()[0])
     add_config_args(p, PriceTrainConfig)
     cfg = config_from_args(PriceTrainConfig, p.parse_args(argv))
+    from eosp.jobs.preflight import check_mlflow, require_findable
+
+    for flag, value in (("--data", cfg.data), ("--out", cfg.out)):
+        if value:
+            require_findable(value, flag)
+    check_mlflow(cfg.mlflow_uri)  # before any work: a tracking URI MLflow cannot use is refused now
     res = run(cfg)
     print(f"[train_prices] model -> {cfg.out} (MLflow run {res['run_id']}, {res['train_seconds']:.0f} s of training)")
     return 0

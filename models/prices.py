@@ -22,6 +22,7 @@ import torch
 from torch import nn
 
 from eosp.atomic import atomic_path
+from eosp.config import apply_overrides, ranged
 from eosp.errors import InputError
 
 TASK_FEATURES = ("weight", "duration_min", "log_window_h", "log_passes", "log_satellites", "contested_sat",
@@ -52,9 +53,9 @@ class TaskGraph:
 
 @dataclass
 class PriceModelConfig:
-    hidden: int = 64
+    hidden: int = ranged(64, 1, 1024)
     """Width of the task and pass embeddings."""
-    layers: int = 2
+    layers: int = ranged(2, 1, 16)
     """Rounds of task -> pass -> task messages."""
 
 
@@ -146,10 +147,12 @@ def load_price_model(directory: str | Path | None = None) -> PriceNet:
         diff = [k for k in LAYOUT if not isinstance(feats, dict) or feats.get(k) != LAYOUT[k]]
         raise InputError(cfg_path, "trained on another feature layout: its " + ", ".join(diff) + " features differ "
                          "from this eosp's")
-    try:
-        cfg = PriceModelConfig(**meta["model"])
-    except (TypeError, KeyError) as exc:
-        raise InputError(cfg_path, f"model configuration unreadable ({exc})") from None
+    try:  # every size checked before anything is built (a width of 40,000 would take gigabytes)
+        if not isinstance(meta.get("model"), dict):
+            raise TypeError("'model' is not an object")
+        cfg = apply_overrides(PriceModelConfig(), dict(meta["model"]))
+    except (TypeError, ValueError) as exc:
+        raise InputError(cfg_path, f"model configuration: {exc}") from None
     model = PriceNet(cfg)
     state = read_weights(d / WEIGHTS)
     want = model.state_dict()

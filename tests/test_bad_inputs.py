@@ -1268,7 +1268,45 @@ def fleet_cases() -> list[Case]:
              ["import", r / "t.pb", "--out", r / "on", "--overwrite"], ("on", "'notes.txt'"), prog=I),
         Case("f-generate-overwrite-keeps-a-users-file", lambda r: _user_file(r, "fl/notes.txt") and
              _gen(r)[:-2] + ["--out", r / "fl", "--overwrite"], ("fl", "'notes.txt'"), prog=G),
+        # issue 80, class 4: train_prices.py checks its outputs and its tracking URI before any work
+        Case("f-prices-out-users-dir", lambda r: _user_file(r, "mine/notes.txt") and
+             _train_prices(r, "--out", r / "mine"), ("--out", "mine", "not an empty directory"), **TP),
+        Case("f-prices-bogus-mlflow", lambda r: _train_prices(r, "--mlflow-uri", "bogus://x"),
+             ("--mlflow-uri bogus://x", "not a tracking URI"), **TP),
+        # issue 80, class 3: the sizes in a price model's prices.json or a fleet checkpoint's agent.json, checked
+        # before a network is built
+        Case("f-price-model-hidden-word", lambda r: _model_copy(r, "pretrained-prices", "prices.json", "model",
+                                                                 hidden="wide") and
+             _solve_fleet(r, "--warm-start", "learned", "--price-model", r / "m"), ("prices.json", "hidden"), prog=S),
+        Case("f-price-model-hidden-40000", lambda r: _model_copy(r, "pretrained-prices", "prices.json", "model",
+                                                                  hidden=40000) and
+             _solve_fleet(r, "--warm-start", "learned", "--price-model", r / "m"),
+             ("prices.json", "hidden", "[1, 1024]"), prog=S),
+        Case("f-fleet-agent-hidden-dim-40000", lambda r: _model_copy(r, "pretrained-agents/fleet", "agent.json",
+                                                                      "model", hidden_dim=40000) and
+             ["solve", r / "fl", "--solver", "fleet-policy", "--checkpoint", r / "m", "--out", r / "o.parquet"],
+             ("agent.json", "hidden_dim", "[1, 1024]"), prog=S),
     ]
+
+
+def _model_copy(r: Path, shipped: str, name: str, key: str, **changes) -> bool:
+    """The shipped model `shipped` copied to r/m with entries of `key` in its `name` changed."""
+    from eosp import models
+
+    shutil.copytree(Path(models.__file__).parent / shipped, r / "m")
+    meta = json.loads((r / "m" / name).read_text())
+    meta[key] = {**meta[key], **changes}
+    (r / "m" / name).write_text(json.dumps(meta))
+    return True
+
+
+TP = dict(job="train_prices", prog="train_prices.py")
+
+
+def _train_prices(r: Path, *extra) -> list:
+    args = {"--fleets": r / "fl", "--data": r / "pdata", "--out": r / "model", "--mlflow-uri": f"sqlite:///{r}/m.db"}
+    args.update(dict(zip(extra[::2], extra[1::2])))
+    return [x for kv in args.items() for x in kv]
 
 
 def _two_tasks(tasks, weight: float):
