@@ -685,14 +685,14 @@ class TuneConfig:
     """Ray Tune sweep over the architecture and the learning rate (jobs/tune.py)."""
 
     name: str = "sweep"
-    """Sweep name: runs in RUN_DIR/tune/NAME, one MLflow parent run of that name."""
-    hidden_dims: tuple[int, ...] = (16, 32)
-    n_layers: tuple[int, ...] = (2, 3)
-    lrs: tuple[float, ...] = (1e-3,)
+    """Sweep name: runs in RUN_DIR/tune/NAME, one MLflow parent run of that name (a plain name, no '/')."""
+    hidden_dims: tuple[int, ...] = ranged((16, 32), 1, 1024)
+    n_layers: tuple[int, ...] = ranged((2, 3), 1, 64)
+    lrs: tuple[float, ...] = ranged((1e-3,), 0.0, 1.0, lo_open=True)
     num_samples: int = ranged(1, 1)
     """Repeats of the grid (with different seeds)."""
     metric: str = "val/policy_mean"
     """Reported metric the scheduler and the best-trial choice maximize."""
-    grace_period: int = 2
+    grace_period: int = ranged(2, 1)
     """ASHA: iterations every trial runs before it can be stopped."""
     cpus_per_trial: int = ranged(1, 1)

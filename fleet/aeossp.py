@@ -273,6 +273,19 @@ def is_case_dir(path: str | os.PathLike) -> bool:
     return p.is_dir() and all((p / f).is_file() for f in CASE_FILES)
 
 
+EVALUATION_SPLITS = ("test", "test_easy", "test_hard", "test_horizon_2022")  # aeossp_standard's held-out cases
+
+
+def refuse_evaluation_case(path: str | os.PathLike, flag: str) -> None:
+    """An InputError when `path` is an aeossp case of an evaluation split (its folder ``cases/<split>/``): what
+    trains or tunes never reads them (a fleet directory imported from one cannot be told apart: the user's to
+    keep out)."""
+    p = Path(path).resolve()
+    if is_case_dir(p) and p.parent.name in EVALUATION_SPLITS and p.parent.parent.name == "cases":
+        raise InputError(f"{flag} {path}", f"an aeossp case of the evaluation split {p.parent.name!r}: training data "
+                                           "never comes from the evaluation splits (use the train split)")
+
+
 def read_case(case_dir: str | os.PathLike) -> Fleet:
     """The fleet of an aeossp_standard case directory (InputError on any bad entry)."""
     root = Path(case_dir)

@@ -98,6 +98,10 @@ def run(cfg: FleetDemoConfig) -> dict:
     except InputError as exc:
         raise InputError(f"--out {cfg.out}", exc.message) from None
     paths = expand_fleets(cfg.fleets)
+    from eosp.fleet.aeossp import refuse_evaluation_case
+
+    for path in paths:
+        refuse_evaluation_case(path, "--fleets")
     out.mkdir(parents=True, exist_ok=True)
     if kind_of(out) != KIND:
         mark_dir(out, KIND)

@@ -273,9 +273,12 @@ def run(cfg: PriceTrainConfig) -> dict:
 
     if not cfg.fleets:
         raise InputError("--fleets", "required: aeossp case or fleet directories to learn from")
+    from eosp.fleet.aeossp import refuse_evaluation_case
+
     for f in cfg.fleets:
         if not Path(f).is_dir():
             raise InputError(f, "not a directory (an aeossp case or a fleet directory expected)")
+        refuse_evaluation_case(f, "--fleets")
     for opt, val in (("--data", cfg.data), ("--out", cfg.out)):
         if not val:
             raise InputError(opt, "required")

@@ -202,6 +202,14 @@ def main(argv: list[str] | None = None) -> int:
     return run_job(_main, argv, "tune.py")
 
 
+def check_sweep_name(tc: TuneConfig) -> None:
+    """A sweep name that is a plain name: the sweep stays in RUN_DIR/tune/ (``../x`` would write elsewhere)."""
+    from eosp.errors import InputError
+
+    if tc.name in ("", ".", "..") or Path(tc.name).name != tc.name or "\\" in tc.name:
+        raise InputError("--tune.name", f"{tc.name!r} is not a plain name: the sweep goes to RUN_DIR/tune/NAME")
+
+
 def _main(argv: list[str] | None) -> int:
     p = Parser(prog="tune.py", description=__doc__.splitlines()[0],
                formatter_class=argparse.RawDescriptionHelpFormatter, epilog=__doc__)
@@ -213,6 +221,7 @@ def _main(argv: list[str] | None) -> int:
         p.error(f"--train.preset: unknown preset {preset!r}; one of {', '.join(MODEL_PRESETS)}")
     cfg = config_from_args(RunConfig, ns, base=RunConfig(model=from_dict(ModelConfig, MODEL_PRESETS[preset])))
     tc = prefixed_config(TuneConfig, ns, "tune.")
+    check_sweep_name(tc)
     need = reward(cfg.env.reward).n_values  # the value heads the reward needs (lexicographic: one per class)
     if need > 1:
         cfg.model.n_values = max(cfg.model.n_values, need)

@@ -122,6 +122,22 @@ def run(cfg: FleetPretrainConfig, tc: TuneConfig) -> dict:
     return summary
 
 
+BASELINES = ("exact", "fleet", "ramp", "features", "greedy")
+METRICS = ("val/selection_score", "val/policy_mean", *(f"val/{m}_to_{b}" for m in ("ratio", "mean_ratio")
+                                                         for b in BASELINES))
+
+
+def check_tune(tc: TuneConfig) -> None:
+    """The sweep's options that Tune would only meet after it started: a sweep name that is a plain name (the
+    sweep stays in RUN_DIR/tune/), a metric the trials report (:data:`METRICS`)."""
+    from eosp.errors import InputError
+    from eosp.jobs.tune import check_sweep_name
+
+    check_sweep_name(tc)
+    if tc.metric not in METRICS:
+        raise InputError("--tune.metric", f"{tc.metric!r} is no metric the trials report; one of {', '.join(METRICS)}")
+
+
 def main(argv: list[str] | None = None) -> int:
     """The job; user errors are one line ``tune_fleet.py: error: ...`` and exit 2 before Ray or MLflow start."""
     return run_job(_main, argv, "tune_fleet.py")
@@ -147,6 +163,7 @@ def _main(argv: list[str] | None) -> int:
     tc = prefixed_config(TuneConfig, ns, "tune.")
     if "tune.metric" not in vars(ns):
         tc.metric = "val/selection_score"  # the mean per-fleet ratio to the fleet solver (FleetValidator)
+    check_tune(tc)
     im = cfg.imitation
     if not im.val_data:
         raise InputError("--imitation.val-data", "a sweep needs held-out fleets to compare its trials")

@@ -1286,7 +1286,25 @@ def fleet_cases() -> list[Case]:
                                                                       "model", hidden_dim=40000) and
              ["solve", r / "fl", "--solver", "fleet-policy", "--checkpoint", r / "m", "--out", r / "o.parquet"],
              ("agent.json", "hidden_dim", "[1, 1024]"), prog=S),
+        # issue 80, class 6: the sweep's options checked before Tune starts
+        Case("f-tune-hidden-dims-0", lambda r: ["--tune.hidden-dims", "0"], ("--tune.hidden-dims", "[1, 1024]"),
+             **TF),
+        Case("f-tune-lrs-negative", lambda r: ["--tune.lrs", "-0.1"], ("--tune.lrs", "(0, 1]"), **TF),
+        Case("f-tune-metric-unknown", lambda r: ["--tune.metric", "val/nothing"], ("--tune.metric", "val/nothing"),
+             **TF),
+        # class 12
+        Case("f-tune-name-escapes", lambda r: ["--tune.name", "../../escape"], ("--tune.name", "plain name"), **TF),
+        Case("f-sample-ten-million", lambda r: ["solve", r / "fl", "--solver", "fleet-sample", "--samples", "10000000",
+                                                "--out", r / "o.parquet"], ("--samples", "1024"), prog=S),
+        Case("f-price-model-without-learned", lambda r: _solve_fleet(r, "--price-model", r / "fl"),
+             ("price_model", "learned"), prog=S),
+        Case("f-demos-from-an-evaluation-case", lambda r: shutil.copytree(r / "case", r / "cases" / "test" / "c1") and
+             ["--fleets", r / "cases" / "test" / "c1", "--out", r / "demos"], ("--fleets", "evaluation split 'test'"),
+             job="build_fleet_demos", prog="build_fleet_demos.py"),
     ]
+
+
+TF = dict(job="tune_fleet", prog="tune_fleet.py")
 
 
 def _model_copy(r: Path, shipped: str, name: str, key: str, **changes) -> bool:

@@ -82,6 +82,12 @@ class FleetConfig(UtilityConfig):
     NAME = "fleet"
     BUDGET = "rounds"
 
+    def validate(self) -> None:
+        super().validate()
+        if self.price_model and self.warm_start != "learned":
+            raise ValueError(f"price_model is the network of warm_start 'learned' (--warm-start learned "
+                             f"--price-model DIR), not read with warm_start {self.warm_start!r}")
+
 
 POLISHES = ("fill", "none")
 
@@ -111,8 +117,9 @@ class FleetSampleConfig(FleetPolicyConfig):
     time_limit: float | None = ranged(30.0, 0, WEEK_S, lo_open=True, zero_unsets=True)
     seed: int = ranged(0, 0)
     """Seed of the sampled episodes."""
-    samples: int = ranged(16, 1)
-    """Episodes per batched round (the first round's first one is the greedy episode)."""
+    samples: int = ranged(16, 1, 1024)
+    """Episodes per batched round (the first round's first one is the greedy episode; at most 1,024: the batch's
+    observations are held at once)."""
     temperature: float = ranged(1.0, 0)
     """Softmax temperature of the sampled episodes (0: the argmax)."""
 
