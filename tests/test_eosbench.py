@@ -558,3 +558,20 @@ def test_a_scenario_with_defaults_reads_as_their_loader(tmp_path):
                                            for w in data["observation_windows"])
     assert metrics(scen, Schedule.build(scen, []))["TM"] == 1.0
     assert list(itertools.islice(scen.ignored, 1)) == ["satellite_specs.max_operation_time_s"]
+
+
+@pytest.mark.parametrize("change", ["end-9999", "time-step-tiny"])
+def test_candidate_starts_are_bounded_by_the_attitude_samples(tmp_path, capsys, change):
+    """A window stretched to the year 9999, or a time step of a microsecond, once asked for terabytes of candidate
+    starts (issue 80, class 1): a start needs its attitude sample, so there are no more candidates than samples,
+    and the solve ends with a schedule their checker accepts."""
+    data = tiny(3)
+    if change == "end-9999":
+        data["observation_windows"][0]["time_windows"][0]["end_time"] = "9999-12-31T23:59:59+00:00"
+    else:
+        data["metadata"]["time_step"] = 1e-6
+    path = write(tmp_path, data)
+    out = tmp_path / "s.json"
+    rc = main(["solve", path, "--solver", "eosbench", "--rounds", "2", "--time-limit", "0", "--out", str(out)])
+    assert rc == 0, capsys.readouterr().err
+    assert main(["validate", path, str(out)]) == 0

@@ -74,9 +74,13 @@ def _nodes_of_window(scenario: Scenario, r: int) -> tuple[np.ndarray, np.ndarray
         ks = np.array([max(0, min(max_k, int(round((max_off / 2.0) / step))))], dtype=np.int64)
         fx = np.repeat(w.fixed[r][None, :], 1, axis=0)
         return ks, fx, fx, np.ones(1, bool)
+    lo, hi = int(w.att_ptr[r]), int(w.att_ptr[r + 1])
+    # a start needs its attitude sample: past the window's samples there is none to point with, so the candidates
+    # are as many as the samples read at most, whatever the window's end or time step says (a window stretched
+    # to the year 9999 would otherwise ask for terabytes)
+    max_k = min(max_k, hi - lo - 1)
     ks = np.arange(max_k + 1, dtype=np.int64)
     n = max(1, int(np.ceil(dur / step - 1e-9)))
-    lo, hi = int(w.att_ptr[r]), int(w.att_ptr[r + 1])
     a = lo + ks
     b = np.minimum(a + n, hi) - 1
     ok = a < hi
