@@ -123,8 +123,14 @@ def sample_best(agent_or_scorer, prepared: PreparedFleet, env_cfg: FleetEnvConfi
 
     env = TeamEnv(sized(env_cfg, prepared), prepared)
     t0 = time.perf_counter()
-    best = sample(env, scorer_of(agent_or_scorer), samples=samples, temperature=temperature, seed=seed,
-                  time_limit=time_limit)
-    schedule, ret = replay(env, best.actions, seed)
-    return Decoded(schedule, ret, len(best.actions), time.perf_counter() - t0,
-                   {"episodes": best.episodes, "network_calls": best.evaluations})
+    kept: list[list] = []  # the best episode's actions so far: what Ctrl-C leaves (the greedy one at least)
+    try:
+        best = sample(env, scorer_of(agent_or_scorer), samples=samples, temperature=temperature, seed=seed,
+                      time_limit=time_limit, on_best=lambda actions: kept.append(list(actions)))
+        actions, info = best.actions, {"episodes": best.episodes, "network_calls": best.evaluations}
+    except KeyboardInterrupt:
+        if not kept:
+            raise  # Ctrl-C before the first episode ended: nothing to write
+        actions, info = kept[-1], {"interrupted": True}
+    schedule, ret = replay(env, actions, seed)
+    return Decoded(schedule, ret, len(actions), time.perf_counter() - t0, info)

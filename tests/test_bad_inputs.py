@@ -1611,3 +1611,26 @@ def test_ctrl_c_at_any_moment_of_the_onera_search_leaves_a_whole_plan(tmp_path):
         assert res.valid, res.first
         assert abs(res.value - sol.value) < 1e-6
     assert signal.getsignal(signal.SIGINT) is signal.default_int_handler  # the handler is given back
+
+
+def test_ctrl_c_of_fleet_sample_writes_its_best_episode(fleet_base, tmp_path, monkeypatch, capsys):
+    """Ctrl-C after the greedy episode of ``--solver fleet-sample`` (issue 80, class 8): the best episode so far is
+    replayed, checked and written, one line, exit 130 (before: "no feasible schedule found yet")."""
+    import eosp.search.rollouts as rollouts
+    from eosp.cli import main
+
+    r = fresh(fleet_base, tmp_path)
+    real, calls = rollouts.rollout_many, []
+
+    def second_interrupts(*args, **kwargs):
+        calls.append(1)
+        if len(calls) == 2:  # the first sampled round, after the greedy episode
+            raise KeyboardInterrupt
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(rollouts, "rollout_many", second_interrupts)
+    rc = main(["solve", str(r / "fl"), "--solver", "fleet-sample", "--time-limit", "30", "--out", str(r / "o.parquet")])
+    err = capsys.readouterr().err
+    assert rc == 130 and err.count("\n") == 1 and "wrote the best valid schedule so far" in err, err
+    monkeypatch.undo()
+    assert main(["validate", str(r / "fl"), str(r / "o.parquet")]) == 0

@@ -575,3 +575,21 @@ def test_candidate_starts_are_bounded_by_the_attitude_samples(tmp_path, capsys, 
     rc = main(["solve", path, "--solver", "eosbench", "--rounds", "2", "--time-limit", "0", "--out", str(out)])
     assert rc == 0, capsys.readouterr().err
     assert main(["validate", path, str(out)]) == 0
+
+
+def test_ctrl_c_writes_the_best_schedule_so_far(tmp_path, capsys, monkeypatch):
+    """Ctrl-C in the first price round (issue 80, class 8): the schedule built so far is checked and
+    written, one line, exit 130 (before: "no feasible schedule found yet, nothing written")."""
+    import eosp.kinds.eosbench.solve as eb
+
+    def interrupt(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(eb, "bound_round", interrupt)
+    path = write(tmp_path, dense(seed=5))
+    out = tmp_path / "s.json"
+    assert main(["solve", path, "--solver", "eosbench", "--rounds", "3", "--time-limit", "0", "--out", str(out)]) == 130
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "wrote the best valid schedule so far" in err, err
+    monkeypatch.undo()
+    assert main(["validate", path, str(out)]) == 0

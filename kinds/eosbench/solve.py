@@ -519,6 +519,67 @@ def _pack_limit(cfg: EosBenchConfig, budget: Budget) -> float | None:
     return min(PACK_RESERVE_S, max(0.01, budget.left()))
 
 
+@dataclass
+class Search:
+    """Where a solve stands, kept outside its loops so that Ctrl-C finds it: the best schedule (value, paths,
+    served; None before the construction ends), the best bound and its kind, rounds done."""
+
+    bound: float
+    kind: str = "conflict-free"
+    value: float = -math.inf
+    paths: list | None = None
+    served: np.ndarray | None = None
+    rounds: int = 0
+    interrupted: bool = False
+
+    def keep(self, st: State) -> None:
+        self.value, self.paths, self.served = st.value, list(st.paths), st.served.copy()
+
+
+def _rounds(st: State, cfg: EosBenchConfig, budget: Budget, run: Search) -> None:
+    """Price rounds, each followed by its moves and every few rounds a packing, until the budget, the rounds or
+    the bound; the best schedule and bound kept in `run` as they are found."""
+    prices = Prices.zero(len(st.scenario.tasks))
+    lp = PriceLP(st.prio, len(st.paths)) if cfg.price_step == "lp" else None
+    rng = np.random.default_rng(cfg.seed)
+    best_dual = math.inf
+    while cfg.rounds is None or run.rounds < cfg.rounds:
+        if budget.expired() and run.rounds > 0:
+            break
+        lam = prices.lam
+        columns: list | None = [] if lp is not None else None
+        dual, taken, proven = bound_round(st, lam, columns, budget)
+        run.rounds += 1
+        prices.stalled(dual < best_dual - 1e-9)  # the step shrinks when the dual stalls, whatever bound stands
+        best_dual = min(best_dual, dual)
+        if proven and dual < run.bound - 1e-9:
+            run.bound, run.kind = dual, "lagrangian"
+        if run.bound <= run.value + 1e-9:  # proven optimal: nothing left to search
+            break
+        if lp is None:
+            prices.step_towards(taken, dual if math.isfinite(dual) else run.bound, run.value)
+        else:
+            for k, tasks in columns:
+                lp.add(k, tasks)
+            for k, tasks in list(st.columns)[lp.committed:]:  # the paths the moves committed: valid, so relaxed too
+                lp.add(k, np.frombuffer(tasks, dtype=np.int32))
+            lp.committed = len(st.columns)
+            prices.lam = lp.next_prices(lam, dual if proven else math.inf, budget)
+        if budget.expired():
+            break
+        for _ in range(cfg.moves_per_round):
+            if budget.expired():
+                break
+            _lns(st, rng, prices.lam, budget)
+            polish(st)
+            if st.value > run.value + 1e-9:
+                run.keep(st)
+        if run.rounds % PACK_EVERY == 0 and not budget.expired():
+            st.paths, st.served = list(run.paths), run.served.copy()
+            if pack(st, _pack_limit(cfg, budget), PACK_NODES if cfg.rounds is not None else None):
+                run.keep(st)
+
+
 def solve(scenario: Scenario, cfg: EosBenchConfig) -> Result:
     """Solve `scenario` (see the module docstring)."""
     t0 = time.perf_counter()
@@ -536,57 +597,25 @@ def solve(scenario: Scenario, cfg: EosBenchConfig) -> Result:
     st = State(scenario, rules, passes, cfg, t0=t0)
     timings = {"passes": time.perf_counter() - t0}
     order = sorted(range(len(passes)), key=lambda k: (st.span[k, 0], k))
-    for k in order:  # construction
-        if budget.expired():
-            break
-        improve(st, k, budget)
-    descend(st, order, budget)
-    polish(st)
-    timings["construction"] = time.perf_counter() - t0 - timings["passes"]
-    best_value, best_paths, best_served = st.value, list(st.paths), st.served.copy()
-    prices = Prices.zero(len(scenario.tasks))
-    lp = PriceLP(st.prio, len(passes)) if cfg.price_step == "lp" else None
-    bound, kind = conflict_free(st), "conflict-free"
-    rng = np.random.default_rng(cfg.seed)
-    rounds, best_dual = 0, math.inf
-    while cfg.rounds is None or rounds < cfg.rounds:
-        if budget.expired() and rounds > 0:
-            break
-        lam = prices.lam
-        columns: list | None = [] if lp is not None else None
-        dual, taken, proven = bound_round(st, lam, columns, budget)
-        rounds += 1
-        prices.stalled(dual < best_dual - 1e-9)  # the step shrinks when the dual stalls, whatever bound stands
-        best_dual = min(best_dual, dual)
-        if proven and dual < bound - 1e-9:
-            bound, kind = dual, "lagrangian"
-        if bound <= best_value + 1e-9:  # proven optimal: nothing left to search
-            break
-        if lp is None:
-            prices.step_towards(taken, dual if math.isfinite(dual) else bound, best_value)
-        else:
-            for k, tasks in columns:
-                lp.add(k, tasks)
-            for k, tasks in list(st.columns)[lp.committed:]:  # the paths the moves committed: valid, so relaxed too
-                lp.add(k, np.frombuffer(tasks, dtype=np.int32))
-            lp.committed = len(st.columns)
-            prices.lam = lp.next_prices(lam, dual if proven else math.inf, budget)
-        if budget.expired():
-            break
-        for _ in range(cfg.moves_per_round):
+    run = Search(bound=conflict_free(st))
+    try:  # Ctrl-C: the best schedule so far is the answer (checked and written by eosp solve)
+        for k in order:  # construction
             if budget.expired():
                 break
-            _lns(st, rng, prices.lam, budget)
-            polish(st)
-            if st.value > best_value + 1e-9:
-                best_value, best_paths, best_served = st.value, list(st.paths), st.served.copy()
-        if rounds % PACK_EVERY == 0 and not budget.expired():
-            st.paths, st.served = list(best_paths), best_served.copy()
-            if pack(st, _pack_limit(cfg, budget), PACK_NODES if cfg.rounds is not None else None):
-                best_value, best_paths, best_served = st.value, list(st.paths), st.served.copy()
-    st.paths, st.served = best_paths, best_served
-    polish(st)
-    pack(st, _pack_limit(cfg, end), PACK_NODES if cfg.rounds is not None else None)
+            improve(st, k, budget)
+        descend(st, order, budget)
+        polish(st)
+        timings["construction"] = time.perf_counter() - t0 - timings["passes"]
+        run.keep(st)
+        _rounds(st, cfg, budget, run)
+    except KeyboardInterrupt:
+        run.interrupted = True
+    if run.paths is not None:  # else Ctrl-C came during the construction: what it built (the checker has its say)
+        st.paths, st.served = run.paths, run.served
+    if not run.interrupted:  # each step may take seconds: after Ctrl-C the schedule is written at once
+        polish(st)
+        pack(st, _pack_limit(cfg, end), PACK_NODES if cfg.rounds is not None else None)
+    bound, kind, rounds = run.bound, run.kind, run.rounds
     sched = to_schedule(st)
     rep = check(scenario, sched, rules)
     while not rep.valid:  # a safety net: the construction keeps every rule, the checker has the last word
@@ -597,7 +626,7 @@ def solve(scenario: Scenario, cfg: EosBenchConfig) -> Result:
     if bound < value - 1e-6:  # never report a bound below a schedule found
         raise AssertionError(f"bound {bound} below the schedule's profit {value}")
     timings["solve"] = time.perf_counter() - t0
-    status = "optimal" if bound <= value + 1e-9 else \
+    status = "interrupted" if run.interrupted else "optimal" if bound <= value + 1e-9 else \
         "budget" if cfg.rounds is not None and rounds >= cfg.rounds else "time_limit"
     info = {"rounds": rounds, "passes": len(passes), "pass_solves": st.pass_solves, "metrics": rep.metrics,
             "transition": cfg.transition, "agility": cfg.agility}

@@ -85,8 +85,12 @@ def solve_sample(data, cfg: FleetSampleConfig, agent: tuple | None = None) -> Re
         limit = max(0.0, cfg.time_limit - (time.perf_counter() - t0) - reserve)
     decoded = sample_best(net, pf, env_cfg, samples=cfg.samples, temperature=cfg.temperature, seed=cfg.seed,
                           time_limit=limit)
-    return finish(pf, decoded, cfg.polish, {"prepare": t_prep, "sample": decoded.seconds},
-                  {"solver": "fleet-sample", "model": meta.get("source", "")})
+    stopped = decoded.info.get("interrupted", False)  # Ctrl-C: the best episode so far, written at once
+    res = finish(pf, decoded, "none" if stopped else cfg.polish, {"prepare": t_prep, "sample": decoded.seconds},
+                 {"solver": "fleet-sample", "model": meta.get("source", "")})
+    if stopped:
+        res.status = "interrupted"
+    return res
 
 
 def solve_features(data, cfg: FleetFeaturesConfig) -> Result:
