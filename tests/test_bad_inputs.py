@@ -1301,10 +1301,27 @@ def fleet_cases() -> list[Case]:
         Case("f-demos-from-an-evaluation-case", lambda r: shutil.copytree(r / "case", r / "cases" / "test" / "c1") and
              ["--fleets", r / "cases" / "test" / "c1", "--out", r / "demos"], ("--fleets", "evaluation split 'test'"),
              job="build_fleet_demos", prog="build_fleet_demos.py"),
+        # class 5: a demo set checked as deeply by train_fleet.py as by pretrain_fleet.py, before Ray starts
+        Case("f-train-fleet-empty-demos", lambda r: _demo_set(r, []) and _train_fleet(r),
+             ("manifest.json", "'demos' is empty"), **TRF),
+        Case("f-train-fleet-missing-fleet", lambda r: _demo_set(r, [{"fleet": str(r / "nope"), "schedule": "s.parquet"}])
+             and _train_fleet(r), ("manifest.json", "demos[0]", "not a fleet"), **TRF),
     ]
 
 
 TF = dict(job="tune_fleet", prog="tune_fleet.py")
+TRF = dict(job="train_fleet", prog="train_fleet.py")
+
+
+def _demo_set(r: Path, demos: list) -> bool:
+    (r / "ds").mkdir()
+    (r / "ds" / "manifest.json").write_text(json.dumps({"demos": demos}))
+    return True
+
+
+def _train_fleet(r: Path) -> list:
+    return ["--train.train-data", r / "ds", "--train.val-data", "", "--train.run-dir", r / "runs",
+            "--train.mlflow-uri", f"sqlite:///{r}/m.db"]
 
 
 def _model_copy(r: Path, shipped: str, name: str, key: str, **changes) -> bool:

@@ -76,6 +76,16 @@ def read_demo_set(path: str | Path) -> list[dict]:
     demos = data.get("demos") if isinstance(data, dict) else None
     if not isinstance(demos, list) or not all(isinstance(d, dict) and {"fleet", "schedule"} <= set(d) for d in demos):
         raise InputError(manifest, "no 'demos' list of fleet and schedule entries: not written by build_fleet_demos")
+    if not demos:
+        raise InputError(manifest, "'demos' is empty: no demonstration to learn from or to validate on")
+    from eosp.fleet.aeossp import is_case_dir
+    from eosp.fleet.io import is_fleet_dir
+
+    for i, d in enumerate(demos):  # every fleet and schedule there before any job starts on them
+        if not isinstance(d["fleet"], str) or not (is_fleet_dir(d["fleet"]) or is_case_dir(d["fleet"])):
+            raise InputError(manifest, f"demos[{i}]: fleet {d['fleet']!r} is not a fleet or aeossp case directory")
+        if not isinstance(d["schedule"], str) or not (root / d["schedule"]).is_file():
+            raise InputError(manifest, f"demos[{i}]: schedule {d['schedule']!r} not found in {root}")
     return [{**d, "schedule": str(root / d["schedule"])} for d in demos]
 
 
