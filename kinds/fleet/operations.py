@@ -107,11 +107,7 @@ class FleetPlanner:
         if not self.warm:
             self.reset()
         prob, o = self.prob, self.prob.opps
-        until = np.where(np.isfinite(know.upload_s), know.upload_s, prob.fleet.horizon.seconds + 1.0)
-        frozen = frozen_passes(prob, until)
-        per_opp = self.opportunity_values(know, frozen[o.pass_id[know.rows]])
-        values = opportunity_values(prob, per_opp)
-        values[frozen[self._pair_pass]] = 0.0
+        until, frozen, per_opp, values = self.values(know)
         self.replanner.revalue(values)
         t = time.perf_counter()
         sol = self.replanner.solve(Start(self.schedule(know.rows), until, t, claim_frozen=False))
@@ -122,6 +118,17 @@ class FleetPlanner:
         compute = time.perf_counter() - t
         info = {"objective": sol.info.get("objective_value"), "bound": sol.bound, "rounds": sol.info["rounds"]}
         return Plan(rows, compute, info, alt, alt_of)
+
+    def values(self, know: Knowledge) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """What a call on `know` solves for: the freeze times per satellite, the frozen passes, the value of each
+        opportunity and of each (pass, task) (0 in the frozen passes)."""
+        prob, o = self.prob, self.prob.opps
+        until = np.where(np.isfinite(know.upload_s), know.upload_s, prob.fleet.horizon.seconds + 1.0)
+        frozen = frozen_passes(prob, until)
+        per_opp = self.opportunity_values(know, frozen[o.pass_id[know.rows]])
+        values = opportunity_values(prob, per_opp)
+        values[frozen[self._pair_pass]] = 0.0
+        return until, frozen, per_opp, values
 
     def opportunity_values(self, know: Knowledge, fixed: np.ndarray) -> np.ndarray:
         """What an acquisition at each opportunity is worth to this planner, from what the ground knows;
