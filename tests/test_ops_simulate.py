@@ -10,6 +10,8 @@ import math
 
 import numpy as np
 import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
 from eosp.cli import main
 from eosp.fleet.generate import FleetGenConfig, generate
@@ -96,24 +98,30 @@ def clairvoyant_optimum(prob, values) -> float:
     return -res.fun / prob.weight.sum()
 
 
-def test_the_clairvoyant_bound_against_an_exact_optimum(scen):
-    """Four realizations: what every planner serves <= the clairvoyant optimum (an exact integer program over
-    every pass's task sets, battery left out) <= the clairvoyant bound the fleet solver proves; the clairvoyant
-    schedule executed serves at most the optimum."""
+@pytest.fixture(scope="module")
+def sims(scen):
+    out = [Simulation.of(scen, SimulateConfig(planner=p, rounds=4, time_limit=60.0)) for p in PLANNERS]
+    yield out
+    for s in out:
+        s.close()
+
+
+@settings(max_examples=4, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(index=st.integers(0, 1_000_000))
+def test_the_clairvoyant_bound_against_an_exact_optimum(scen, sims, index):
+    """Realizations drawn by hypothesis: what every planner serves <= the clairvoyant optimum (an exact integer
+    program over every pass's task sets, battery left out) <= the clairvoyant bound the fleet solver proves; the
+    clairvoyant schedule executed serves at most the optimum."""
     from eosp.kinds.fleet.operations import clairvoyant_values
 
-    sims = [Simulation.of(scen, SimulateConfig(planner=p, rounds=4, time_limit=60.0)) for p in PLANNERS]
-    for index in range(4):
-        w = realize(scen, index)
-        runs = [s.run(index) for s in sims]
-        prob = sims[0].planner.prob
-        best = clairvoyant_optimum(prob, clairvoyant_values(prob, w))
-        for r in runs:
-            assert r["served"] <= best + 1e-12 <= r["bound"] + 2e-12, (index, r["served"], best, r["bound"])
-            assert r["clairvoyant_schedule"] <= best + 1e-12
-        assert runs[0]["bound"] == runs[1]["bound"] == runs[2]["bound"]  # the realization's, whoever planned
-    for s in sims:
-        s.close()
+    w = realize(scen, index)
+    runs = [s.run(index) for s in sims]
+    prob = sims[0].planner.prob
+    best = clairvoyant_optimum(prob, clairvoyant_values(prob, w))
+    for r in runs:
+        assert r["served"] <= best + 1e-12 <= r["bound"] + 2e-12, (index, r["served"], best, r["bound"])
+        assert r["clairvoyant_schedule"] <= best + 1e-12
+    assert runs[0]["bound"] == runs[1]["bound"] == runs[2]["bound"]  # the realization's, whoever planned
 
 
 class Peeking:
