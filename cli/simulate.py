@@ -29,6 +29,8 @@ def cmd_simulate(kind, ns: argparse.Namespace) -> int:  # noqa: ARG001 - the fle
             if index not in have:
                 done.append(sim.run(index))
                 write_summary(out, ns.problem, cfg, done)
+                if index < ns.replay:
+                    replay(sim, done[-1], out / f"replay-{index:04d}.html")
     except KeyboardInterrupt:
         if done:
             m = write_summary(out, ns.problem, cfg, done)
@@ -46,3 +48,13 @@ def cmd_simulate(kind, ns: argparse.Namespace) -> int:  # noqa: ARG001 - the fle
               f"{bad['violation']}", file=sys.stderr)
         return 1
     return 0
+
+
+def replay(sim, figures: dict, path: Path) -> None:
+    """The replay page of the realization `sim` ran last (:mod:`eosp.evaluation.replay_page`)."""
+    from eosp.evaluation.replay_page import replay_data, write_replay
+
+    world, run = sim.last
+    title = f"{sim.cfg.planner}{' + onboard rule' if sim.cfg.onboard == 'rule' else ''}: {sim.scen.path.name}, " \
+            f"realization {world.index}"
+    write_replay(path, replay_data(sim.day, world, run, sim.scen), figures, title)

@@ -218,6 +218,8 @@ class Run:
     calls: list[dict]
     figures: dict
     plans: list[tuple[int, np.ndarray]] = field(default_factory=list)  # (call, the rows it answered), in order
+    uploads: list[tuple[float, np.ndarray]] = field(default_factory=list)  # (call time, upload time per satellite)
+    alternates_taken: set[int] = field(default_factory=set)  # the alternates the onboard rule took
 
 
 def simulate(day: Day, world: World, planner: Planner, time_limit: float, check=None,
@@ -228,7 +230,7 @@ def simulate(day: Day, world: World, planner: Planner, time_limit: float, check=
     battery test (:func:`execute`; None: no onboard rule, alternates are never taken)."""
     n_sat = len(day.contact_start)
     sent = Sent()
-    calls, plans = [], []
+    calls, plans, uploads = [], [], []
     for call, t in enumerate(world.calls_s.tolist()):
         execute(day, world, sent, t, onboard)
         upload = day.next_contact(np.arange(n_sat), np.full(n_sat, t + time_limit))
@@ -239,13 +241,14 @@ def simulate(day: Day, world: World, planner: Planner, time_limit: float, check=
         if plan is None:
             continue
         plans.append((call, np.asarray(plan.rows, dtype=np.int64)))
+        uploads.append((t, upload))
         churn = _upload(day, sent, know, plan, upload)
         calls.append({"t_s": t, "compute_s": round(plan.compute_s, 3), "wall_s": round(wall, 3), "churn": churn,
                       "uploads": int(np.isfinite(upload).sum()), "alternates": int(len(plan.alternates)),
                       **plan.info})
     execute(day, world, sent, math.inf, onboard)
     done = np.asarray(sent.done, dtype=np.int64)
-    return Run(done, calls, figures(day, world, done, calls, check, len(sent.taken)), plans)
+    return Run(done, calls, figures(day, world, done, calls, check, len(sent.taken)), plans, uploads, sent.taken)
 
 
 def _upload(day: Day, sent: Sent, know: Knowledge, plan: Plan, upload: np.ndarray) -> int:

@@ -303,3 +303,31 @@ def test_every_execution_is_valid_with_and_without_the_onboard_rule(clustered, o
         assert r["valid"] is True and r["served"] <= r["bound"] + 1e-12
         assert onboard == "rule" or r["alternates_taken"] == 0
     sim.close()
+
+
+def test_the_replay_page_in_headless_chromium(clustered, tmp_path, chromium, capsys):
+    """``eosp simulate --replay 1``: the page opens from its file with no request and no script error, and draws
+    every acquisition flown (served, cloudy, alternates as the figures count them), every contact and upload, a
+    row per contact where something was reported or uploaded, a row per urgent request."""
+    from tests.browser import Browser
+
+    out = tmp_path / "run"
+    assert main(["simulate", str(clustered.path), "--planner", "ev-replan", "--onboard", "rule", "--rounds", "3",
+                 "--realizations", "1", "--replay", "1", "--out", str(out)]) == 0
+    capsys.readouterr()
+    fig = json.loads((out / "summary.json").read_text())["realizations"][0]
+    page = out / "replay-0000.html"
+    with Browser(chromium, tmp_path / "chromium.log") as b:
+        b.open(page)
+        got = b.evaluate("window.replay")
+        counts = b.evaluate("[document.querySelectorAll('rect.acq').length, "
+                            "document.querySelectorAll('tr.contact').length, "
+                            "document.querySelectorAll('tr.request').length, "
+                            "document.querySelectorAll('path.upload').length]")
+        errors, requests = b.errors(), b.requests()
+    assert errors == [] and requests == [page.resolve().as_uri()]
+    d = got["drawn"]
+    assert got["ready"] and d["acquisitions"] == fig["acquisitions"] == counts[0]
+    assert d["cloudy"] == fig["failed"] and d["alternates"] == fig["alternates_taken"]
+    assert d["contacts"] == len(clustered.contacts) and counts[1] == got["contactRows"] > 0
+    assert counts[2] == int(clustered.urgent.sum()) and d["uploads"] == counts[3] > 0

@@ -375,6 +375,10 @@ class FleetKind(KindBase):
             p.add_argument("--out", required=True, help="the run directory to write (RUN/summary.json)")
             p.add_argument("--resume", action="store_true", help="go on from the realizations RUN holds")
             p.add_argument("--overwrite", action="store_true", help="start a run directory eosp wrote again")
+            p.add_argument("--replay", type=int, default=0, metavar="N",
+                           help="write the replay page of the first N realizations (RUN/replay-NNNN.html: per "
+                                "satellite its contacts, uploads and acquisitions, per contact what it reported, "
+                                "every urgent request's service)")
             add_config_args(p, SimulateConfig)
         super().arguments(command, p, solver)
 

@@ -269,7 +269,9 @@ class Simulation:
 
         world = realize(self.scen, index)
         got = self.simulate(world, check)
-        return {**got.figures, **self.clairvoyant(world, got.figures), "calls": got.calls}
+        out = {**got.figures, **self.clairvoyant(world, got.figures), "calls": got.calls}
+        self.last = (world, got)  # for a replay page of this realization (eosp.evaluation.replay_page)
+        return out
 
     def clairvoyant(self, world, figures: dict) -> dict:
         """The fleet solver on the realized day (see :func:`clairvoyant_values`): its proven bound, kept as the
