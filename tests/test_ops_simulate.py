@@ -331,3 +331,33 @@ def test_the_replay_page_in_headless_chromium(clustered, tmp_path, chromium, cap
     assert d["cloudy"] == fig["failed"] and d["alternates"] == fig["alternates_taken"]
     assert d["contacts"] == len(clustered.contacts) and counts[1] == got["contactRows"] > 0
     assert counts[2] == int(clustered.urgent.sum()) and d["uploads"] == counts[3] > 0
+
+
+@pytest.mark.ray
+@pytest.mark.extended
+def test_ctrl_c_of_the_ray_job_keeps_its_realizations(scen_dir, tmp_path):
+    """SIGINT to the process group of jobs/simulate_operations.py once a realization is written: one line of the
+    job's with the means of those kept, exit 130, no traceback; a rerun goes on from them."""
+    import sys
+
+    from eosp.jobs import simulate_operations as job
+    from tests.test_bad_inputs import _interrupt
+
+    out = tmp_path / "run"
+    args = ["--scenario", str(scen_dir), "--out", str(out), "--sim.planner", "replan", "--sim.rounds", "3",
+            "--sim.time-limit", "60", "--mlflow-uri", f"sqlite:///{tmp_path}/mlflow.db", "--ray.num-cpus", "2"]
+    rc, err, took = _interrupt([sys.executable, "-m", "eosp.jobs.simulate_operations", *args,
+                                "--sim.realizations", "200"], out / "summary.json", cwd=tmp_path)
+    ours = [x for x in err.splitlines() if x.startswith("simulate_operations.py:")]
+    assert rc == 130 and len(ours) == 1 and "Traceback" not in err, err
+    assert "interrupted" in ours[0] and "executions valid" in ours[0] and took < 30.0, (ours, took)
+    kept = json.loads((out / "summary.json").read_text())["realizations"]
+    assert 1 <= len(kept) < 200
+    n = len(kept) + 1
+    try:
+        assert job.main([*args, "--sim.realizations", str(n)]) == 0
+    finally:
+        import ray
+
+        ray.shutdown()
+    assert len(json.loads((out / "summary.json").read_text())["realizations"]) == n
