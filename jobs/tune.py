@@ -92,11 +92,23 @@ def sweep(trainable, space: dict, tc: TuneConfig, sweep_dir: Path, experiment: s
 
     from eosp.jobs.tracking import use_experiment
 
+    state_file = sweep_dir / "sweep.json"
+    if state_file.exists():  # a sweep of this name ran: it resumes only with the same settings
+        try:
+            old = json.loads(state_file.read_text())
+        except ValueError:
+            old = None
+        mine = json.loads(json.dumps({"tune": to_dict(tc), **state}))
+        if not isinstance(old, dict) or any(old.get(k) != v for k, v in mine.items()):
+            from eosp.errors import InputError
+
+            raise InputError(f"--tune.name {tc.name}", f"{sweep_dir} holds a sweep of other settings: choose another "
+                                                       "name (or the same settings to resume it)")
+        print(f"[tune] resuming sweep {tc.name} from {sweep_dir} (the same settings)", flush=True)
     exp = use_experiment(uri, experiment)  # the database and the experiment created here, not by racing trials
     sweep_dir.mkdir(parents=True, exist_ok=True)
     if kind_of(sweep_dir) != SWEEP_KIND:
         mark_dir(sweep_dir, SWEEP_KIND)
-    state_file = sweep_dir / "sweep.json"
     client = mlflow.tracking.MlflowClient(uri)
     if state_file.exists():
         parent_id = json.loads(state_file.read_text())["mlflow_parent_run_id"]
@@ -122,6 +134,11 @@ def sweep(trainable, space: dict, tc: TuneConfig, sweep_dir: Path, experiment: s
                                       checkpoint_config=tune.CheckpointConfig(num_to_keep=1)),
         )
     results = tuner.fit()
+    if not any(r.checkpoint is not None for r in results):
+        if results.errors:  # every trial failed: a defect, shown as such
+            raise RuntimeError(f"every trial of sweep {tc.name} failed; the first: {results.errors[0]}")
+        # Tune stops its trials on Ctrl-C and returns: before any trial ended an epoch there is nothing to report
+        raise KeyboardInterrupt
     best = results.get_best_result(metric=metric, mode="max", scope="all")
     ck = best.get_best_checkpoint(metric=metric, mode="max") or best.checkpoint
     return results, best, ck, parent_id, client

@@ -1651,3 +1651,24 @@ def test_ctrl_c_of_fleet_sample_writes_its_best_episode(fleet_base, tmp_path, mo
     assert rc == 130 and err.count("\n") == 1 and "wrote the best valid schedule so far" in err, err
     monkeypatch.undo()
     assert main(["validate", str(r / "fl"), str(r / "o.parquet")]) == 0
+
+
+def test_a_sweep_of_other_settings_is_not_resumed(tmp_path, capsys):
+    """A sweep name whose directory holds a sweep of other settings is refused before Tune starts (issue 80, class
+    6: it was resumed without a word); the same settings resume it, and say so."""
+    from eosp.config import TuneConfig, to_dict
+    from eosp.errors import InputError
+    from eosp.jobs.tune import sweep
+    from eosp.ownership import mark_dir
+
+    d = tmp_path / "tune" / "sweep"
+    d.mkdir(parents=True)
+    mark_dir(d, "tune-sweep")
+    before = TuneConfig(hidden_dims=(16,))
+    (d / "sweep.json").write_text(json.dumps({"mlflow_parent_run_id": "x", "tune": to_dict(before),
+                                              "run": {"lr": 0.1}}))
+    with pytest.raises(InputError, match="holds a sweep of other settings"):
+        sweep(None, {}, TuneConfig(hidden_dims=(32,)), d, "e", f"sqlite:///{tmp_path}/m.db", 1, {}, {"run": {"lr": 0.1}})
+    with pytest.raises(InputError, match="holds a sweep of other settings"):
+        sweep(None, {}, before, d, "e", f"sqlite:///{tmp_path}/m.db", 1, {}, {"run": {"lr": 0.2}})
+    assert not (tmp_path / "m.db").exists()  # refused before MLflow or Tune was touched
