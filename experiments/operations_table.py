@@ -7,7 +7,7 @@ realizations; the same clouds, forecasts and arrivals for every variant).
     python experiments/operations_table.py --fleets FLEET_DIR ... --work DIR --realizations 6 --time-limit 10 \\
         --simulate-args "--bound-time-limit 15"
 
-Variants: plan-once, replan, ev-replan, ev-replan with the onboard rule, ev-replan started cold at every call, and
+Variants: plan-once, replan, ev-replan, each also with the onboard rule, ev-replan started cold at every call, and
 ev-replan with perfect forecasts.  Prints one markdown table of means and one of paired differences; every run's
 summary stays under ``--work`` (a rerun resumes them).
 """
@@ -26,10 +26,13 @@ VARIANTS = {  # name: (scenario twin, eosp simulate options)
     "replan": ("", ["--planner", "replan"]),
     "ev-replan": ("", ["--planner", "ev-replan"]),
     "ev-replan + onboard rule": ("", ["--planner", "ev-replan", "--onboard", "rule"]),
+    "plan-once + onboard rule": ("", ["--planner", "plan-once", "--onboard", "rule"]),
+    "replan + onboard rule": ("", ["--planner", "replan", "--onboard", "rule"]),
     "ev-replan, cold calls": ("", ["--planner", "ev-replan", "--warm", "false"]),
     "ev-replan, perfect forecasts": ("perfect", ["--planner", "ev-replan"]),
 }
 PAIRS = (("replan", "plan-once"), ("ev-replan", "replan"), ("ev-replan + onboard rule", "ev-replan"),
+         ("plan-once + onboard rule", "plan-once"), ("replan + onboard rule", "replan"),
          ("ev-replan", "ev-replan, cold calls"), ("ev-replan, perfect forecasts", "ev-replan"))
 
 
