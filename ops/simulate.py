@@ -5,11 +5,13 @@ What happens, in time order (docs/operations.md):
 * planning calls at the horizon's start and on the scenario's cadence; each gives the planner what the ground
   knows then (:class:`Knowledge`) and the time its plan reaches each satellite: the first ground contact at or
   after the call's time plus the planner's compute budget (``time_limit``; never, when no contact is left);
-* a plan governs its satellite from its upload on; everything before the upload is what the satellite was sent
-  already (or has done), and a plan may not change it (a planner that does is a defect: refused);
+* a plan governs the passes of a satellite that start after its upload there; the passes before are what the
+  satellite was sent already (or has done), and a plan may not change them (a planner that does is a defect:
+  refused);
 * the satellite executes its timeline as sent; an acquisition succeeds when the realized clouds at its target
   and start allow it (:mod:`eosp.ops.world`), and its outcome reaches the ground at the satellite's next contact
-  after its end (downlink latency); a request whose acquisition failed stays open for later opportunities;
+  after its end (downlink latency); a request whose acquisition failed stays open for later opportunities; with
+  the onboard rule, a primary found cloudy lets the satellite take the alternate sent for it (:func:`execute`);
 * a request is known from its arrival; it is served by its first acquisition that succeeds.
 
 A plan is a set of opportunities (rows of the day's :class:`eosp.fleet.opportunities.Opportunities`: a task, a
