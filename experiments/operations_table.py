@@ -68,6 +68,7 @@ def main() -> None:
     ap.add_argument("--scenario-args", default="", help="extra options of eosp scenario, e.g. '--cadence-h 2'")
     ap.add_argument("--simulate-args", default="", help="extra options of eosp simulate, e.g. '--bound-time-limit 15'")
     ap.add_argument("--variants", nargs="+", default=list(VARIANTS), choices=list(VARIANTS))
+    ap.add_argument("--report-only", action="store_true", help="tables of the runs --work holds; nothing run")
     args = ap.parse_args()
     work = Path(args.work)
     rows, pairs = [], []
@@ -77,12 +78,16 @@ def main() -> None:
         for variant in args.variants:
             twin, opts = VARIANTS[variant]
             scen = work / f"{name}{'.' + twin if twin else ''}.scen"
+            run = work / f"{name}.{variant.replace(' ', '').replace(',', '.').replace('+', '.')}"
+            if args.report_only and not (run / "summary.json").exists():
+                continue
             if not scen.exists():
                 extra = ["--forecast-sigma-day", "0"] if twin == "perfect" else []
                 print(eosp("scenario", fleet, "--out", str(scen), *args.scenario_args.split(), *extra), flush=True)
-            run = work / f"{name}.{variant.replace(' ', '').replace(',', '.').replace('+', '.')}"
-            print(eosp("simulate", str(scen), *opts, "--realizations", str(args.realizations), "--time-limit",
-                       str(args.time_limit), "--out", str(run), "--resume", *args.simulate_args.split()), flush=True)
+            if not args.report_only:
+                print(eosp("simulate", str(scen), *opts, "--realizations", str(args.realizations), "--time-limit",
+                           str(args.time_limit), "--out", str(run), "--resume", *args.simulate_args.split()),
+                      flush=True)
             got[variant] = json.loads((run / "summary.json").read_text())
             m = got[variant]["means"]
             rows.append(f"| {name} | {variant} | {fmt(m['served'])} | {fmt(m['served_catalogue'])} | "
