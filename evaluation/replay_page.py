@@ -39,8 +39,7 @@ def replay_data(day, world, run, scen) -> dict:
     return {
         "start": f.horizon.start.isoformat().replace("+00:00", "Z"), "horizon": float(day.horizon_s),
         "sats": [str(s) for s in f.satellites.ids],
-        "contacts": [[[float(a), float(b)] for a, b in zip(day.contact_start[k], day.contact_end[k])]
-                     for k in range(len(day.contact_start))],
+        "contacts": [[[float(a), float(b)] for a, b in zip(*day.contacts.of(k))] for k in range(day.satellites)],
         "uploads": uploads,
         "acq": {"sat": day.sat[rows].tolist(), "task": [str(f.tasks.ids[t]) for t in day.task[rows]],
                 "start": day.start_s[rows].tolist(), "end": day.end_s[rows].tolist(), "ok": ok.tolist(),

@@ -38,6 +38,7 @@ from typing import Callable, Protocol
 
 import numpy as np
 
+from eosp.ops.stations import Contacts
 from eosp.ops.world import World
 
 
@@ -93,7 +94,7 @@ class Planner(Protocol):
 @dataclass
 class Day:
     """What a simulation reads of a scenario, in arrays: per opportunity its task, satellite, start and end
-    (seconds), per task its weight and whether it is urgent, the contacts per satellite, the horizon."""
+    (seconds), per task its weight and whether it is urgent, the contacts, the horizon, the satellites."""
 
     task: np.ndarray
     sat: np.ndarray
@@ -101,9 +102,9 @@ class Day:
     end_s: np.ndarray
     weight: np.ndarray
     urgent: np.ndarray
-    contact_start: list[np.ndarray]
-    contact_end: list[np.ndarray]
+    contacts: Contacts
     horizon_s: float
+    satellites: int
     pass_id: np.ndarray  # per opportunity: its pass
     pass_start: np.ndarray  # per pass: when it starts (a plan governs the passes that start after its upload)
 
@@ -115,13 +116,12 @@ class Day:
         step = f.horizon.action_step_s
         start = o.start.astype(np.float64) * step
         end = start + f.tasks.duration_s[o.task]
-        cs, ce = zip(*(scen.contacts.of(k) for k in range(len(f.satellites)))) if len(f.satellites) else ((), ())
         if pass_start is None:
             pass_start = np.full(o.n_passes, np.inf)
             np.minimum.at(pass_start, o.pass_id, start)
         return cls(o.task.astype(np.int64), o.satellite.astype(np.int64), start, end,
-                   np.asarray(f.tasks.weight, dtype=np.float64), np.asarray(scen.urgent, bool), list(cs), list(ce),
-                   float(f.horizon.seconds), o.pass_id.astype(np.int64), np.asarray(pass_start, dtype=np.float64))
+                   np.asarray(f.tasks.weight, dtype=np.float64), np.asarray(scen.urgent, bool), scen.contacts,
+                   float(f.horizon.seconds), len(f.satellites), o.pass_id.astype(np.int64), np.asarray(pass_start, dtype=np.float64))
 
     def fixed(self, rows: np.ndarray, upload: np.ndarray) -> np.ndarray:
         """Bool per row: its pass starts before its satellite's upload (what a plan uploaded then cannot change)."""
@@ -129,16 +129,7 @@ class Day:
 
     def next_contact(self, sat: np.ndarray, t: np.ndarray) -> np.ndarray:
         """Per (satellite, time): the first instant at or after it in contact (inf: none left)."""
-        out = np.full(len(sat), math.inf)
-        for k in np.unique(sat).tolist():
-            mine = sat == k
-            st, en = self.contact_start[k], self.contact_end[k]
-            i = np.searchsorted(en, t[mine], side="left")  # the first contact not over at t
-            ok = i < len(en)
-            got = np.full(int(mine.sum()), math.inf)
-            got[ok] = np.maximum(st[i[ok]], t[mine][ok])
-            out[mine] = got
-        return out
+        return self.contacts.next_contacts(sat, t)
 
 
 @dataclass
@@ -230,7 +221,7 @@ def simulate(day: Day, world: World, planner: Planner, time_limit: float, check=
     plan is uploaded at the first contact after the call's time plus this); `check`: a function of the executed
     rows returning (valid, first violation or None), e.g. the fleet checker's; `onboard`: the onboard rule's
     battery test (:func:`execute`; None: no onboard rule, alternates are never taken)."""
-    n_sat = len(day.contact_start)
+    n_sat = day.satellites
     sent = Sent()
     calls, plans, uploads = [], [], []
     for call, t in enumerate(world.calls_s.tolist()):

@@ -85,12 +85,23 @@ class Contacts:
     def next_contact(self, sat: int, t: float) -> float | None:
         """The first instant at or after `t` at which satellite `sat` is in contact (`t` itself when it is in
         one); None when no contact is left in the horizon."""
-        st, en = self.of(sat)
-        live = en >= t
-        if not live.any():
-            return None
-        i = int(np.flatnonzero(live)[0])
-        return max(float(st[i]), float(t))
+        got = float(self.next_contacts(np.array([sat]), np.array([t]))[0])
+        return None if math.isinf(got) else got
+
+    def next_contacts(self, sat: np.ndarray, t: np.ndarray) -> np.ndarray:
+        """:meth:`next_contact` of many (satellite, time) pairs at once (inf: no contact left): uploads and
+        downlinks in the simulator (:mod:`eosp.ops.simulate`)."""
+        sat, t = np.asarray(sat, dtype=np.int64), np.asarray(t, dtype=np.float64)
+        out = np.full(len(sat), math.inf)
+        for k in np.unique(sat).tolist():
+            mine = sat == k
+            st, en = self.of(k)
+            i = np.searchsorted(en, t[mine], side="left")  # the first contact not over at t (ends ascend with starts)
+            ok = i < len(en)
+            got = np.full(int(mine.sum()), math.inf)
+            got[ok] = np.maximum(st[i[ok]], t[mine][ok])
+            out[mine] = got
+        return out
 
 
 def _number(path: Path, row: int, column: str, text: str, lo: float, hi: float) -> float:

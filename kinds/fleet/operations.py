@@ -18,6 +18,7 @@ values of the other passes, which is where the planners differ:
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import time
 from dataclasses import dataclass
@@ -284,8 +285,7 @@ class Simulation:
             return {"bound_source": "conflict-free clairvoyant"}
         prob = self.planner.prob
         prob.set_values(clairvoyant_values(prob, world))
-        solver = FleetConfig(time_limit=None if cfg.rounds else cfg.bound_time_limit, rounds=cfg.rounds,
-                             seed=cfg.seed)
+        solver = dataclasses.replace(cfg.solver(), time_limit=None if cfg.rounds else cfg.bound_time_limit)
         sol = solve(prob.fleet, prob.opps, solver, problem=prob)
         rows = self.planner.rows(sol.schedule)
         served = np.zeros(len(prob.weight), dtype=bool)
