@@ -19,52 +19,27 @@ import sys
 
 from eosp.cli.build_shards import cmd_build_shards
 from eosp.cli.parser import COMMANDS, build_parser
-from eosp.cli.solve import SIGINT_SEEN, solve_options, solver_of, unknown_option
+from eosp.cli.solve import solve_options, solver_of, unknown_option
 from eosp.errors import InputError
 
 __all__ = ["build_parser", "main", "run", "solve_options"]  # build_parser, solve_options: for tests
 
 
-def _on_sigint(signum, frame) -> None:  # noqa: ARG001 - Python's own handler, remembering that it ran
-    SIGINT_SEEN.append(True)  # read by eosp.cli.solve.cmd_solve
-    raise KeyboardInterrupt
-
-
 def main(argv: list[str] | None = None) -> int:
     """The ``eosp`` command.  Ctrl-C anywhere (loading torch for a learned solver's flags, reading, solving) is one
     line and exit 130; a search's incumbent is written by :func:`eosp.cli.solve.cmd_solve` itself."""
-    import signal
+    from eosp.interrupt import ProgramInterrupt
 
     argv = sys.argv[1:] if argv is None else argv
-    SIGINT_SEEN.clear()
-    previous, unraisable = None, sys.unraisablehook
-
-    def swallowed(u) -> None:
-        """A Ctrl-C that lands in a C callback (numba compiling) is dropped there by Python ('Exception ignored'):
-        deliver it again, to land in ordinary code, instead of printing it and going on."""
-        if u.exc_type is KeyboardInterrupt:
-            signal.raise_signal(signal.SIGINT)
-        else:
-            unraisable(u)
-
-    sys.unraisablehook = swallowed
-    if signal.getsignal(signal.SIGINT) is signal.default_int_handler:  # an ignored SIGINT stays ignored
+    with ProgramInterrupt() as ctrl_c:
         try:
-            previous = signal.signal(signal.SIGINT, _on_sigint)
-        except ValueError:  # not the main thread (embedded): Python's handler stays
-            previous = None
-    try:
-        return run(argv)
-    except Exception:
-        if not SIGINT_SEEN:
-            raise
-        # Ctrl-C inside a library that turns it into another error (numba compiling its kernels): still Ctrl-C
-    except KeyboardInterrupt:
-        pass
-    finally:
-        sys.unraisablehook = unraisable
-        if previous is not None:
-            signal.signal(signal.SIGINT, previous)
+            return run(argv)
+        except Exception:
+            if not ctrl_c.seen:
+                raise
+            # Ctrl-C inside a library that turns it into another error (numba compiling its kernels): still Ctrl-C
+        except KeyboardInterrupt:
+            pass
     name = argv[0] if argv and not argv[0].startswith("-") else ""
     print(f"eosp{' ' + name if name else ''}: interrupted: nothing written", file=sys.stderr)
     return 130

@@ -14,9 +14,9 @@ import sys
 import time
 from dataclasses import fields
 
+from eosp.interrupt import sigint_seen
 from eosp.problem import load
 
-SIGINT_SEEN: list[bool] = []  # set by Ctrl-C during main (eosp.cli): an error that follows it is the interrupt's
 
 
 def solver_of(argv: list[str]) -> str | None:
@@ -95,7 +95,7 @@ def cmd_solve(kind, ns: argparse.Namespace) -> int:
     except KeyboardInterrupt:
         return interrupted_solve(kind, ns, problem)
     except Exception:
-        if SIGINT_SEEN:  # Ctrl-C that a library turned into another error (numba compiling its kernels)
+        if sigint_seen():  # Ctrl-C that a library turned into another error (numba compiling its kernels)
             return interrupted_solve(kind, ns, problem)
         raise
     elapsed = time.perf_counter() - t0

@@ -64,26 +64,67 @@ def add_memory_arg(parser: argparse.ArgumentParser) -> None:
 def run_job(main: Any, argv: list[str] | None, prog: str) -> int:
     """Run a job's `main(argv)` with the one error path of the jobs: a user error (:class:`eosp.errors.InputError`:
     a bad file, option, data set, checkpoint or config) is one line ``PROG: error: ...`` and exit 2; Ctrl-C is one
-    line and exit 130 (what was completed before it is kept, e.g. checkpoints and finished shards)."""
+    line and exit 130 (what was completed before it is kept, e.g. checkpoints and finished shards), also when a
+    library turned it into another error (:class:`eosp.interrupt.ProgramInterrupt`), the job's MLflow run ended as
+    KILLED.  A job that is a process of its own (`argv` None) shuts Ray down here with Ctrl-C ignored, so that a
+    Ctrl-C in the teardown cannot become a traceback of Ray's exit handler."""
     from eosp import errors
+    from eosp.interrupt import ProgramInterrupt
 
     errors.PROG = prog
+    interrupted = False
     try:
-        return main(argv)
-    except errors.InputError as exc:
-        print(errors.error_line(exc), file=sys.stderr, flush=True)
-        return 2
-    except OSError as exc:
-        if not exc.filename:
-            raise
-        # the system refused a path of the user's (not found, permission): one line naming it
-        print(errors.error_line(f"{exc.filename}: {(exc.strerror or str(exc)).lower()}"), file=sys.stderr,
-              flush=True)
-        return 2
-    except KeyboardInterrupt:
-        print(f"{prog}: interrupted: stopped (files completed before the interrupt are kept)", file=sys.stderr,
-              flush=True)
-        return 130
+        with ProgramInterrupt() as ctrl_c:
+            try:
+                return main(argv)
+            except errors.InputError as exc:
+                print(errors.error_line(exc), file=sys.stderr, flush=True)
+                return 2
+            except OSError as exc:
+                if ctrl_c.seen:
+                    interrupted = True
+                elif not exc.filename:
+                    raise
+                else:  # the system refused a path of the user's (not found, permission): one line naming it
+                    print(errors.error_line(f"{exc.filename}: {(exc.strerror or str(exc)).lower()}"),
+                          file=sys.stderr, flush=True)
+                    return 2
+            except KeyboardInterrupt:
+                interrupted = True
+            except Exception:
+                if not ctrl_c.seen:
+                    raise
+                interrupted = True
+    finally:
+        _teardown(own_process=argv is None, interrupted=interrupted)
+    print(f"{prog}: interrupted: stopped (files completed before the interrupt are kept)", file=sys.stderr,
+          flush=True)
+    return 130
+
+
+def _teardown(own_process: bool, interrupted: bool) -> None:
+    """What a job leaves: its MLflow run ended as KILLED after Ctrl-C; Ray shut down in a process of its own, with
+    a second Ctrl-C ignored meanwhile (the job's outcome is decided)."""
+    import signal
+
+    mlflow, ray = sys.modules.get("mlflow"), sys.modules.get("ray")
+    if not (own_process or interrupted):
+        return
+    try:
+        previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    except ValueError:  # not the main thread
+        previous = None
+    try:
+        if interrupted and mlflow is not None and mlflow.active_run() is not None:
+            try:
+                mlflow.end_run("KILLED")
+            except Exception:  # noqa: BLE001 - a tracking server gone: the job's outcome stays the interrupt
+                pass
+        if own_process and ray is not None and ray.is_initialized():
+            ray.shutdown()
+    finally:
+        if previous is not None:
+            signal.signal(signal.SIGINT, previous)
 
 
 def _field_docs(cls: type) -> dict[str, str]:

@@ -60,3 +60,57 @@ class HeldInterrupt:
             previous(signal.SIGINT, None)
         else:  # SIG_DFL: Python would have died of the signal; a KeyboardInterrupt is the catchable equivalent
             raise KeyboardInterrupt
+
+
+_SEEN: list[bool] = []  # a Ctrl-C came during the running program (ProgramInterrupt)
+
+
+def sigint_seen() -> bool:
+    """Whether Ctrl-C came during the program :class:`ProgramInterrupt` runs: an error that follows it is the
+    interrupt's (a library turned it into another error), never a figure or a traceback."""
+    return bool(_SEEN)
+
+
+class ProgramInterrupt:
+    """Context manager around a whole program (the ``eosp`` command, a job): Ctrl-C raises ``KeyboardInterrupt`` as
+    Python's own handler does and is remembered (:func:`sigint_seen`), because libraries turn it into other errors:
+    numba's dispatcher returns ``SystemError(... returned a result with an exception set)`` when the interrupt lands
+    inside a compiled call, a Ray task or actor that got the same SIGINT (a terminal sends it to the whole process
+    group) fails with its own error.  A ``KeyboardInterrupt`` that lands in a C callback is dropped there by Python
+    ('Exception ignored'); it is delivered again, to land in ordinary code.  An ignored SIGINT stays ignored; outside
+    the main thread nothing is replaced."""
+
+    def __enter__(self) -> "ProgramInterrupt":
+        import sys
+
+        _SEEN.clear()
+        self._previous, self._unraisable = None, sys.unraisablehook
+        sys.unraisablehook = self._swallowed
+        try:
+            if signal.getsignal(signal.SIGINT) is signal.default_int_handler:
+                self._previous = signal.signal(signal.SIGINT, self._on_sigint)
+        except ValueError:  # not the main thread: Python's handler stays
+            self._previous = None
+        return self
+
+    @staticmethod
+    def _on_sigint(signum: int, frame: FrameType | None) -> None:  # noqa: ARG004 - the signal handler's shape
+        _SEEN.append(True)
+        raise KeyboardInterrupt
+
+    def _swallowed(self, u) -> None:
+        if u.exc_type is KeyboardInterrupt:
+            signal.raise_signal(signal.SIGINT)
+        else:
+            self._unraisable(u)
+
+    def __exit__(self, exc_type, exc, tb) -> None:
+        import sys
+
+        sys.unraisablehook = self._unraisable
+        if self._previous is not None:
+            signal.signal(signal.SIGINT, self._previous)
+
+    @property
+    def seen(self) -> bool:
+        return sigint_seen()

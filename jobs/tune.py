@@ -133,12 +133,14 @@ def sweep(trainable, space: dict, tc: TuneConfig, sweep_dir: Path, experiment: s
                                       failure_config=tune.FailureConfig(max_failures=1),
                                       checkpoint_config=tune.CheckpointConfig(num_to_keep=1)),
         )
+    # Ctrl-C stays the job's: Tune's own handler would stop the trials gracefully (saving, 10 s and more) and return
+    # a result grid the job could not tell from a finished sweep.  The trials' checkpoints are on disk when they
+    # are reported, the experiment's state every few seconds; the rerun resumes from them.
+    os.environ["TUNE_DISABLE_SIGINT_HANDLER"] = "1"
     results = tuner.fit()
-    if not any(r.checkpoint is not None for r in results):
-        if results.errors:  # every trial failed: a defect, shown as such
-            raise RuntimeError(f"every trial of sweep {tc.name} failed; the first: {results.errors[0]}")
-        # Tune stops its trials on Ctrl-C and returns: before any trial ended an epoch there is nothing to report
-        raise KeyboardInterrupt
+    if not any(r.checkpoint is not None for r in results):  # every trial failed: a defect, shown as such
+        raise RuntimeError(f"no trial of sweep {tc.name} reported; the first error: "
+                           f"{results.errors[0] if results.errors else None}")
     best = results.get_best_result(metric=metric, mode="max", scope="all")
     ck = best.get_best_checkpoint(metric=metric, mode="max") or best.checkpoint
     return results, best, ck, parent_id, client

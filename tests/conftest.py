@@ -43,7 +43,7 @@ RAY_TESTS = {"test_shard_source_splits_shards_between_workers"}
 # The extended suite (marker `extended`, `make test-extended`, run by CI after `make test`): the slowest Ray tests
 # (whole services and jobs killed and resumed, multi-node clusters, training variants, the README's blocks, each
 # 8-65 s), which `make test` leaves out to stay within 10 minutes on a 2-core machine.  Nothing leaves CI.
-EXTENDED_MODULES = {"test_platform", "test_platform_multinode", "test_readme", "test_overlap"}
+EXTENDED_MODULES = {"test_platform", "test_platform_multinode", "test_readme", "test_overlap", "test_jobs_ctrl_c"}
 EXTENDED_TESTS = {"test_ppo_starts_from_an_imitation_checkpoint", "test_demonstrations_imitation_with_dagger_ppo_and_a_sweep",
                   "test_evaluate_killed_and_rerun_gives_the_same_report", "test_build_shards_killed_and_rerun_resumes",
                   "test_train_job_refuses_what_the_local_ray_cannot_run", "test_tune_refuses_a_gpu_learner_without_a_gpu",

@@ -1,4 +1,5 @@
-"""eosp.interrupt.HeldInterrupt: Ctrl-C recorded inside the block, delivered at its end, never lost."""
+"""eosp.interrupt: HeldInterrupt (Ctrl-C recorded inside the block, delivered at its end, never lost) and a program's
+Ctrl-C read as such when a library turned it into another error (ProgramInterrupt, through the jobs' run_job)."""
 
 import signal
 import threading
@@ -75,3 +76,36 @@ def test_the_interrupt_tests_pass_in_a_run_started_with_sigint_ignored(tmp_path)
                        cwd=root / "tests", capture_output=True, text=True, timeout=120,
                        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_IGN))
     assert r.returncode == 0 and "1 passed" in r.stdout, r.stdout + r.stderr
+
+
+def test_a_job_reads_ctrl_c_that_a_library_made_another_error_as_ctrl_c(tmp_path, capsys):
+    """numba's dispatcher returns SystemError('... returned a result with an exception set') when Ctrl-C lands in a
+    compiled call (seen in a fleet PPO job): still the interrupt's one line and exit 130, the MLflow run KILLED,
+    Python's handler given back; the same error without Ctrl-C stays a defect with its traceback."""
+    import mlflow
+
+    from eosp.args import run_job
+
+    mlflow.set_tracking_uri(f"sqlite:///{tmp_path / 'mlflow.db'}")
+
+    def job(argv):
+        run = mlflow.start_run(run_name="stopped")
+        ids.append(run.info.run_id)
+        try:
+            signal.raise_signal(signal.SIGINT)
+        except KeyboardInterrupt as exc:
+            raise SystemError("CPUDispatcher(<function f>) returned a result with an exception set") from exc
+        return 0
+
+    ids: list[str] = []
+    assert run_job(job, [], "job.py") == 130
+    err = [x for x in capsys.readouterr().err.splitlines() if x.startswith("job.py")]  # not MLflow's own lines
+    assert err == ["job.py: interrupted: stopped (files completed before the interrupt are kept)"]
+    assert mlflow.get_run(ids[0]).info.status == "KILLED" and mlflow.active_run() is None
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
+
+    def broken(argv):
+        raise SystemError("a defect")
+
+    with pytest.raises(SystemError):
+        run_job(broken, [], "job.py")
