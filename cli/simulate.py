@@ -51,10 +51,16 @@ def cmd_simulate(kind, ns: argparse.Namespace) -> int:  # noqa: ARG001 - the fle
 
 
 def replay(sim, figures: dict, path: Path) -> None:
-    """The replay page of the realization `sim` ran last (:mod:`eosp.evaluation.replay_page`)."""
-    from eosp.evaluation.replay_page import replay_data, write_replay
+    """The replay page of the realization `sim` ran last: the fleet page of the day as executed with the replay's
+    sections (:mod:`eosp.evaluation.replay_page`)."""
+    import numpy as np
+
+    from eosp.evaluation.replay_page import replay_data, replay_page, write_replay
 
     world, run = sim.last
-    title = f"{sim.cfg.planner}{' + onboard rule' if sim.cfg.onboard == 'rule' else ''}: {sim.scen.path.name}, " \
-            f"realization {world.index}"
-    write_replay(path, replay_data(sim.day, world, run, sim.scen), figures, title)
+    planner = f"{sim.cfg.planner}{' + onboard rule' if sim.cfg.onboard == 'rule' else ''}"
+    title = f"{planner}: {sim.scen.path.name}, realization {world.index}"
+    executed = sim.planner.schedule(np.asarray(run.rows, dtype=np.int64))
+    info = {"solver": planner, "time_limit": sim.cfg.time_limit}
+    write_replay(path, replay_page(sim.scen.fleet, sim.scen.opps, executed, replay_data(sim.day, world, run, sim.scen),
+                                   figures, title, info))

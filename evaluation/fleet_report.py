@@ -279,19 +279,21 @@ def _summary(views: list[View]) -> str:
 
 
 def build_page(fleet: Fleet, opps, schedules: dict[str, Schedule], title: str | None = None,
-               infos: dict[str, dict] | None = None) -> str:
+               infos: dict[str, dict] | None = None, appendix: str = "") -> str:
     """The page as one HTML string (self-contained: the script, the data and the coastlines inline); `infos`: each
-    schedule's metadata by label (:func:`schedule_info`), for the summary's solver, time limit, bound and gap."""
+    schedule's metadata by label (:func:`schedule_info`), for the summary's solver, time limit, bound and gap;
+    `appendix`: sections of the page's own after the fleet's (a simulated day's replay,
+    :mod:`eosp.evaluation.replay_page`)."""
     views = [View(label, s, (infos or {}).get(label, {})) for label, s in schedules.items()]
     title = title or f"{fleet.case_id or 'fleet'}: a constellation day"
     data, notes = build_data(fleet, opps, views, title)
     h = fleet.horizon
     meta = (f"{len(fleet.satellites)} satellites, {len(fleet.tasks)} tasks, horizon {iso_z(h.start)} to "
             f"{iso_z(h.end)} (UTC); {len(views)} schedule(s), checked by the fleet checker")
-    return _page(data, notes, _summary(views), title, meta, fleet.tasks.lat_deg, fleet.tasks.lon_deg)
+    return _page(data, notes, _summary(views), title, meta, fleet.tasks.lat_deg, fleet.tasks.lon_deg, appendix)
 
 
-def _page(data: dict, notes: list[str], summary: str, title: str, meta: str, lat, lon) -> str:
+def _page(data: dict, notes: list[str], summary: str, title: str, meta: str, lat, lon, appendix: str = "") -> str:
     from importlib.resources import files
 
     script = files("eosp.evaluation").joinpath("fleet_page.js").read_text(encoding="utf-8")
@@ -310,7 +312,7 @@ def _page(data: dict, notes: list[str], summary: str, title: str, meta: str, lat
             f"data-schedules='{len(data['views'])}'>\n<h1>{html.escape(title)}</h1><p class='meta'>{meta}</p>"
             f"{note_html}\n{summary}<div id='diff'></div>\n{_BODY}\n"
             f"<script type='application/json' id='fleet-data'>{payload}</script>\n<script>{script}</script>\n"
-            "</body></html>\n")
+            f"{appendix}</body></html>\n")
 
 
 # --------------------------------------------------------------------------- ONERA fleets (no orbits, downloads)

@@ -1,6 +1,8 @@
-"""The replay of a simulated day (``eosp simulate ... --replay N``): one offline HTML page per realization.
+"""The replay of a simulated day (``eosp simulate ... --replay N``): the fleet page of the day as executed (its Gantt,
+map, task table and checker verdict, :mod:`eosp.evaluation.fleet_report`) with the replay as sections of its own,
+one offline HTML page per realization.
 
-What it shows, from the simulator's own record (:class:`eosp.ops.simulate.Run`) and the realization: per satellite,
+What the replay shows, from the simulator's own record (:class:`eosp.ops.simulate.Run`) and the realization: per satellite,
 its ground contacts, the uploads of each planning call, every acquisition it flew (served, found cloudy, an
 alternate the onboard rule took); per contact, what the satellite reported there and whether a plan reached it;
 every urgent request with its arrival and when it was served (or that it never was, tried or not).  The page is
@@ -15,13 +17,9 @@ from pathlib import Path
 
 import numpy as np
 
-from eosp.ownership import html_mark
 
-REPORT_KIND = "report"
-_STYLE = ("body{font:13px sans-serif;margin:16px}table{border-collapse:collapse;margin:8px 0}"
-          "td,th{border:1px solid #ccc;padding:2px 6px;text-align:right}th{background:#eee}"
-          "td.l,th.l{text-align:left}.meta{color:#555}svg{border:1px solid #ccc}"
-          ".legend span{display:inline-block;width:12px;height:10px;margin:0 4px 0 12px}")
+_STYLE = ("#replay svg{border:1px solid #ccc}#replay .legend span{display:inline-block;width:12px;height:10px;"
+          "margin:0 4px 0 12px}#replay td.l,#replay th.l{text-align:left}")
 
 
 def replay_data(day, world, run, scen) -> dict:
@@ -54,8 +52,8 @@ def replay_data(day, world, run, scen) -> dict:
     }
 
 
-def replay_page(data: dict, figures: dict, title: str) -> str:
-    """The page (see the module docstring)."""
+def replay_section(data: dict, figures: dict) -> str:
+    """The replay's sections of the page (its style, data and script inline; the element ids are its own)."""
     from importlib.resources import files
 
     script = files("eosp.evaluation").joinpath("replay_page.js").read_text(encoding="utf-8")
@@ -70,20 +68,29 @@ def replay_page(data: dict, figures: dict, title: str) -> str:
               "<span style='background:#d33'></span>found cloudy<span style='background:#36c'></span>an alternate "
               "(onboard rule)<span style='background:#ddd'></span>ground contact<span style='background:#f90'>"
               "</span>upload</p>")
-    return ("<!DOCTYPE html>\n<html lang='en'><head><meta charset='utf-8'>" + html_mark(REPORT_KIND) +
-            f"<title>{html.escape(title)}</title><style>{_STYLE}</style></head>\n<body>\n"
-            f"<h1>{html.escape(title)}</h1><p class='meta'>{meta}</p>{legend}\n"
+    return (f"<style>{_STYLE}</style><section id='replay'>\n<h2>Replay: the day in operation</h2>"
+            f"<p class='meta'>{meta}.  The schedule above is every acquisition flown, those found cloudy included "
+            f"(they serve nothing); here they are told apart.</p>{legend}\n"
             "<svg id='timeline'></svg>\n<h2>Contacts</h2><p class='meta'>What each satellite reported at each contact "
             "(the acquisitions since its last one) and whether a plan reached it.</p><table id='contacts'></table>\n"
             "<h2>Urgent requests</h2><table id='urgent'></table>\n<h2>Catalogue</h2><p id='catalogue'></p>\n"
             f"<script type='application/json' id='replay-data'>{payload}</script>\n<script>{script}</script>\n"
-            "</body></html>\n")
+            "</section>\n")
 
 
-def write_replay(path: Path, data: dict, figures: dict, title: str) -> Path:
+def replay_page(fleet, opps, executed, data: dict, figures: dict, title: str, info: dict) -> str:
+    """The page: the fleet page of the `executed` schedule (every acquisition flown; `info`: how it was planned,
+    for the page's summary) and the replay's sections."""
+    from eosp.evaluation.fleet_report import build_page
+
+    return build_page(fleet, opps, {"executed": executed}, title, {"executed": info},
+                      appendix=replay_section(data, figures))
+
+
+def write_replay(path: Path, page: str) -> Path:
     """The page written atomically to `path` (a page of a run directory eosp writes)."""
     from eosp.atomic import atomic_path
 
     with atomic_path(path) as tmp:
-        tmp.write_text(replay_page(data, figures, title), encoding="utf-8")
+        tmp.write_text(page, encoding="utf-8")
     return path

@@ -306,9 +306,10 @@ def test_every_execution_is_valid_with_and_without_the_onboard_rule(clustered, o
 
 
 def test_the_replay_page_in_headless_chromium(clustered, tmp_path, chromium, capsys):
-    """``eosp simulate --replay 1``: the page opens from its file with no request and no script error, and draws
-    every acquisition flown (served, cloudy, alternates as the figures count them), every contact and upload, a
-    row per contact where something was reported or uploaded, a row per urgent request."""
+    """``eosp simulate --replay 1``: the fleet page of the day as executed with the replay's sections opens from its
+    file with no request and no script error; the fleet page's Gantt draws every acquisition flown with no checker
+    violation, the replay every acquisition (served, cloudy, alternates as the figures count them), every contact
+    and upload, a row per contact where something was reported or uploaded, a row per urgent request."""
     from tests.browser import Browser
 
     out = tmp_path / "run"
@@ -320,12 +321,15 @@ def test_the_replay_page_in_headless_chromium(clustered, tmp_path, chromium, cap
     with Browser(chromium, tmp_path / "chromium.log") as b:
         b.open(page)
         got = b.evaluate("window.replay")
+        fleet = b.evaluate("[window.fleetPage.ready, window.fleetPage.drawn.gantt.bars, "
+                           "window.fleetPage.drawn.gantt.violations, document.body.dataset.schedules]")
         counts = b.evaluate("[document.querySelectorAll('rect.acq').length, "
                             "document.querySelectorAll('tr.contact').length, "
                             "document.querySelectorAll('tr.request').length, "
                             "document.querySelectorAll('path.upload').length]")
         errors, requests = b.errors(), b.requests()
     assert errors == [] and requests == [page.resolve().as_uri()]
+    assert fleet == [True, fig["acquisitions"], 0, "1"]
     d = got["drawn"]
     assert got["ready"] and d["acquisitions"] == fig["acquisitions"] == counts[0]
     assert d["cloudy"] == fig["failed"] and d["alternates"] == fig["alternates_taken"]
