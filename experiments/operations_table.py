@@ -7,8 +7,8 @@ realizations; the same clouds, forecasts and arrivals for every variant).
     python experiments/operations_table.py --fleets FLEET_DIR ... --work DIR --realizations 6 --time-limit 10 \\
         --simulate-args "--bound-time-limit 15"
 
-Variants: plan-once, replan, ev-replan, each also with the onboard rule, ev-replan started cold at every call, and
-ev-replan with perfect forecasts.  Prints one markdown table of means and one of paired differences; every run's
+Variants: plan-once, replan, ev-replan, each also with the onboard rule, ev-replan started cold at every call,
+ev-replan with perfect forecasts, ev-replan with the onboard rule that looks ahead.  Prints one markdown table of means and one of paired differences; every run's
 summary stays under ``--work`` (a rerun resumes them).
 """
 
@@ -30,10 +30,12 @@ VARIANTS = {  # name: (scenario twin, eosp simulate options)
     "replan + onboard rule": ("", ["--planner", "replan", "--onboard", "rule"]),
     "ev-replan, cold calls": ("", ["--planner", "ev-replan", "--warm", "false"]),
     "ev-replan, perfect forecasts": ("perfect", ["--planner", "ev-replan"]),
+    "ev-replan + lookahead": ("", ["--planner", "ev-replan", "--onboard", "lookahead"]),
 }
 PAIRS = (("replan", "plan-once"), ("ev-replan", "replan"), ("ev-replan + onboard rule", "ev-replan"),
          ("plan-once + onboard rule", "plan-once"), ("replan + onboard rule", "replan"),
-         ("ev-replan", "ev-replan, cold calls"), ("ev-replan, perfect forecasts", "ev-replan"))
+         ("ev-replan", "ev-replan, cold calls"), ("ev-replan, perfect forecasts", "ev-replan"),
+         ("ev-replan + lookahead", "ev-replan"))
 
 
 def eosp(*args: str) -> str:
@@ -100,11 +102,12 @@ def main() -> None:
             ra = {r["realization"]: r["served"] for r in got[a]["realizations"]}
             rb = {r["realization"]: r["served"] for r in got[b]["realizations"]}
             mean, half = interval([ra[i] - rb[i] for i in sorted(ra) if i in rb])
-            pairs.append(f"| {name} | {a} - {b} | {mean:+.4f} | [{mean - half:+.4f}, {mean + half:+.4f}] |")
+            n = len([i for i in ra if i in rb])
+            pairs.append(f"| {name} | {a} - {b} | {n} | {mean:+.4f} | [{mean - half:+.4f}, {mean + half:+.4f}] |")
     print("\n| fleet | variant | served | catalogue | urgent | clairvoyant bound | regret | cloud-lost | urgent "
           "latency h | churn | s a call | valid |\n|---|---|---|---|---|---|---|---|---|---|---|---|")
     print("\n".join(rows))
-    print("\n| fleet | pair | served, mean difference | 95% interval |\n|---|---|---|---|")
+    print("\n| fleet | pair | realizations | served, mean difference | 95% interval |\n|---|---|---|---|---|")
     print("\n".join(pairs))
 
 

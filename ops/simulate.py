@@ -11,7 +11,8 @@ What happens, in time order (docs/operations.md):
 * the satellite executes its timeline as sent; an acquisition succeeds when the realized clouds at its target
   and start allow it (:mod:`eosp.ops.world`), and its outcome reaches the ground at the satellite's next contact
   after its end (downlink latency); a request whose acquisition failed stays open for later opportunities; with
-  the onboard rule, a primary found cloudy lets the satellite take the alternate sent for it (:func:`execute`);
+  an onboard rule, a primary found cloudy lets the satellite take the alternate sent for it, after it or, when the
+  rule looks ahead, in its place (:func:`execute`);
 * a request is known from its arrival; it is served by its first acquisition that succeeds.
 
 A plan is a set of opportunities (rows of the day's :class:`eosp.fleet.opportunities.Opportunities`: a task, a
@@ -144,31 +145,50 @@ class Sent:
     done: list[int] = field(default_factory=list)
     taken: set[int] = field(default_factory=set)
     until: float = 0.0
+    ahead: bool = False  # the alternates are replacements, taken in their primary's place (Onboard.ahead)
 
 
-def execute(day: Day, world: World, sent: Sent, t: float, onboard: Callable | None) -> None:
-    """The satellites' work up to time `t`: every primary starting before it done; with the onboard rule
-    (`onboard`: a function of a satellite and its timeline's rows saying whether its battery holds), a primary
-    found cloudy lets the satellite take the alternate sent for it, when its task is not one the satellite has
-    served itself and its battery holds with it (what it did, the alternate, the primaries it was sent after it).
-    What was decided is never decided again."""
+@dataclass(frozen=True)
+class Onboard:
+    """What a satellite decides on its own (docs/operations.md, "The onboard rule"): `test(k, rows)` says whether
+    satellite k can fly a timeline of opportunity rows (its battery, and with `ahead` its slews); `ahead` False:
+    the target is found cloudy as it is acquired (Phi-Sat-1's detection, flown) and the alternate sent for it is
+    taken after it; True: a detector looking ahead sees the next target cloudy before the satellite slews to it
+    (proposed, not flown), the primary is skipped and the replacement sent for it is taken in its place."""
+
+    test: Callable[[int, np.ndarray], bool]
+    ahead: bool = False
+
+
+def execute(day: Day, world: World, sent: Sent, t: float, onboard: Onboard | None) -> None:
+    """The satellites' work up to time `t`: every primary starting before it done; with an onboard rule, a primary
+    found cloudy lets the satellite take the alternate sent for it (after the primary, or in its place when the
+    rule looks ahead), when its task is not one the satellite has served itself and the satellite can fly it
+    (:class:`Onboard`: what it did, the alternate, the primaries it was sent after it).  What was decided is never
+    decided again."""
     s = day.start_s
     new = sent.prim[(s[sent.prim] >= sent.until) & (s[sent.prim] < t)]
     for r in new[np.argsort(s[new], kind="stable")].tolist():
-        sent.done.append(r)
         if onboard is None or world.clear[r]:
+            sent.done.append(r)
             continue
+        if not onboard.ahead:
+            sent.done.append(r)
         k = day.sat[r]
+        took = False
         for a in sent.alt[sent.alt_of == r].tolist():
             mine = np.asarray(sent.done, dtype=np.int64)
             mine = mine[day.sat[mine] == k]
             if (world.clear[mine] & (day.task[mine] == day.task[a])).any():
                 continue  # served already, by this satellite
-            later = sent.prim[(day.sat[sent.prim] == k) & (s[sent.prim] > s[a])]
-            if onboard(int(k), np.concatenate([mine, [a], later])):
+            later = sent.prim[(day.sat[sent.prim] == k) & (s[sent.prim] > s[a]) & (sent.prim != r)]
+            if onboard.test(int(k), np.concatenate([mine, [a], later])):
                 sent.done.append(a)
                 sent.taken.add(a)
+                took = True
                 break
+        if onboard.ahead and not took:
+            sent.done.append(r)  # no replacement it can fly: the primary as sent (found cloudy)
     sent.until = max(sent.until, t)
 
 
@@ -179,9 +199,14 @@ def knowledge(day: Day, world: World, sent: Sent, call: int, upload_s: np.ndarra
     alt_report = day.next_contact(day.sat[sent.alt], day.end_s[sent.alt])
     decided = s[sent.alt_of] < sent.until
     taken = np.isin(sent.alt, np.fromiter(sent.taken, np.int64, len(sent.taken)))
-    keep = ~decided | taken | (alt_report > t)  # an alternate not taken is known only once reported
-    rows = np.concatenate([sent.prim, sent.alt[keep]])
-    is_alt = np.r_[np.zeros(len(sent.prim), bool), np.ones(int(keep.sum()), bool)]
+    prim = sent.prim
+    if sent.ahead:  # the timelines the ground knows: a replacement once reported taken, in its primary's place
+        keep = taken & (alt_report <= t)
+        prim = prim[~np.isin(prim, sent.alt_of[keep])]
+    else:
+        keep = ~decided | taken | (alt_report > t)  # an alternate not taken is known only once reported
+    rows = np.concatenate([prim, sent.alt[keep]])
+    is_alt = np.r_[np.zeros(len(prim), bool), np.ones(int(keep.sum()), bool)]
     order = np.argsort(rows, kind="stable")
     rows, is_alt = rows[order], is_alt[order]
     report = day.next_contact(day.sat[rows], day.end_s[rows])
@@ -216,13 +241,13 @@ class Run:
 
 
 def simulate(day: Day, world: World, planner: Planner, time_limit: float, check=None,
-             onboard: Callable | None = None) -> Run:
+             onboard: Onboard | None = None) -> Run:
     """Run `planner` through `world` (see the module docstring).  `time_limit`: the compute budget of a call (its
     plan is uploaded at the first contact after the call's time plus this); `check`: a function of the executed
-    rows returning (valid, first violation or None), e.g. the fleet checker's; `onboard`: the onboard rule's
-    battery test (:func:`execute`; None: no onboard rule, alternates are never taken)."""
+    rows returning (valid, first violation or None), e.g. the fleet checker's; `onboard`: the onboard rule
+    (:class:`Onboard`; None: none, alternates are never taken)."""
     n_sat = day.satellites
-    sent = Sent()
+    sent = Sent(ahead=onboard is not None and onboard.ahead)
     calls, plans, uploads = [], [], []
     for call, t in enumerate(world.calls_s.tolist()):
         execute(day, world, sent, t, onboard)

@@ -272,8 +272,8 @@ def test_the_onboard_rule_takes_alternates_that_keep_every_timeline_valid(cluste
     import dataclasses
 
     from eosp.fleet.check import validate
-    from eosp.kinds.fleet.operations import alternates, battery_test
-    from eosp.ops.simulate import Sent, execute
+    from eosp.kinds.fleet.operations import alternates, onboard_test
+    from eosp.ops.simulate import Onboard, Sent, execute
 
     sim = Simulation.of(clustered, SimulateConfig(planner="replan", rounds=3, time_limit=60.0))
     prob, day = sim.planner.prob, sim.day
@@ -288,20 +288,56 @@ def test_the_onboard_rule_takes_alternates_that_keep_every_timeline_valid(cluste
     for clear, expect in ((False, len(alt)), (True, 0)):
         world = dataclasses.replace(w, clear=np.where(np.isin(np.arange(len(w.clear)), thin), clear, True))
         sent = Sent(prim=np.sort(thin), alt=alt, alt_of=alt_of)
-        execute(day, world, sent, math.inf, battery_test(prob))
+        execute(day, world, sent, math.inf, Onboard(onboard_test(prob)))
         done = np.asarray(sent.done)
         assert len(sent.taken) == expect and len(done) == len(thin) + expect
         assert validate(prob.fleet, sim.planner.schedule(np.sort(done)), prob.geo).valid
     sim.close()
 
 
-@pytest.mark.parametrize("onboard", ["none", "rule"])
-def test_every_execution_is_valid_with_and_without_the_onboard_rule(clustered, onboard):
+def test_the_rule_that_looks_ahead_replaces_cloudy_primaries_where_it_can_fly_the_replacement(clustered):
+    """Replacements for a plan (per primary, one that fits in its place), flown in two worlds: where every primary
+    is cloudy, each is skipped for its replacement when the satellite can fly it (slews checked against what it
+    really flew, the battery) and flown as sent otherwise; where every primary is clear, none is replaced; both
+    executions pass the checker; a replacement never shares its primary's pass with another's task twice."""
+    import dataclasses
+
+    from eosp.fleet.check import validate
+    from eosp.kinds.fleet.operations import onboard_test, replacements
+    from eosp.ops.simulate import Onboard, Sent, execute
+
+    sim = Simulation.of(clustered, SimulateConfig(planner="replan", rounds=3, time_limit=60.0))
+    prob, day = sim.planner.prob, sim.day
+    w = realize(clustered, 0)
+    plan = np.sort(sim.simulate(w).plans[0][1])
+    frozen = np.zeros(len(prob.passes), dtype=bool)
+    rep, rep_of = replacements(prob, plan, frozen, prob.weight[prob.opps.task])
+    o = prob.opps
+    assert len(rep) >= 3 and set(rep_of.tolist()) <= set(plan.tolist()) and len(set(rep_of.tolist())) == len(rep)
+    assert (o.pass_id[rep] == o.pass_id[rep_of]).all() and not np.isin(o.task[rep], o.task[plan]).any()
+    assert len(set(o.task[rep].tolist())) == len(rep)
+    for k in range(len(rep)):  # each fits in its primary's place (the rest of the plan as it is)
+        swapped = np.sort(np.r_[plan[plan != rep_of[k]], rep[k]])
+        assert validate(prob.fleet, sim.planner.schedule(swapped), prob.geo).valid
+    for clear, replaced in ((False, True), (True, False)):
+        world = dataclasses.replace(w, clear=np.where(np.isin(np.arange(len(w.clear)), plan), clear, True))
+        sent = Sent(prim=plan, alt=rep, alt_of=rep_of)
+        execute(day, world, sent, math.inf, Onboard(onboard_test(prob, slews=True), ahead=True))
+        done = np.asarray(sent.done)
+        assert (len(sent.taken) > 0) == replaced and len(done) == len(plan)
+        skipped = set(plan.tolist()) - set(done.tolist())
+        assert skipped == {int(rep_of[list(rep).index(a)]) for a in sent.taken}
+        assert validate(prob.fleet, sim.planner.schedule(np.sort(done)), prob.geo).valid
+    sim.close()
+
+
+@pytest.mark.parametrize("onboard", ["none", "rule", "lookahead"])
+def test_every_execution_is_valid_with_and_without_an_onboard_rule(clustered, onboard):
     sim = Simulation.of(clustered, SimulateConfig(planner="ev-replan", onboard=onboard, rounds=3, time_limit=60.0))
     for index in range(2):
         r = sim.run(index)
         assert r["valid"] is True and r["served"] <= r["bound"] + 1e-12
-        assert onboard == "rule" or r["alternates_taken"] == 0
+        assert onboard != "none" or r["alternates_taken"] == 0
     sim.close()
 
 

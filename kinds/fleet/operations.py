@@ -32,9 +32,10 @@ from eosp.kinds.fleet.config import FleetConfig
 from eosp.kinds.fleet.problem import Problem, opportunity_values
 from eosp.kinds.fleet.replan import Replanner
 from eosp.kinds.fleet.solve import Start, frozen_passes
-from eosp.ops.simulate import Day, Knowledge, Plan, simulate
+from eosp.ops.simulate import Day, Knowledge, Onboard, Plan, simulate
 
 PLANNERS = ("plan-once", "replan", "ev-replan")
+ONBOARD = ("none", "rule", "lookahead")
 RUN_KIND = "eosp-simulation"
 MEANS = ("served", "served_catalogue", "served_urgent", "bound", "regret", "cloud_lost", "urgent_latency_h", "churn",
          "conflict_free_bound", "clairvoyant_schedule", "clairvoyant_gap")
@@ -61,9 +62,12 @@ class SimulateConfig:
     warm: bool = True
     """Keep the solver's prices and master columns from one planning call to the next (false: every call starts
     cold, as a separate solve would)."""
-    onboard: str = choice("none", "none", "rule")
-    """rule: a satellite that finds its target cloudy takes the alternate sent for it (each plan sends one per gap
-    between primaries that fits there and with the battery); none: it flies what it was sent."""
+    onboard: str = choice("none", *ONBOARD)
+    """rule: a satellite that finds its target cloudy as it acquires it takes the alternate sent for it after it
+    (each plan sends one per gap between primaries that fits there and with the battery); lookahead: a detector
+    looking ahead (proposed, not flown) sees the target cloudy before the slew, and the satellite takes the
+    replacement sent for it in its place (each plan sends, per primary, the most valuable opportunity that fits
+    there instead) where its slews and battery hold; none: it flies what it was sent."""
     bound_time_limit: float = ranged(30.0, 0.0, WEEK_S)
     """Seconds of the fleet solver's clairvoyant solve of each realization, for its bound (0: the conflict-free
     clairvoyant bound alone); with --rounds, that many price rounds instead."""
@@ -80,7 +84,7 @@ class FleetPlanner:
     name: str
     prob: Problem
     cfg: FleetConfig
-    alternates: bool = False  # with each plan, alternates for the onboard rule (:func:`alternates`)
+    onboard: str = "none"  # with each plan, what the onboard rule may take: alternates (rule), replacements (lookahead)
     warm: bool = True  # prices and columns kept from call to call (else every call starts cold)
 
     def __post_init__(self) -> None:
@@ -114,8 +118,9 @@ class FleetPlanner:
         sol = self.replanner.solve(Start(self.schedule(know.rows), until, t, claim_frozen=False))
         rows = self.rows(sol.schedule)
         alt = alt_of = np.zeros(0, np.int64)
-        if self.alternates:
-            alt, alt_of = alternates(prob, rows, frozen, np.where(frozen[o.pass_id], 0.0, per_opp))
+        if self.onboard != "none":
+            pick = replacements if self.onboard == "lookahead" else alternates
+            alt, alt_of = pick(prob, rows, frozen, np.where(frozen[o.pass_id], 0.0, per_opp))
         compute = time.perf_counter() - t
         info = {"objective": sol.info.get("objective_value"), "bound": sol.bound, "rounds": sol.info["rounds"]}
         return Plan(rows, compute, info, alt, alt_of)
@@ -221,11 +226,14 @@ def alternates(prob: Problem, rows: np.ndarray, frozen: np.ndarray, value: np.nd
     return np.asarray(out_alt, dtype=np.int64), np.asarray(out_of, dtype=np.int64)
 
 
-def battery_test(prob: Problem):
-    """The onboard rule's test (:func:`eosp.ops.simulate.execute`): whether satellite k's battery holds over a
-    timeline of opportunity rows (the checker's battery model, :mod:`eosp.fleet.battery`)."""
+def onboard_test(prob: Problem, slews: bool = False):
+    """The onboard rule's test (:class:`eosp.ops.simulate.Onboard`): whether satellite k can fly a timeline of
+    opportunity rows: its battery holds (the checker's battery model, :mod:`eosp.fleet.battery`) and, with
+    `slews`, no two overlap and every slew plus settling fits before its observation (the checker's rules,
+    :mod:`eosp.fleet.slew`; the rule after acquisition needs no such test: its alternates fit by construction)."""
     from eosp.fleet.battery import SunCache
     from eosp.fleet.battery import simulate as battery
+    from eosp.fleet.slew import MARGIN_S
     from eosp.fleet.timeline import intervals, timeline
 
     o, los = prob.opps, prob.los
@@ -236,9 +244,66 @@ def battery_test(prob: Problem):
     def holds(k: int, rows: np.ndarray) -> bool:
         rows = rows[np.lexsort((end[rows], start[rows]))]
         tl = timeline(los, k, o.task[rows].astype(np.int64), start[rows], end[rows])
+        if slews and len(rows):
+            st, en = start[rows], end[rows]
+            to = np.asarray(tl.los0, dtype=np.float64).reshape(-1, 3)
+            frm = np.empty_like(to)
+            frm[0] = los.nadir(k, st[0])
+            frm[1:] = np.asarray(tl.los1[:-1], dtype=np.float64).reshape(-1, 3)
+            gap = st - np.r_[0.0, en[:-1]]
+            if (gap < 0).any() or (los.need_s(k, frm, to) + MARGIN_S > gap).any():
+                return False
         return battery(prob.fleet, sun, k, *intervals(los, tl, k)).ok
 
     return holds
+
+
+def replacements(prob: Problem, rows: np.ndarray, frozen: np.ndarray,
+                 value: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Replacements for the onboard rule that looks ahead (:class:`eosp.ops.simulate.Onboard`) of a plan's
+    primaries `rows` in the passes it may change (not `frozen`): for each primary, the most valuable opportunity
+    (`value`, per opportunity; 0: never) of the same satellite and pass that fits in its place, between the
+    primaries before and after it (slews and settling, no overlap: :func:`eosp.fleet.timeline.fits` with the
+    primary removed), of a task no primary holds and no other replacement took.  The battery is the satellite's
+    to test when it decides (a replacement changes the slews around it).  Returns the replacements and their
+    primaries."""
+    from eosp.fleet.timeline import Arrays, Candidates, fits, timeline
+
+    o, los = prob.opps, prob.los
+    step = float(prob.fleet.horizon.action_step_s)
+    start = o.start.astype(np.float64) * step
+    end = start + prob.fleet.tasks.duration_s[o.task]
+    task = o.task.astype(np.int64)
+    taken = np.zeros(len(prob.weight), dtype=bool)
+    taken[task[rows]] = True
+    out_alt, out_of = [], []
+    live = ~frozen[o.pass_id] & (value > 0)
+    for k in np.unique(o.satellite[rows[~frozen[o.pass_id[rows]]]]).tolist():
+        mine = rows[o.satellite[rows] == k]
+        mine = mine[np.lexsort((end[mine], start[mine]))]
+        cand = np.flatnonzero(live & (o.satellite == k) & ~taken[task])
+        if not len(cand):
+            continue
+        tl = Arrays.of(timeline(los, k, task[mine], start[mine], end[mine]))
+        pos = np.searchsorted(tl.start, start[cand], side="right")
+        c = Candidates(start[cand], end[cand], los.los(k, task[cand], start[cand]), los.los(k, task[cand], end[cand]))
+        # the primary replaced: the one after the insertion point (b=1) or the one before it (a=1)
+        got: dict[int, int] = {}
+        for a, b, at in ((0, 1, pos), (1, 0, pos - 1)):
+            inside = (at >= 0) & (at < len(mine))
+            prim = mine[np.clip(at, 0, len(mine) - 1)]
+            ok = inside & (o.pass_id[prim] == o.pass_id[cand]) & ~frozen[o.pass_id[prim]]
+            ok &= fits(los, k, tl, c, pos, a, b)
+            for i in np.flatnonzero(ok)[np.argsort(-value[cand[ok]], kind="stable")].tolist():
+                p_, r_ = int(prim[i]), int(cand[i])
+                if not taken[task[r_]] and (p_ not in got or value[r_] > value[got[p_]]):
+                    if p_ in got:
+                        taken[task[got[p_]]] = False
+                    got[p_] = r_
+                    taken[task[r_]] = True
+        out_of += list(got)
+        out_alt += list(got.values())
+    return np.asarray(out_alt, dtype=np.int64), np.asarray(out_of, dtype=np.int64)
 
 
 @dataclass
@@ -254,7 +319,7 @@ class Simulation:
     @classmethod
     def of(cls, scen, cfg: SimulateConfig) -> Simulation:
         prob = Problem.build(scen.fleet, scen.opps)
-        planner = FleetPlanner(cfg.planner, prob, cfg.solver(), alternates=cfg.onboard == "rule", warm=cfg.warm)
+        planner = FleetPlanner(cfg.planner, prob, cfg.solver(), onboard=cfg.onboard, warm=cfg.warm)
         return cls(scen, cfg, Day.of(scen, prob.pass_time[:, 0]), planner)
 
     def run(self, index: int) -> dict:
@@ -305,7 +370,8 @@ class Simulation:
     def simulate(self, world, check=None):
         """The planner, reset, through `world` (:func:`eosp.ops.simulate.simulate`)."""
         self.planner.reset()
-        onboard = battery_test(self.planner.prob) if self.cfg.onboard == "rule" else None
+        ahead = self.cfg.onboard == "lookahead"
+        onboard = None if self.cfg.onboard == "none" else Onboard(onboard_test(self.planner.prob, ahead), ahead)
         return simulate(self.day, world, self.planner, self.cfg.time_limit, check, onboard)
 
     def close(self) -> None:
