@@ -84,6 +84,32 @@ def sigint_as_a_terminal_gives() -> None:
     signal.signal(signal.SIGINT, signal.SIG_DFL)
 
 
+def sigint_to_group(p, wait_s: float = 30.0) -> tuple[int, str, float]:
+    """Send SIGINT to the process group of `p` (started with ``start_new_session=True``), as a terminal's Ctrl-C
+    does; (exit status, stderr, seconds from the signal until every process of the group is gone, at most
+    `wait_s` after the exit); a group still running 60 s after the signal is killed: (-9, stderr, inf)."""
+    import os
+    import signal
+    import subprocess
+    import time
+
+    t0 = time.monotonic()
+    os.killpg(p.pid, signal.SIGINT)
+    try:
+        _, err = p.communicate(timeout=60)
+    except subprocess.TimeoutExpired:
+        os.killpg(p.pid, signal.SIGKILL)
+        _, err = p.communicate()
+        return -9, err, float("inf")
+    while time.monotonic() - t0 < wait_s:  # the workers too
+        try:
+            os.killpg(p.pid, 0)
+        except ProcessLookupError:
+            break
+        time.sleep(0.05)
+    return p.returncode, err, time.monotonic() - t0
+
+
 @pytest.fixture(scope="session")
 def chromium():
     """The path of a headless Chromium for the page tests (tests/browser.py finds or installs one); the test is

@@ -1433,11 +1433,10 @@ def _interrupt(argv: list, after: float | Path, cwd: Path | None = None) -> tupl
     """Run `argv` in its own process group, send SIGINT to the group (as a terminal's Ctrl-C does) after `after`
     seconds, or once the file `after` exists (at most 180 s); (exit status, stderr, seconds from the signal to the
     exit of every process of the group)."""
-    import signal
     import subprocess
     import time
 
-    from tests.conftest import sigint_as_a_terminal_gives
+    from tests.conftest import sigint_as_a_terminal_gives, sigint_to_group
 
     p = subprocess.Popen([str(a) for a in argv], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                          start_new_session=True, cwd=cwd, preexec_fn=sigint_as_a_terminal_gives)
@@ -1447,21 +1446,7 @@ def _interrupt(argv: list, after: float | Path, cwd: Path | None = None) -> tupl
             time.sleep(0.2)
     else:
         time.sleep(after)
-    t0 = time.monotonic()
-    os.killpg(p.pid, signal.SIGINT)
-    try:
-        _, err = p.communicate(timeout=60)
-    except subprocess.TimeoutExpired:
-        os.killpg(p.pid, signal.SIGKILL)
-        _, err = p.communicate()
-        return -9, err, float("inf")
-    while time.monotonic() - t0 < 30:  # the workers too
-        try:
-            os.killpg(p.pid, 0)
-        except ProcessLookupError:
-            break
-        time.sleep(0.05)
-    return p.returncode, err, time.monotonic() - t0
+    return sigint_to_group(p)
 
 
 def test_ctrl_c_of_the_fleet_solver_with_workers(tmp_path):

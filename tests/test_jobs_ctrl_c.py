@@ -6,8 +6,6 @@ it completed (checkpoints), end its MLflow run as KILLED, and a sweep must resum
 
 from __future__ import annotations
 
-import os
-import signal
 import sqlite3
 import subprocess
 import sys
@@ -19,7 +17,7 @@ import pytest
 from eosp.fleet.generate import FleetGenConfig, generate
 from eosp.fleet.io import write_fleet
 from eosp.fleet.opportunities import compute
-from tests.conftest import sigint_as_a_terminal_gives
+from tests.conftest import sigint_as_a_terminal_gives, sigint_to_group
 
 pytestmark = pytest.mark.ray
 
@@ -59,23 +57,10 @@ def interrupt(argv: list, marker: str, delay: float, cwd: Path) -> tuple[int, li
             time.sleep(0.05)
         assert p.poll() is None, f"the job ended before {marker!r}: {p.communicate()[1][-2000:]}"
         time.sleep(delay)
-        t1 = time.monotonic()
-        os.killpg(p.pid, signal.SIGINT)
-        try:
-            _, err = p.communicate(timeout=60)
-        except subprocess.TimeoutExpired:
-            os.killpg(p.pid, signal.SIGKILL)
-            _, err = p.communicate()
-            return -9, [err], float("inf"), log.read_text()
-        while time.monotonic() - t1 < 60:  # Ray's processes too
-            try:
-                os.killpg(p.pid, 0)
-            except ProcessLookupError:
-                break
-            time.sleep(0.05)
+        rc, err, took = sigint_to_group(p, wait_s=60.0)  # Ray's processes too
     assert "Traceback" not in err, err[-3000:]
     prog = Path(str(argv[2]).rsplit(".", 1)[-1]).name + ".py:"
-    return p.returncode, [x for x in err.splitlines() if x.startswith(prog)], time.monotonic() - t1, log.read_text()
+    return rc, [x for x in err.splitlines() if x.startswith(prog)], took, log.read_text()
 
 
 def status_of(uri_db: Path, run_name: str) -> str | None:

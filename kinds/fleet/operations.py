@@ -169,6 +169,34 @@ class FleetPlanner:
                                                    sched.start_us.tolist())), dtype=np.int64)
 
 
+def _times(prob: Problem) -> tuple[np.ndarray, np.ndarray]:
+    """Each opportunity's start and end (seconds from the horizon's start)."""
+    o = prob.opps
+    start = o.start.astype(np.float64) * float(prob.fleet.horizon.action_step_s)
+    return start, start + prob.fleet.tasks.duration_s[o.task]
+
+
+def _open_candidates(prob: Problem, rows: np.ndarray, frozen: np.ndarray, value: np.ndarray, taken: np.ndarray):
+    """For each satellite with primaries (`rows`) in passes the plan may change: (satellite, its primaries in time
+    order, its opportunities worth something (`value` > 0) in those passes of a task not `taken`, the primaries'
+    timeline, where each candidate would go in it).  `taken` is read per satellite: what the caller marks taken
+    while it handles one satellite is no candidate of the next."""
+    from eosp.fleet.timeline import Arrays, timeline
+
+    o, los = prob.opps, prob.los
+    start, end = _times(prob)
+    task = o.task.astype(np.int64)
+    live = ~frozen[o.pass_id] & (value > 0)
+    for k in np.unique(o.satellite[rows[~frozen[o.pass_id[rows]]]]).tolist():
+        mine = rows[o.satellite[rows] == k]
+        mine = mine[np.lexsort((end[mine], start[mine]))]
+        cand = np.flatnonzero(live & (o.satellite == k) & ~taken[task])
+        if not len(cand):
+            continue
+        tl = Arrays.of(timeline(los, k, task[mine], start[mine], end[mine]))
+        yield k, mine, cand, tl, np.searchsorted(tl.start, start[cand], side="right")
+
+
 def alternates(prob: Problem, rows: np.ndarray, frozen: np.ndarray, value: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Alternates for the onboard rule (:func:`eosp.ops.simulate.execute`) of a plan's primaries `rows` in the
     passes it may change (not `frozen`): after each primary, the most valuable opportunity (`value`, per
@@ -180,26 +208,16 @@ def alternates(prob: Problem, rows: np.ndarray, frozen: np.ndarray, value: np.nd
     with every alternate in, the battery held on the ground.  Returns the alternates and their primaries."""
     from eosp.fleet.battery import SunCache
     from eosp.fleet.battery import simulate as battery
-    from eosp.fleet.timeline import Arrays, Candidates, fits, intervals, timeline
+    from eosp.fleet.timeline import Candidates, fits, intervals, timeline
 
     o, los = prob.opps, prob.los
-    step = float(prob.fleet.horizon.action_step_s)
-    start = o.start.astype(np.float64) * step
-    end = start + prob.fleet.tasks.duration_s[o.task]
+    start, end = _times(prob)
     task = o.task.astype(np.int64)
     sun = prob.sun or SunCache(prob.geo)
     taken = np.zeros(len(prob.weight), dtype=bool)
     taken[task[rows]] = True
     out_alt, out_of = [], []
-    live = ~frozen[o.pass_id] & (value > 0)
-    for k in np.unique(o.satellite[rows[~frozen[o.pass_id[rows]]]]).tolist():
-        mine = rows[o.satellite[rows] == k]
-        mine = mine[np.lexsort((end[mine], start[mine]))]
-        cand = np.flatnonzero(live & (o.satellite == k) & ~taken[task])
-        if not len(cand):
-            continue
-        tl = Arrays.of(timeline(los, k, task[mine], start[mine], end[mine]))
-        pos = np.searchsorted(tl.start, start[cand], side="right")
+    for k, mine, cand, tl, pos in _open_candidates(prob, rows, frozen, value, taken):
         prev = mine[np.maximum(pos - 1, 0)]
         ok = (pos > 0) & (o.pass_id[prev] == o.pass_id[cand]) & ~frozen[o.pass_id[prev]]
         cand, pos, prev = cand[ok], pos[ok], prev[ok]
@@ -237,8 +255,7 @@ def onboard_test(prob: Problem, slews: bool = False):
     from eosp.fleet.timeline import intervals, timeline
 
     o, los = prob.opps, prob.los
-    start = o.start.astype(np.float64) * float(prob.fleet.horizon.action_step_s)
-    end = start + prob.fleet.tasks.duration_s[o.task]
+    start, end = _times(prob)
     sun = prob.sun or SunCache(prob.geo)
 
     def holds(k: int, rows: np.ndarray) -> bool:
@@ -267,25 +284,15 @@ def replacements(prob: Problem, rows: np.ndarray, frozen: np.ndarray,
     primary removed), of a task no primary holds and no other replacement took.  The battery is the satellite's
     to test when it decides (a replacement changes the slews around it).  Returns the replacements and their
     primaries."""
-    from eosp.fleet.timeline import Arrays, Candidates, fits, timeline
+    from eosp.fleet.timeline import Candidates, fits
 
     o, los = prob.opps, prob.los
-    step = float(prob.fleet.horizon.action_step_s)
-    start = o.start.astype(np.float64) * step
-    end = start + prob.fleet.tasks.duration_s[o.task]
+    start, end = _times(prob)
     task = o.task.astype(np.int64)
     taken = np.zeros(len(prob.weight), dtype=bool)
     taken[task[rows]] = True
     out_alt, out_of = [], []
-    live = ~frozen[o.pass_id] & (value > 0)
-    for k in np.unique(o.satellite[rows[~frozen[o.pass_id[rows]]]]).tolist():
-        mine = rows[o.satellite[rows] == k]
-        mine = mine[np.lexsort((end[mine], start[mine]))]
-        cand = np.flatnonzero(live & (o.satellite == k) & ~taken[task])
-        if not len(cand):
-            continue
-        tl = Arrays.of(timeline(los, k, task[mine], start[mine], end[mine]))
-        pos = np.searchsorted(tl.start, start[cand], side="right")
+    for k, mine, cand, tl, pos in _open_candidates(prob, rows, frozen, value, taken):
         c = Candidates(start[cand], end[cand], los.los(k, task[cand], start[cand]), los.los(k, task[cand], end[cand]))
         # the primary replaced: the one after the insertion point (b=1) or the one before it (a=1)
         got: dict[int, int] = {}
