@@ -21,9 +21,9 @@ def cmd_simulate(kind, ns: argparse.Namespace) -> int:  # noqa: ARG001 - the fle
     out = Path(ns.out)
     scen = scenario.read(ns.problem)  # a bad scenario is refused before anything is written
     done = prior_realizations(out, ns.problem, cfg, resume=ns.resume, overwrite=ns.overwrite)
+    sim = Simulation.of(scen, cfg)  # a bad onboard policy is refused here, before anything is written
     out.mkdir(parents=True, exist_ok=True)
     have = {r["realization"] for r in done}
-    sim = Simulation.of(scen, cfg)
     try:
         for index in range(cfg.realizations):
             if index not in have:

@@ -35,10 +35,11 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass, field
-from typing import Callable, Protocol
+from typing import Generator, Protocol
 
 import numpy as np
 
+from eosp.ops.onboard import RECENT, Decision, Onboard
 from eosp.ops.stations import Contacts
 from eosp.ops.world import World
 
@@ -146,25 +147,23 @@ class Sent:
     taken: set[int] = field(default_factory=set)
     until: float = 0.0
     ahead: bool = False  # the alternates are replacements, taken in their primary's place (Onboard.ahead)
-
-
-@dataclass(frozen=True)
-class Onboard:
-    """What a satellite decides on its own (docs/operations.md, "The onboard rule"): `test(k, rows)` says whether
-    satellite k can fly a timeline of opportunity rows (its battery, and with `ahead` its slews); `ahead` False:
-    the target is found cloudy as it is acquired (Phi-Sat-1's detection, flown) and the alternate sent for it is
-    taken after it; True: a detector looking ahead sees the next target cloudy before the satellite slews to it
-    (proposed, not flown), the primary is skipped and the replacement sent for it is taken in its place."""
-
-    test: Callable[[int, np.ndarray], bool]
-    ahead: bool = False
+    uploads: list[tuple[int, np.ndarray]] = field(default_factory=list)  # (call, upload time per satellite)
+    plans: dict[int, np.ndarray] = field(default_factory=dict)  # per call: its plan's primaries (every satellite)
 
 
 def execute(day: Day, world: World, sent: Sent, t: float, onboard: Onboard | None) -> None:
+    """The satellites' work up to time `t` (:func:`executing`), each decision answered by ``onboard.choose``."""
+    _drive(executing(day, world, sent, t, onboard), onboard)
+
+
+def executing(day: Day, world: World, sent: Sent, t: float,
+              onboard: Onboard | None) -> Generator[Decision, int, None]:
     """The satellites' work up to time `t`: every primary starting before it done; with an onboard rule, a primary
-    found cloudy lets the satellite take the alternate sent for it (after the primary, or in its place when the
+    found cloudy lets the satellite take a candidate sent for it (after the primary, or in its place when the
     rule looks ahead), when its task is not one the satellite has served itself and the satellite can fly it
-    (:class:`Onboard`: what it did, the alternate, the primaries it was sent after it).  What was decided is never
+    (:class:`Onboard`: what it did, the candidate, the primaries it was sent after it).  With a chooser
+    (``onboard.choose``) each such choice among the candidates it can fly is yielded (a :class:`Decision`) and
+    answered by the index taken (-1: none); without, the first it can fly is taken.  What was decided is never
     decided again."""
     s = day.start_s
     new = sent.prim[(s[sent.prim] >= sent.until) & (s[sent.prim] < t)]
@@ -175,21 +174,53 @@ def execute(day: Day, world: World, sent: Sent, t: float, onboard: Onboard | Non
         if not onboard.ahead:
             sent.done.append(r)
         k = day.sat[r]
-        took = False
+        mine = np.asarray(sent.done, dtype=np.int64)
+        mine = mine[day.sat[mine] == k]
+        fly = []
         for a in sent.alt[sent.alt_of == r].tolist():
-            mine = np.asarray(sent.done, dtype=np.int64)
-            mine = mine[day.sat[mine] == k]
             if (world.clear[mine] & (day.task[mine] == day.task[a])).any():
                 continue  # served already, by this satellite
             later = sent.prim[(day.sat[sent.prim] == k) & (s[sent.prim] > s[a]) & (sent.prim != r)]
             if onboard.test(int(k), np.concatenate([mine, [a], later])):
-                sent.done.append(a)
-                sent.taken.add(a)
-                took = True
-                break
-        if onboard.ahead and not took:
-            sent.done.append(r)  # no replacement it can fly: the primary as sent (found cloudy)
+                fly.append(a)
+                if onboard.choose is None:
+                    break
+        took = -1
+        if fly:
+            took = 0 if onboard.choose is None else (yield _decision(day, world, sent, r, np.asarray(fly), mine))
+        if took >= 0:
+            sent.done.append(fly[took])
+            sent.taken.add(fly[took])
+        elif onboard.ahead:
+            sent.done.append(r)  # no candidate taken: the primary as sent (found cloudy)
     sent.until = max(sent.until, t)
+
+
+def _decision(day: Day, world: World, sent: Sent, r: int, cands: np.ndarray, mine: np.ndarray) -> Decision:
+    """What satellite ``day.sat[r]`` knows when it finds primary `r` cloudy (:class:`Decision`)."""
+    k, s = int(day.sat[r]), day.start_s
+    call = -1
+    for c, up in sent.uploads:
+        if up[k] <= s[r]:
+            call = c
+    later = np.zeros(len(cands))
+    if call >= 0:
+        rows = sent.plans[call]
+        for i, a in enumerate(cands.tolist()):
+            same = rows[(day.task[rows] == day.task[a]) & (s[rows] > s[a])]
+            later[i] = 1.0 - float(np.prod(1.0 - world.forecast[same, call]))
+    contact = float(day.next_contact(np.array([k]), np.array([s[r]]))[0]) - s[r]
+    return Decision(k, int(r), cands, call, later, world.clear[mine[-RECENT:]], contact)
+
+
+def _drive(gen: Generator, onboard: Onboard | None):
+    """Run a generator of decisions to its end, each answered by ``onboard.choose``; its return value."""
+    try:
+        d = next(gen)
+        while True:
+            d = gen.send(onboard.choose(d))
+    except StopIteration as stop:
+        return stop.value
 
 
 def knowledge(day: Day, world: World, sent: Sent, call: int, upload_s: np.ndarray) -> Knowledge:
@@ -238,6 +269,7 @@ class Run:
     plans: list[tuple[int, np.ndarray]] = field(default_factory=list)  # (call, the rows it answered), in order
     uploads: list[tuple[float, np.ndarray]] = field(default_factory=list)  # (call time, upload time per satellite)
     alternates_taken: set[int] = field(default_factory=set)  # the alternates the onboard rule took
+    answers: list[tuple[int, Plan]] = field(default_factory=list)  # (call, the planner's answer), in order
 
 
 def simulate(day: Day, world: World, planner: Planner, time_limit: float, check=None,
@@ -245,12 +277,20 @@ def simulate(day: Day, world: World, planner: Planner, time_limit: float, check=
     """Run `planner` through `world` (see the module docstring).  `time_limit`: the compute budget of a call (its
     plan is uploaded at the first contact after the call's time plus this); `check`: a function of the executed
     rows returning (valid, first violation or None), e.g. the fleet checker's; `onboard`: the onboard rule
-    (:class:`Onboard`; None: none, alternates are never taken)."""
+    (:class:`Onboard`; None: none, alternates are never taken), its decisions answered by ``onboard.choose``."""
+    return _drive(running(day, world, planner, time_limit, check, onboard), onboard)
+
+
+def running(day: Day, world: World, planner: Planner, time_limit: float, check=None,
+            onboard: Onboard | None = None, sent: Sent | None = None) -> Generator[Decision, int, Run]:
+    """:func:`simulate` as a generator: each onboard decision yielded and answered by the index of the candidate
+    taken (:func:`executing`); returns the :class:`Run`.  `sent`: the satellites' state to run on (a new one by
+    default; given, the caller sees what is done as it is done)."""
     n_sat = day.satellites
-    sent = Sent(ahead=onboard is not None and onboard.ahead)
-    calls, plans, uploads = [], [], []
+    sent = sent if sent is not None else Sent(ahead=onboard is not None and onboard.ahead)
+    calls, plans, uploads, answers = [], [], [], []
     for call, t in enumerate(world.calls_s.tolist()):
-        execute(day, world, sent, t, onboard)
+        yield from executing(day, world, sent, t, onboard)
         upload = day.next_contact(np.arange(n_sat), np.full(n_sat, t + time_limit))
         know = knowledge(day, world, sent, call, upload)
         wall = time.perf_counter()
@@ -259,14 +299,38 @@ def simulate(day: Day, world: World, planner: Planner, time_limit: float, check=
         if plan is None:
             continue
         plans.append((call, np.asarray(plan.rows, dtype=np.int64)))
+        answers.append((call, plan))
         uploads.append((t, upload))
+        sent.uploads.append((call, upload))
+        sent.plans[call] = np.asarray(plan.rows, dtype=np.int64)
         churn = _upload(day, sent, know, plan, upload)
         calls.append({"t_s": t, "compute_s": round(plan.compute_s, 3), "wall_s": round(wall, 3), "churn": churn,
                       "uploads": int(np.isfinite(upload).sum()), "alternates": int(len(plan.alternates)),
                       **plan.info})
-    execute(day, world, sent, math.inf, onboard)
+    yield from executing(day, world, sent, math.inf, onboard)
     done = np.asarray(sent.done, dtype=np.int64)
-    return Run(done, calls, figures(day, world, done, calls, check, len(sent.taken)), plans, uploads, sent.taken)
+    return Run(done, calls, figures(day, world, done, calls, check, len(sent.taken)), plans, uploads, sent.taken,
+               answers)
+
+
+@dataclass
+class Replayed:
+    """A planner answering each call with the plan recorded for it in another run of the same realization (the
+    ground planner not re-run: an onboard chooser's rollouts, issue 76): the recorded primaries and candidates of
+    the passes the plan may change, and in the passes it may not, what this run's ground knows (it may differ
+    from the recorded run's: other candidates taken)."""
+
+    day: Day
+    answers: dict[int, Plan]
+    name: str = "replayed"
+
+    def plan(self, know: Knowledge) -> Plan | None:
+        got = self.answers.get(know.call)
+        if got is None:
+            return None
+        rows = np.asarray(got.rows, dtype=np.int64)
+        rows = np.union1d(rows[~self.day.fixed(rows, know.upload_s)], know.rows[self.day.fixed(know.rows, know.upload_s)])
+        return Plan(rows, got.compute_s, {}, got.alternates, got.alternate_of)
 
 
 def _upload(day: Day, sent: Sent, know: Knowledge, plan: Plan, upload: np.ndarray) -> int:

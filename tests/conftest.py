@@ -38,7 +38,7 @@ def tiny():
 # cluster beside a CPU-bound worker, starve each other and make the timing-sensitive ones flaky).
 RAY_MODULES = {"test_platform", "test_platform_multinode", "test_train", "test_tune", "test_jobs_faults",
                "test_jobs_smoke", "test_overlap", "test_expert", "test_readme", "test_fleet_ray",
-               "test_train_prices"}
+               "test_train_prices", "test_train_onboard"}
 RAY_TESTS = {"test_shard_source_splits_shards_between_workers"}
 # The extended suite (marker `extended`, `make test-extended`, run by CI after `make test`): the slowest Ray tests
 # (whole services and jobs killed and resumed, multi-node clusters, training variants, the README's blocks, each

@@ -87,6 +87,7 @@ def test_a_job_reads_ctrl_c_that_a_library_made_another_error_as_ctrl_c(tmp_path
     from eosp.args import run_job
 
     mlflow.set_tracking_uri(f"sqlite:///{tmp_path / 'mlflow.db'}")
+    mlflow.set_experiment("interrupt")  # not the experiment id an earlier test of this worker left active
 
     def job(argv):
         run = mlflow.start_run(run_name="stopped")

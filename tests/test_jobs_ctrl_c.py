@@ -115,3 +115,27 @@ def test_a_sweep_stopped_with_its_trials_running_resumes(data):
     r = subprocess.run([str(a) for a in argv], capture_output=True, text=True, cwd=data, timeout=600)
     assert r.returncode == 0, r.stderr[-2000:]
     assert "resuming sweep arch" in r.stdout and "2 trials; best" in r.stdout, r.stdout[-2000:]
+
+
+def test_onboard_training_stopped_in_ppo_keeps_its_state_and_resumes(tmp_path):
+    """jobs/train_onboard.py stopped during PPO's second iteration: exit 130, one line, within 10 s; the state of
+    the first iteration kept (WORK/ppo.json); the rerun resumes after it."""
+    import json
+
+    from eosp.fleet.geometry import Geometry
+    from eosp.ops.scenario import ScenarioConfig, make
+
+    f = generate(FleetGenConfig(satellites=6, tasks=150, hours=4.0, placement="clusters", clusters=4,
+                                cluster_km=150.0, seed=6))
+    write_fleet(f, compute(f, Geometry(f)), tmp_path / "fleet")
+    make(str(tmp_path / "fleet"), ScenarioConfig(urgent_per_hour=4, cadence_h=1, seed=3), str(tmp_path / "scen"))
+    argv = [sys.executable, Path(__file__).resolve().parents[1] / "jobs" / "train_onboard.py",
+            "--scenarios", tmp_path / "scen", "--work", tmp_path / "work", "--out", tmp_path / "policy",
+            "--realizations", 3, "--validation", 1, "--time-limit", 0.5, "--epochs", 3, "--train-batch-size", 64,
+            "--runners", 1, "--iterations", 3, "--ray.num-cpus", 2, "--mlflow-uri", f"sqlite:///{tmp_path / 'm.db'}"]
+    rc, ours, took, _ = interrupt(argv, "PPO iteration 1", 0.5, tmp_path)
+    assert rc == 130 and len(ours) == 1 and "interrupted" in ours[0], (rc, ours)
+    assert took < 10.0, took
+    assert json.loads((tmp_path / "work" / "ppo.json").read_text())["iteration"] >= 1
+    r = subprocess.run([str(a) for a in argv], capture_output=True, text=True, cwd=tmp_path, timeout=600)
+    assert r.returncode == 0 and "resuming after PPO iteration" in r.stdout, r.stderr[-2000:]

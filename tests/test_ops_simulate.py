@@ -272,8 +272,9 @@ def test_the_onboard_rule_takes_alternates_that_keep_every_timeline_valid(cluste
     import dataclasses
 
     from eosp.fleet.check import validate
-    from eosp.kinds.fleet.operations import alternates, onboard_test
-    from eosp.ops.simulate import Onboard, Sent, execute
+    from eosp.kinds.fleet.candidates import alternates, onboard_test
+    from eosp.ops.onboard import Onboard
+    from eosp.ops.simulate import Sent, execute
 
     sim = Simulation.of(clustered, SimulateConfig(planner="replan", rounds=3, time_limit=60.0))
     prob, day = sim.planner.prob, sim.day
@@ -303,8 +304,9 @@ def test_the_rule_that_looks_ahead_replaces_cloudy_primaries_where_it_can_fly_th
     import dataclasses
 
     from eosp.fleet.check import validate
-    from eosp.kinds.fleet.operations import onboard_test, replacements
-    from eosp.ops.simulate import Onboard, Sent, execute
+    from eosp.kinds.fleet.candidates import onboard_test, replacements
+    from eosp.ops.onboard import Onboard
+    from eosp.ops.simulate import Sent, execute
 
     sim = Simulation.of(clustered, SimulateConfig(planner="replan", rounds=3, time_limit=60.0))
     prob, day = sim.planner.prob, sim.day

@@ -30,12 +30,15 @@ from eosp.config import WEEK_S, choice, ranged
 from eosp.fleet.model import Schedule
 from eosp.kinds.fleet.config import FleetConfig
 from eosp.kinds.fleet.problem import Problem, opportunity_values
+from eosp.kinds.fleet.candidates import alternates, onboard_test, replacements
 from eosp.kinds.fleet.replan import Replanner
 from eosp.kinds.fleet.solve import Start, frozen_passes
-from eosp.ops.simulate import Day, Knowledge, Onboard, Plan, simulate
+from eosp.ops.onboard import Context, Onboard, ScoreRule
+from eosp.ops.simulate import Day, Knowledge, Plan, simulate
 
 PLANNERS = ("plan-once", "replan", "ev-replan")
 ONBOARD = ("none", "rule", "lookahead")
+CHOOSERS = ("first", "score", "policy")
 RUN_KIND = "eosp-simulation"
 MEANS = ("served", "served_catalogue", "served_urgent", "bound", "regret", "cloud_lost", "urgent_latency_h", "churn",
          "conflict_free_bound", "clairvoyant_schedule", "clairvoyant_gap")
@@ -68,6 +71,20 @@ class SimulateConfig:
     looking ahead (proposed, not flown) sees the target cloudy before the slew, and the satellite takes the
     replacement sent for it in its place (each plan sends, per primary, the most valuable opportunity that fits
     there instead) where its slews and battery hold; none: it flies what it was sent."""
+    candidates: int = ranged(1, 1, 8)
+    """With --onboard lookahead: the replacements each plan sends per primary, the most valuable first (1: one,
+    each task once: the rule's; more: a task may be sent for several primaries, the satellite's chooser picks)."""
+    choose: str = choice("first", *CHOOSERS)
+    """How a satellite picks among the candidates it can fly: first: the first in the order sent (the rule);
+    score: the highest value x (1 - gamma x later) x (1 - beta x cloud correlation with the primary just seen)
+    (docs/operations.md); policy: the learned onboard policy (--policy)."""
+    beta: float = ranged(0.0, 0.0, 1.0)
+    """--choose score: how much a candidate's cloud correlation with the primary found cloudy discounts it."""
+    gamma: float = ranged(0.0, 0.0, 1.0)
+    """--choose score: how much the chance that another primary serves the candidate's task later discounts it."""
+    policy: str = ""
+    """--choose policy: a directory with the onboard policy's weights (empty: the shipped one,
+    models/pretrained-agents/onboard)."""
     bound_time_limit: float = ranged(30.0, 0.0, WEEK_S)
     """Seconds of the fleet solver's clairvoyant solve of each realization, for its bound (0: the conflict-free
     clairvoyant bound alone); with --rounds, that many price rounds instead."""
@@ -86,6 +103,7 @@ class FleetPlanner:
     cfg: FleetConfig
     onboard: str = "none"  # with each plan, what the onboard rule may take: alternates (rule), replacements (lookahead)
     warm: bool = True  # prices and columns kept from call to call (else every call starts cold)
+    candidates: int = 1  # replacements sent per primary (lookahead)
 
     def __post_init__(self) -> None:
         if self.name not in PLANNERS:
@@ -117,10 +135,17 @@ class FleetPlanner:
         t = time.perf_counter()
         sol = self.replanner.solve(Start(self.schedule(know.rows), until, t, claim_frozen=False))
         rows = self.rows(sol.schedule)
+        # the frozen passes as the ground knows them: a schedule holds a task once, and a task acquired twice
+        # there (two replacements taken before the ground knew of either) is still what was done
+        kept = know.rows[frozen[o.pass_id[know.rows]]]
+        rows = np.union1d(rows[~frozen[o.pass_id[rows]]], kept)
         alt = alt_of = np.zeros(0, np.int64)
         if self.onboard != "none":
-            pick = replacements if self.onboard == "lookahead" else alternates
-            alt, alt_of = pick(prob, rows, frozen, np.where(frozen[o.pass_id], 0.0, per_opp))
+            value = np.where(frozen[o.pass_id], 0.0, per_opp)
+            if self.onboard == "lookahead":
+                alt, alt_of = replacements(prob, rows, frozen, value, self.candidates)
+            else:
+                alt, alt_of = alternates(prob, rows, frozen, value)
         compute = time.perf_counter() - t
         info = {"objective": sol.info.get("objective_value"), "bound": sol.bound, "rounds": sol.info["rounds"]}
         return Plan(rows, compute, info, alt, alt_of)
@@ -169,150 +194,6 @@ class FleetPlanner:
                                                    sched.start_us.tolist())), dtype=np.int64)
 
 
-def _times(prob: Problem) -> tuple[np.ndarray, np.ndarray]:
-    """Each opportunity's start and end (seconds from the horizon's start)."""
-    o = prob.opps
-    start = o.start.astype(np.float64) * float(prob.fleet.horizon.action_step_s)
-    return start, start + prob.fleet.tasks.duration_s[o.task]
-
-
-def _open_candidates(prob: Problem, rows: np.ndarray, frozen: np.ndarray, value: np.ndarray, taken: np.ndarray):
-    """For each satellite with primaries (`rows`) in passes the plan may change: (satellite, its primaries in time
-    order, its opportunities worth something (`value` > 0) in those passes of a task not `taken`, the primaries'
-    timeline, where each candidate would go in it).  `taken` is read per satellite: what the caller marks taken
-    while it handles one satellite is no candidate of the next."""
-    from eosp.fleet.timeline import Arrays, timeline
-
-    o, los = prob.opps, prob.los
-    start, end = _times(prob)
-    task = o.task.astype(np.int64)
-    live = ~frozen[o.pass_id] & (value > 0)
-    for k in np.unique(o.satellite[rows[~frozen[o.pass_id[rows]]]]).tolist():
-        mine = rows[o.satellite[rows] == k]
-        mine = mine[np.lexsort((end[mine], start[mine]))]
-        cand = np.flatnonzero(live & (o.satellite == k) & ~taken[task])
-        if not len(cand):
-            continue
-        tl = Arrays.of(timeline(los, k, task[mine], start[mine], end[mine]))
-        yield k, mine, cand, tl, np.searchsorted(tl.start, start[cand], side="right")
-
-
-def alternates(prob: Problem, rows: np.ndarray, frozen: np.ndarray, value: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Alternates for the onboard rule (:func:`eosp.ops.simulate.execute`) of a plan's primaries `rows` in the
-    passes it may change (not `frozen`): after each primary, the most valuable opportunity (`value`, per
-    opportunity; 0: never) of the same satellite and pass that fits between it and the next primary (the slew and
-    settling from it and to the next, no overlap: the checker's rules, :func:`eosp.fleet.timeline.fits`), of a
-    task no primary holds and no other alternate took; then, per satellite, alternates dropped from the least
-    valuable until its battery holds with all of them.  Why one per gap: taken or not, every sequence the
-    satellite can then fly (a primary, perhaps its alternate, the next primary) is one the checker accepts, and
-    with every alternate in, the battery held on the ground.  Returns the alternates and their primaries."""
-    from eosp.fleet.battery import SunCache
-    from eosp.fleet.battery import simulate as battery
-    from eosp.fleet.timeline import Candidates, fits, intervals, timeline
-
-    o, los = prob.opps, prob.los
-    start, end = _times(prob)
-    task = o.task.astype(np.int64)
-    sun = prob.sun or SunCache(prob.geo)
-    taken = np.zeros(len(prob.weight), dtype=bool)
-    taken[task[rows]] = True
-    out_alt, out_of = [], []
-    for k, mine, cand, tl, pos in _open_candidates(prob, rows, frozen, value, taken):
-        prev = mine[np.maximum(pos - 1, 0)]
-        ok = (pos > 0) & (o.pass_id[prev] == o.pass_id[cand]) & ~frozen[o.pass_id[prev]]
-        cand, pos, prev = cand[ok], pos[ok], prev[ok]
-        if not len(cand):
-            continue
-        c = Candidates(start[cand], end[cand], los.los(k, task[cand], start[cand]), los.los(k, task[cand], end[cand]))
-        ok = fits(los, k, tl, c, pos)
-        cand, prev = cand[ok], prev[ok]
-        got: dict[int, int] = {}
-        for i in np.argsort(-value[cand], kind="stable").tolist():  # the most valuable first, one per gap and task
-            if prev[i] not in got and not taken[task[cand[i]]]:
-                got[int(prev[i])] = int(cand[i])
-                taken[task[cand[i]]] = True
-        alt = sorted(got.items(), key=lambda kv: value[kv[1]])  # the least valuable first: dropped first
-        while alt:
-            both = np.concatenate([mine, [a for _, a in alt]])
-            both = both[np.lexsort((end[both], start[both]))]
-            tlb = timeline(los, k, task[both], start[both], end[both])
-            if battery(prob.fleet, sun, k, *intervals(los, tlb, k)).ok:
-                break
-            alt = alt[1:]
-        out_of += [p for p, _ in alt]
-        out_alt += [a for _, a in alt]
-    return np.asarray(out_alt, dtype=np.int64), np.asarray(out_of, dtype=np.int64)
-
-
-def onboard_test(prob: Problem, slews: bool = False):
-    """The onboard rule's test (:class:`eosp.ops.simulate.Onboard`): whether satellite k can fly a timeline of
-    opportunity rows: its battery holds (the checker's battery model, :mod:`eosp.fleet.battery`) and, with
-    `slews`, no two overlap and every slew plus settling fits before its observation (the checker's rules,
-    :mod:`eosp.fleet.slew`; the rule after acquisition needs no such test: its alternates fit by construction)."""
-    from eosp.fleet.battery import SunCache
-    from eosp.fleet.battery import simulate as battery
-    from eosp.fleet.slew import MARGIN_S
-    from eosp.fleet.timeline import intervals, timeline
-
-    o, los = prob.opps, prob.los
-    start, end = _times(prob)
-    sun = prob.sun or SunCache(prob.geo)
-
-    def holds(k: int, rows: np.ndarray) -> bool:
-        rows = rows[np.lexsort((end[rows], start[rows]))]
-        tl = timeline(los, k, o.task[rows].astype(np.int64), start[rows], end[rows])
-        if slews and len(rows):
-            st, en = start[rows], end[rows]
-            to = np.asarray(tl.los0, dtype=np.float64).reshape(-1, 3)
-            frm = np.empty_like(to)
-            frm[0] = los.nadir(k, st[0])
-            frm[1:] = np.asarray(tl.los1[:-1], dtype=np.float64).reshape(-1, 3)
-            gap = st - np.r_[0.0, en[:-1]]
-            if (gap < 0).any() or (los.need_s(k, frm, to) + MARGIN_S > gap).any():
-                return False
-        return battery(prob.fleet, sun, k, *intervals(los, tl, k)).ok
-
-    return holds
-
-
-def replacements(prob: Problem, rows: np.ndarray, frozen: np.ndarray,
-                 value: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Replacements for the onboard rule that looks ahead (:class:`eosp.ops.simulate.Onboard`) of a plan's
-    primaries `rows` in the passes it may change (not `frozen`): for each primary, the most valuable opportunity
-    (`value`, per opportunity; 0: never) of the same satellite and pass that fits in its place, between the
-    primaries before and after it (slews and settling, no overlap: :func:`eosp.fleet.timeline.fits` with the
-    primary removed), of a task no primary holds and no other replacement took.  The battery is the satellite's
-    to test when it decides (a replacement changes the slews around it).  Returns the replacements and their
-    primaries."""
-    from eosp.fleet.timeline import Candidates, fits
-
-    o, los = prob.opps, prob.los
-    start, end = _times(prob)
-    task = o.task.astype(np.int64)
-    taken = np.zeros(len(prob.weight), dtype=bool)
-    taken[task[rows]] = True
-    out_alt, out_of = [], []
-    for k, mine, cand, tl, pos in _open_candidates(prob, rows, frozen, value, taken):
-        c = Candidates(start[cand], end[cand], los.los(k, task[cand], start[cand]), los.los(k, task[cand], end[cand]))
-        # the primary replaced: the one after the insertion point (b=1) or the one before it (a=1)
-        got: dict[int, int] = {}
-        for a, b, at in ((0, 1, pos), (1, 0, pos - 1)):
-            inside = (at >= 0) & (at < len(mine))
-            prim = mine[np.clip(at, 0, len(mine) - 1)]
-            ok = inside & (o.pass_id[prim] == o.pass_id[cand]) & ~frozen[o.pass_id[prim]]
-            ok &= fits(los, k, tl, c, pos, a, b)
-            for i in np.flatnonzero(ok)[np.argsort(-value[cand[ok]], kind="stable")].tolist():
-                p_, r_ = int(prim[i]), int(cand[i])
-                if not taken[task[r_]] and (p_ not in got or value[r_] > value[got[p_]]):
-                    if p_ in got:
-                        taken[task[got[p_]]] = False
-                    got[p_] = r_
-                    taken[task[r_]] = True
-        out_of += list(got)
-        out_alt += list(got.values())
-    return np.asarray(out_alt, dtype=np.int64), np.asarray(out_of, dtype=np.int64)
-
-
 @dataclass
 class Simulation:
     """What the realizations of one scenario share: the scenario, its problem (pass graphs built once), the day's
@@ -322,12 +203,20 @@ class Simulation:
     cfg: SimulateConfig
     day: Day
     planner: FleetPlanner
+    policy: object = None  # the onboard policy (--choose policy), read once
 
     @classmethod
     def of(cls, scen, cfg: SimulateConfig) -> Simulation:
+        """A bad policy directory is refused here, before the problem is built (one line)."""
+        policy = None
+        if cfg.onboard != "none" and cfg.choose == "policy":
+            from eosp.models.onboard import load_policy
+
+            policy = load_policy(cfg.policy or None)
         prob = Problem.build(scen.fleet, scen.opps)
-        planner = FleetPlanner(cfg.planner, prob, cfg.solver(), onboard=cfg.onboard, warm=cfg.warm)
-        return cls(scen, cfg, Day.of(scen, prob.pass_time[:, 0]), planner)
+        planner = FleetPlanner(cfg.planner, prob, cfg.solver(), onboard=cfg.onboard, warm=cfg.warm,
+                               candidates=cfg.candidates)
+        return cls(scen, cfg, Day.of(scen, prob.pass_time[:, 0]), planner, policy)
 
     def run(self, index: int) -> dict:
         """Realization `index` simulated: its figures and each planning call's record."""
@@ -377,12 +266,49 @@ class Simulation:
     def simulate(self, world, check=None):
         """The planner, reset, through `world` (:func:`eosp.ops.simulate.simulate`)."""
         self.planner.reset()
-        ahead = self.cfg.onboard == "lookahead"
-        onboard = None if self.cfg.onboard == "none" else Onboard(onboard_test(self.planner.prob, ahead), ahead)
-        return simulate(self.day, world, self.planner, self.cfg.time_limit, check, onboard)
+        return simulate(self.day, world, self.planner, self.cfg.time_limit, check, self.onboard(world))
+
+    def onboard(self, world) -> Onboard | None:
+        """The onboard rule of the configuration for realization `world` (None: none)."""
+        cfg = self.cfg
+        if cfg.onboard == "none":
+            return None
+        ahead = cfg.onboard == "lookahead"
+        test = onboard_test(self.planner.prob, ahead)
+        if cfg.choose == "first":
+            return Onboard(test, ahead)
+        ctx = onboard_context(self.scen, self.day, world)
+        if cfg.choose == "score":
+            return Onboard(test, ahead, ScoreRule(ctx, cfg.beta, cfg.gamma))
+        return Onboard(test, ahead, self.policy.chooser(ctx))
 
     def close(self) -> None:
         self.planner.close()
+
+
+def record_plans(sim: Simulation, scen_path: str, index: int, out: str | Path) -> dict:
+    """Realization `index` simulated with `sim` and its ground plans written to `out` (:mod:`eosp.ops.plan_cache`)
+    for onboard choosers' rollouts; its figures."""
+    from eosp.ops import plan_cache
+    from eosp.ops.world import realize
+
+    world = realize(sim.scen, index)
+    got = sim.simulate(world)
+    cfg = sim.cfg
+    plan_cache.write(out, got.answers, sim.day.pass_start,
+                     {"scenario": str(scen_path), "realization": index, "planner": cfg.planner,
+                      "time_limit": cfg.time_limit, "candidates": cfg.candidates, "onboard": cfg.onboard,
+                      "choose": cfg.choose, "served": got.figures["served"]})
+    return got.figures
+
+
+def onboard_context(scen, day: Day, world) -> Context:
+    """What the onboard features read of scenario `scen` and realization `world` (:class:`eosp.ops.onboard.Context`)."""
+    from eosp.ops.clouds import surface_km
+
+    t, m = scen.fleet.tasks, scen.config
+    return Context(day.weight, surface_km(t.lat_deg, t.lon_deg), day.task, day.start_s, world.forecast,
+                   float(m.cloud_length_km), float(m.cloud_tau_h) * 3600.0)
 
 
 def clairvoyant_values(prob: Problem, world) -> np.ndarray:

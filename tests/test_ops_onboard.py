@@ -1,0 +1,141 @@
+"""Onboard decisions (eosp.ops.onboard), the environment that asks them of one agent per satellite
+(eosp.envs.onboard) and the onboard policy's files (eosp.models.onboard): the environment's executed timelines are
+valid, its rewards sum to the simulator's served weight for the same realization and decisions, a recording
+replayed with the recorded run's chooser is that run, and a policy directory that is anything else is refused in
+one line, never unpickled."""
+
+from __future__ import annotations
+
+import json
+import pickle
+
+import numpy as np
+import pytest
+
+from eosp.errors import InputError
+from eosp.fleet.generate import FleetGenConfig, generate
+from eosp.fleet.geometry import Geometry
+from eosp.fleet.io import write_fleet
+from eosp.fleet.opportunities import compute
+from eosp.kinds.fleet.operations import SimulateConfig, Simulation, record_plans
+from eosp.ops import scenario
+from eosp.ops.onboard import CANDIDATES, FEATURES, Context, Decision, ScoreRule, features
+from eosp.ops.scenario import ScenarioConfig, make
+
+CFG = SimulateConfig(planner="ev-replan", onboard="lookahead", candidates=3, rounds=3, time_limit=60.0)
+
+
+@pytest.fixture(scope="module")
+def recorded(tmp_path_factory):
+    """A clustered day (passes with several primaries), two realizations recorded with the rule's choice."""
+    root = tmp_path_factory.mktemp("onboard")
+    f = generate(FleetGenConfig(satellites=6, tasks=150, hours=4.0, placement="clusters", clusters=4,
+                                cluster_km=150.0, seed=6))
+    write_fleet(f, compute(f, Geometry(f)), root / "fleet")
+    make(str(root / "fleet"), ScenarioConfig(urgent_per_hour=4, cadence_h=1, seed=3), str(root / "scen"))
+    scen = scenario.read(root / "scen")
+    sim = Simulation.of(scen, CFG)
+    figures = [record_plans(sim, str(root / "scen"), i, root / f"r{i}.npz") for i in range(2)]
+    sim.close()
+    return sim, [str(root / f"r{i}.npz") for i in range(2)], figures
+
+
+def _fly(env, episode: int, pick):
+    """Episode `episode` of `env` with actions from `pick(obs)`; the rewards paid, summed, and the last infos."""
+    from eosp.envs.onboard import NONE
+
+    obs, _ = env.reset(episode=episode)
+    total = 0.0
+    while True:
+        (aid,) = obs
+        assert obs[aid]["x"].shape == (CANDIDATES, len(FEATURES)) and obs[aid]["mask"].any()
+        a = pick(obs[aid])
+        obs, rew, done, _, info = env.step({aid: NONE if a < 0 else a})
+        total += sum(rew.values())
+        if done["__all__"]:
+            return total, info
+
+
+@pytest.mark.parametrize("how", ["first", "none", "random"])
+def test_every_episode_is_valid_and_its_rewards_sum_to_the_served_weight(recorded, how):
+    from eosp.envs.onboard import OnboardEnv, OnboardEnvConfig
+    from eosp.fleet.check import validate
+
+    sim, recs, figures = recorded
+    env = OnboardEnv(OnboardEnvConfig(recs, seed=1))
+    rng = np.random.default_rng(0)
+    pick = {"first": lambda o: 0, "none": lambda o: -1,
+            "random": lambda o: int(rng.integers(-1, int(o["mask"].sum())))}[how]
+    for episode in range(len(recs)):
+        paid, info = _fly(env, episode, pick)
+        run = env.run
+        served = run.figures["served"]
+        assert validate(sim.planner.prob.fleet, sim.planner.schedule(np.sort(run.rows)), sim.planner.prob.geo).valid
+        assert env.returns.sum() == pytest.approx(served, abs=1e-12)
+        assert paid <= served + 1e-12  # what agents that never act earned is in env.returns only
+        assert [v for v in info.values() if v][0]["served"] == served
+        if how == "first":  # the recording's own chooser: the recorded run again
+            assert served == pytest.approx(figures[episode]["served"], abs=1e-12)
+
+
+def test_a_chooser_gives_the_same_run_in_the_simulator_and_in_the_environment(recorded):
+    """The tuned rule through the environment (one agent asked per decision) and through the simulator's own
+    driver (eosp.ops.simulate.simulate, the chooser answering) fly the same timelines."""
+    from eosp.envs.onboard import OnboardEnv, OnboardEnvConfig
+    from eosp.ops.onboard import Onboard
+    from eosp.ops.simulate import Replayed, simulate
+
+    _, recs, _ = recorded
+    env = OnboardEnv(OnboardEnvConfig(recs))
+    for i in range(len(recs)):
+        served = env.play(i, lambda ctx: ScoreRule(ctx, 0.8, 1.0))
+        rows = np.sort(env.run.rows)
+        rec = env.recorded[i]
+        src = env._source(rec)
+        run = simulate(src.day, env.world, Replayed(src.day, rec.answers), float(rec.meta["time_limit"]),
+                       onboard=Onboard(src.test, True, ScoreRule(env.ctx, 0.8, 1.0)))
+        assert run.figures["served"] == served and np.array_equal(np.sort(run.rows), rows)
+
+
+def test_features_say_what_the_cloud_model_says():
+    """A candidate at the primary's point and time has correlation 1; far away, 0; values scale with weight and
+    forecast; empty slots are masked."""
+    xyz = np.array([[6371.0, 0.0, 0.0], [6371.0, 0.0, 0.0], [0.0, 6371.0, 0.0]])
+    ctx = Context(np.array([1.0, 2.0, 4.0]), xyz, np.arange(3), np.array([0.0, 0.0, 60.0]),
+                  np.array([[0.5], [0.25], [1.0]]), 300.0, 6 * 3600.0)
+    x, mask = features(ctx, Decision(0, 0, np.array([1, 2]), 0, np.array([0.0, 0.5]), np.array([False, True])))
+    f = {n: x[:, i] for i, n in enumerate(FEATURES)}
+    assert mask.tolist() == [True, True, False] and not x[2].any()
+    assert f["corr"][0] == pytest.approx(1.0) and f["corr"][1] < 1e-9
+    assert f["value"][:2] == pytest.approx([2 * 0.25 / 4, 4 * 1.0 / 4])
+    assert f["cloudy_recent"][0] == pytest.approx(0.5) and f["p_primary"][0] == pytest.approx(0.5)
+    d = Decision(0, 0, np.array([1, 2]), 0, np.array([0.0, 0.0]), np.zeros(0, bool))
+    assert ScoreRule(ctx)(d) == 1  # the higher value
+    near = Context(ctx.weight, ctx.xyz_km, ctx.task, ctx.start_s, np.array([[0.5], [1.0], [0.3]]), 300.0, 21600.0)
+    assert ScoreRule(near)(d) == 0 and ScoreRule(near, beta=1.0)(d) == 1  # beta: the correlated one discounted
+
+
+def test_a_policy_directory_that_is_anything_else_is_refused_in_one_line(tmp_path):
+    from eosp.models.onboard import OnboardNet, load_policy, save_policy
+
+    good = save_policy(OnboardNet(8), tmp_path / "good")
+    policy = load_policy(good)
+    assert policy.net.hidden == 8
+    cases = {
+        "missing": lambda d: None,
+        "not json": lambda d: (d / "onboard.json").write_text("{"),
+        "another format": lambda d: (d / "onboard.json").write_text(json.dumps({"format": "eosp-prices"})),
+        "other features": lambda d: (d / "onboard.json").write_text(json.dumps(
+            {**json.loads((good / "onboard.json").read_text()), "features": ["value"]})),
+        "a pickle": lambda d: ((d / "onboard.json").write_text((good / "onboard.json").read_text()),
+                               (d / "onboard.pt").write_bytes(pickle.dumps(object()))),
+        "other sizes": lambda d: ((d / "onboard.json").write_text((good / "onboard.json").read_text()),
+                                  save_policy(OnboardNet(16), d / "x"), (d / "x" / "onboard.pt").rename(d / "onboard.pt")),
+    }
+    for name, make_case in cases.items():
+        d = tmp_path / name.replace(" ", "-")
+        d.mkdir()
+        make_case(d)
+        with pytest.raises(InputError) as e:
+            load_policy(d)
+        assert "\n" not in str(e.value) and str(d) in str(e.value), name
