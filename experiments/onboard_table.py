@@ -19,9 +19,10 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import time
 from pathlib import Path
+
+from operations_table import interval  # experiments/, beside this script
 
 VARIANTS = ("rule", "tuned rule", "policy")
 
@@ -56,17 +57,6 @@ def simulate(scen: str, opts: dict, indices: list[int], out: str) -> list[dict]:
         got.append(rec)
     sim.close()
     return got
-
-
-def interval(diffs: list[float]) -> tuple[float, float]:
-    from scipy.stats import t as student
-
-    n = len(diffs)
-    mean = sum(diffs) / n
-    if n < 2:
-        return mean, math.inf
-    sd = math.sqrt(sum((d - mean) ** 2 for d in diffs) / (n - 1))
-    return mean, float(student.ppf(0.975, n - 1)) * sd / math.sqrt(n)
 
 
 def decision_time(policy: str, scen: str, n: int = 2000) -> float:

@@ -28,6 +28,24 @@ def generated(family: str = "uniform", n: int = 12, seed: int = 0, step: float =
     return generate(family_config(family, n, seed, graph={"step_s": step}, satellite={"slew_model": slew}))
 
 
+def clustered_scenario(root: Path, tasks: int = 120, seed: int = 3) -> Path:
+    """A 4-hour day of 6 satellites over targets in four clusters (passes with several primaries: gaps and
+    replacements to choose among), as a fleet ROOT/fleet and an operations scenario ROOT/scen (4 urgent requests an
+    hour, a planning call an hour, scenario seed `seed`); the scenario's path."""
+    from eosp.fleet.generate import FleetGenConfig, generate
+    from eosp.fleet.geometry import Geometry
+    from eosp.fleet.io import write_fleet
+    from eosp.fleet.opportunities import compute
+    from eosp.ops.scenario import ScenarioConfig, make
+
+    if not (root / "fleet").exists():
+        f = generate(FleetGenConfig(satellites=6, tasks=tasks, hours=4.0, placement="clusters", clusters=4,
+                                    cluster_km=150.0, seed=6))
+        write_fleet(f, compute(f, Geometry(f)), root / "fleet")
+    make(str(root / "fleet"), ScenarioConfig(urgent_per_hour=4, cadence_h=1, seed=seed), str(root / "scen"))
+    return root / "scen"
+
+
 @pytest.fixture
 def tiny():
     return generated("uniform", 12, 0, 2.0)

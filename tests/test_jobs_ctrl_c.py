@@ -122,13 +122,9 @@ def test_onboard_training_stopped_in_ppo_keeps_its_state_and_resumes(tmp_path):
     the first iteration kept (WORK/ppo.json); the rerun resumes after it."""
     import json
 
-    from eosp.fleet.geometry import Geometry
-    from eosp.ops.scenario import ScenarioConfig, make
+    from tests.conftest import clustered_scenario
 
-    f = generate(FleetGenConfig(satellites=6, tasks=150, hours=4.0, placement="clusters", clusters=4,
-                                cluster_km=150.0, seed=6))
-    write_fleet(f, compute(f, Geometry(f)), tmp_path / "fleet")
-    make(str(tmp_path / "fleet"), ScenarioConfig(urgent_per_hour=4, cadence_h=1, seed=3), str(tmp_path / "scen"))
+    clustered_scenario(tmp_path, tasks=150)
     argv = [sys.executable, "-m", "eosp.jobs.train_onboard", "--scenarios", tmp_path / "scen", "--work", tmp_path / "work", "--out", tmp_path / "policy",
             "--realizations", 3, "--validation", 1, "--time-limit", 0.5, "--epochs", 3, "--train-batch-size", 64,
             "--runners", 1, "--iterations", 3, "--ray.num-cpus", 2, "--mlflow-uri", f"sqlite:///{tmp_path / 'm.db'}"]

@@ -13,14 +13,10 @@ import numpy as np
 import pytest
 
 from eosp.errors import InputError
-from eosp.fleet.generate import FleetGenConfig, generate
-from eosp.fleet.geometry import Geometry
-from eosp.fleet.io import write_fleet
-from eosp.fleet.opportunities import compute
 from eosp.kinds.fleet.operations import SimulateConfig, Simulation, record_plans
 from eosp.ops import scenario
 from eosp.ops.onboard import CANDIDATES, FEATURES, Context, Decision, ScoreRule, features
-from eosp.ops.scenario import ScenarioConfig, make
+from tests.conftest import clustered_scenario
 
 CFG = SimulateConfig(planner="ev-replan", onboard="lookahead", candidates=3, rounds=3, time_limit=60.0)
 
@@ -29,10 +25,7 @@ CFG = SimulateConfig(planner="ev-replan", onboard="lookahead", candidates=3, rou
 def recorded(tmp_path_factory):
     """A clustered day (passes with several primaries), two realizations recorded with the rule's choice."""
     root = tmp_path_factory.mktemp("onboard")
-    f = generate(FleetGenConfig(satellites=6, tasks=150, hours=4.0, placement="clusters", clusters=4,
-                                cluster_km=150.0, seed=6))
-    write_fleet(f, compute(f, Geometry(f)), root / "fleet")
-    make(str(root / "fleet"), ScenarioConfig(urgent_per_hour=4, cadence_h=1, seed=3), str(root / "scen"))
+    clustered_scenario(root, tasks=150)
     scen = scenario.read(root / "scen")
     sim = Simulation.of(scen, CFG)
     figures = [record_plans(sim, str(root / "scen"), i, root / f"r{i}.npz") for i in range(2)]

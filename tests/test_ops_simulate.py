@@ -256,12 +256,9 @@ def test_the_ray_job_runs_realizations_resumes_and_logs_to_mlflow(scen, scen_dir
 @pytest.fixture(scope="module")
 def clustered(tmp_path_factory):
     """Targets in four clusters: passes with several primaries, where a thinned plan leaves gaps to fill."""
-    root = tmp_path_factory.mktemp("clustered")
-    f = generate(FleetGenConfig(satellites=6, tasks=120, hours=4.0, placement="clusters", clusters=4,
-                                cluster_km=150.0, seed=6))
-    write_fleet(f, compute(f, Geometry(f)), root / "fleet")
-    make(str(root / "fleet"), ScenarioConfig(urgent_per_hour=4, cadence_h=1, seed=3), str(root / "scen"))
-    return scenario.read(root / "scen")
+    from tests.conftest import clustered_scenario
+
+    return scenario.read(clustered_scenario(tmp_path_factory.mktemp("clustered")))
 
 
 def test_the_onboard_rule_takes_alternates_that_keep_every_timeline_valid(clustered):

@@ -11,12 +11,9 @@ from pathlib import Path
 
 import pytest
 
-from eosp.fleet.generate import FleetGenConfig, generate
-from eosp.fleet.geometry import Geometry
-from eosp.fleet.io import write_fleet
-from eosp.fleet.opportunities import compute
 from eosp.ops.evaluation import evaluation_seeds
 from eosp.ops.scenario import ScenarioConfig, make
+from tests.conftest import clustered_scenario
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -30,17 +27,14 @@ def job(*args, cwd):
 @pytest.fixture(scope="module")
 def fleet(tmp_path_factory):
     root = tmp_path_factory.mktemp("onboard-job")
-    f = generate(FleetGenConfig(satellites=6, tasks=150, hours=4.0, placement="clusters", clusters=4,
-                                cluster_km=150.0, seed=6))
-    write_fleet(f, compute(f, Geometry(f)), root / "fleet")
+    clustered_scenario(root, tasks=150)
     return root
 
 
 def test_train_resume_and_refusal(fleet, tmp_path):
     from eosp.models.onboard import load_policy
 
-    make(str(fleet / "fleet"), ScenarioConfig(urgent_per_hour=4, cadence_h=1, seed=3), str(tmp_path / "scen"))
-    common = ["--scenarios", tmp_path / "scen", "--work", tmp_path / "work", "--out", tmp_path / "policy",
+    common = ["--scenarios", fleet / "scen", "--work", tmp_path / "work", "--out", tmp_path / "policy",
               "--realizations", 3, "--validation", 1, "--time-limit", 0.5, "--epochs", 3, "--train-batch-size", 32,
               "--runners", 1, "--ray.num-cpus", 2, "--mlflow-uri", f"sqlite:///{tmp_path / 'mlflow.db'}"]
     r = job(*common, "--iterations", 1, cwd=tmp_path)
