@@ -90,13 +90,23 @@ class OnboardEnv:
         return self.sources[path]
 
     def reset(self, seed: int | None = None, episode: int | None = None) -> tuple[dict, dict]:
-        """A new episode: recording `episode` (default: drawn at random)."""
+        """A new episode: recording `episode` (default: drawn at random, again while a draw asks no decision, so
+        that the first observation names an agent; an error when none of the recordings asks one)."""
+        if seed is not None:
+            self.rng = np.random.default_rng([self.cfg.seed, seed])
+        if episode is not None:
+            return self._start(episode)
+        for i in self.rng.permutation(len(self.recorded)).tolist():
+            obs, info = self._start(i)
+            if obs:
+                return obs, info
+        raise ValueError("no recording of this onboard environment asks a decision (no cloudy primary with a "
+                         "candidate the satellite can fly)")
+
+    def _start(self, i: int) -> tuple[dict, dict]:
         from eosp.ops.simulate import Replayed, Sent, running
         from eosp.ops.world import realize
 
-        if seed is not None:
-            self.rng = np.random.default_rng([self.cfg.seed, seed])
-        i = int(self.rng.integers(len(self.recorded))) if episode is None else episode
         rec = self.recorded[i]
         src = self._source(rec)
         self.day, self.world = src.day, realize(src.scen, int(rec.meta["realization"]))
