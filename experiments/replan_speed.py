@@ -22,6 +22,7 @@ to the base state (the planner's state cannot be copied), so the base plans of t
 from __future__ import annotations
 
 import argparse
+import copy
 import dataclasses
 import time
 
@@ -103,26 +104,49 @@ def main() -> None:
     ap.add_argument("--warm", type=float, default=5.0)
     ap.add_argument("--cold", type=float, default=120.0)
     ap.add_argument("--events", nargs="+", default=["arrival", "outcome", "forecast", "contact"])
+    ap.add_argument("--call-rounds", type=int, default=None,
+                    help="price rounds of each call up to the base state instead of --call-limit seconds (the same "
+                         "base state in every run; uploads still wait for --call-limit)")
+    ap.add_argument("--carry", nargs="+", default=["scale"], choices=["scale", "keep"],
+                    help="how the warm re-plan carries its prices to the new values (each from the same state: "
+                         "the prices restored, or with master columns a run again, the same with --call-rounds)")
     args = ap.parse_args()
     scen = scenario.read(args.scenario)
     world = realize(scen, args.realization)
     print("| event | keep | warm | cold | warm / cold | keep / cold | warm s | cold s |\n|---|---|---|---|---|---|---|---|")
     for kind in args.events:
-        sim = Simulation.of(scen, SimulateConfig(planner="ev-replan", time_limit=args.call_limit))
-        stop = UpTo(sim.planner, args.call)
-        try:
-            simulate(sim.day, world, stop, args.call_limit)
-        except Stop:
-            pass
-        know = event(kind, base_state(stop.before, stop.after, sim.day), stop.after, sim.day)
-        W = sim.planner.prob.total_weight
-        keep = kept_value(sim.planner, know, know.rows[~know.alternate])
-        sim.planner.replanner.cfg = dataclasses.replace(sim.planner.replanner.cfg, time_limit=args.warm)
-        t = time.perf_counter()
-        warm = sim.planner.plan(know).info["objective"] * W
-        warm_s = time.perf_counter() - t
+        warms, sim = [], None
+        for carry in args.carry:
+            if sim is None or sim.planner.replanner.master is not None:  # a master LP cannot be copied: run again
+                if sim is not None:
+                    sim.close()
+                sim = Simulation.of(scen, SimulateConfig(planner="ev-replan", time_limit=args.call_limit,
+                                                         rounds=args.call_rounds))
+                stop = UpTo(sim.planner, args.call)
+                try:
+                    simulate(sim.day, world, stop, args.call_limit)
+                except Stop:
+                    pass
+                know = event(kind, base_state(stop.before, stop.after, sim.day), stop.after, sim.day)
+                W = sim.planner.prob.total_weight
+                keep = kept_value(sim.planner, know, know.rows[~know.alternate])
+                rp = sim.planner.replanner
+                rp.cfg = dataclasses.replace(rp.cfg, time_limit=args.warm, rounds=None)
+                base = (copy.deepcopy(rp.prices), rp._cap, rp.calls)
+            else:  # the same state again: the prices as the base left them (no master columns)
+                rp.prices, rp._cap, rp.calls = copy.deepcopy(base[0]), *base[1:]
+            rp.carry = carry
+            t = time.perf_counter()
+            warms.append((carry, sim.planner.plan(know).info["objective"] * W, time.perf_counter() - t))
+        _, warm, warm_s = warms[-1]
+        if len(warms) > 1:
+            print(f"| {kind}, warm by carry | " + " | ".join(f"{c}: {v:.2f} ({s_:.1f} s)" for c, v, s_ in warms) + " |",
+                  flush=True)
+        if args.cold <= 0:  # the warm ones only
+            sim.close()
+            continue
         cold_planner = FleetPlanner("ev-replan", sim.planner.prob, dataclasses.replace(sim.planner.cfg,
-                                                                                      time_limit=args.cold))
+                                                                                      time_limit=args.cold, rounds=None))
         t = time.perf_counter()
         cold = cold_planner.plan(know).info["objective"] * W
         cold_s = time.perf_counter() - t
@@ -131,7 +155,6 @@ def main() -> None:
               f"{warm_s:.1f} | {cold_s:.1f} |", flush=True)
         cold_planner.close()
         sim.close()
-
 
 if __name__ == "__main__":
     main()

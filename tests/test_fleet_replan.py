@@ -96,6 +96,34 @@ def test_a_replan_after_a_revaluation_equals_a_cold_solve(contended):
     assert planner.master is not None and planner.master.columns > 0  # the columns went from call to call
 
 
+def test_kept_prices_follow_each_task_s_values(contended):
+    """After a call, values doubled for half the tasks and zeroed for a few: the carried prices are the kept ones
+    doubled, zeroed and unchanged where each task's values were, and with carry "keep" the kept ones as they are;
+    the next call from them is still the cold solve's value."""
+    fleet, opps = contended
+    prob = Problem.build(fleet, opps)
+    planner = Replanner(prob, FleetConfig(rounds=ROUNDS, time_limit=None, seed=1))
+    rng = np.random.default_rng(2)
+    values = random_values(prob, rng)
+    planner.revalue(values)
+    planner.solve(Start())
+    lam = planner.prices.lam.copy()
+    assert (lam > 0).any()
+    factor = np.where(np.arange(len(prob.weight)) % 2 == 0, 2.0, 1.0)
+    factor[::7] = 0.0
+    planner.revalue(values * factor[prob.task_idx])
+    expect = np.where(planner._cap > 0, lam * factor, lam)  # a task worth nothing before keeps its price
+    assert np.allclose(planner.carried(), expect)
+    planner.carry = "keep"
+    assert np.array_equal(planner.carried(), lam)
+    planner.carry = "scale"
+    warm = planner.solve(Start())
+    cold_prob = Problem.build(fleet, opps)
+    cold_prob.set_values(values * factor[prob.task_idx])
+    cold = solve(fleet, opps, FleetConfig(rounds=ROUNDS, time_limit=None, seed=1), problem=cold_prob)
+    assert objective(warm, prob) == pytest.approx(objective(cold, cold_prob), abs=1e-6)
+
+
 def test_requests_arrive_as_a_revaluation(contended):
     """Five requests worth nothing yet: no schedule serves them and no bound counts them; once they arrive (their
     weights) the next call, from the prices and columns of the first, equals a cold solve of the whole day."""
