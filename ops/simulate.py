@@ -149,6 +149,8 @@ class Sent:
     ahead: bool = False  # the alternates are replacements, taken in their primary's place (Onboard.ahead)
     uploads: list[tuple[int, np.ndarray]] = field(default_factory=list)  # (call, upload time per satellite)
     plans: dict[int, np.ndarray] = field(default_factory=dict)  # per call: its plan's primaries (every satellite)
+    flew_candidate: set[int] = field(default_factory=set)  # satellites that took a candidate
+    skipped: set[int] = field(default_factory=set)  # primaries a satellite refused (its slews or battery fail)
 
 
 def execute(day: Day, world: World, sent: Sent, t: float, onboard: Onboard | None) -> None:
@@ -163,11 +165,18 @@ def executing(day: Day, world: World, sent: Sent, t: float,
     rule looks ahead), when its task is not one the satellite has served itself and the satellite can fly it
     (:class:`Onboard`: what it did, the candidate, the primaries it was sent after it).  With a chooser
     (``onboard.choose``) each such choice among the candidates it can fly is yielded (a :class:`Decision`) and
-    answered by the index taken (-1: none); without, the first it can fly is taken.  What was decided is never
-    decided again."""
+    answered by the index taken (-1: none); without, the first it can fly is taken.  A satellite that looks ahead
+    and has taken a candidate refuses a primary it cannot fly after what it flew (slews, battery: a plan uploaded
+    before the ground learnt what it took may not hold with it) and reports it as not served; every executed
+    timeline is then one the checker accepts.  What was decided is never decided again."""
     s = day.start_s
     new = sent.prim[(s[sent.prim] >= sent.until) & (s[sent.prim] < t)]
     for r in new[np.argsort(s[new], kind="stable")].tolist():
+        if onboard is not None and onboard.ahead and day.sat[r] in sent.flew_candidate:
+            mine = np.asarray(sent.done, dtype=np.int64)
+            if not onboard.test(int(day.sat[r]), np.concatenate([mine[day.sat[mine] == day.sat[r]], [r]])):
+                sent.skipped.add(r)  # a plan made before the ground knew what it took: refused onboard
+                continue
         if onboard is None or world.clear[r]:
             sent.done.append(r)
             continue
@@ -191,6 +200,7 @@ def executing(day: Day, world: World, sent: Sent, t: float,
         if took >= 0:
             sent.done.append(fly[took])
             sent.taken.add(fly[took])
+            sent.flew_candidate.add(int(k))
         elif onboard.ahead:
             sent.done.append(r)  # no candidate taken: the primary as sent (found cloudy)
     sent.until = max(sent.until, t)
@@ -242,7 +252,8 @@ def knowledge(day: Day, world: World, sent: Sent, call: int, upload_s: np.ndarra
     rows, is_alt = rows[order], is_alt[order]
     report = day.next_contact(day.sat[rows], day.end_s[rows])
     known = (s[rows] < t) & (report <= t)
-    outcome = np.where(known, world.clear[rows].astype(np.int64), -1)
+    flown = world.clear[rows] & ~np.isin(rows, np.fromiter(sent.skipped, np.int64, len(sent.skipped)))
+    outcome = np.where(known, flown.astype(np.int64), -1)  # a refused primary is reported as not served
     planned = _planned(day, world, rows, call)
     if is_alt.any():  # an alternate serves when its primary fails and it succeeds
         of = dict(zip(sent.alt.tolist(), sent.alt_of.tolist()))

@@ -132,3 +132,38 @@ def test_a_policy_directory_that_is_anything_else_is_refused_in_one_line(tmp_pat
         with pytest.raises(InputError) as e:
             load_policy(d)
         assert "\n" not in str(e.value) and str(d) in str(e.value), name
+
+
+def test_a_satellite_that_took_a_candidate_refuses_a_primary_it_cannot_fly(recorded):
+    """A satellite that took a replacement and then meets a primary its test refuses (a plan made before the ground
+    knew what it took) skips it and reports it as not served; another satellite's primaries are flown as sent."""
+    import dataclasses
+    import math
+
+    from eosp.ops.onboard import Onboard
+    from eosp.ops.simulate import Sent, execute, knowledge
+    from eosp.ops.world import realize
+
+    sim, recs, _ = recorded
+    day = sim.day
+    rec = __import__("eosp.ops.plan_cache", fromlist=["read"]).read(recs[0])
+    plan = np.sort(rec.answers[0].rows)
+    sats, counts = np.unique(day.sat[plan], return_counts=True)
+    k = int(sats[np.argmax(counts)])
+    mine = plan[day.sat[plan] == k]
+    mine = mine[np.argsort(day.start_s[mine])]
+    first, last = int(mine[0]), int(mine[-1])
+    other = np.flatnonzero((day.sat == k) & ~np.isin(np.arange(len(day.sat)), plan))[0]
+    w = realize(sim.scen, 0)
+    world = dataclasses.replace(w, clear=np.where(np.arange(len(w.clear)) == first, False, True))
+    sent = Sent(prim=plan, alt=np.array([other]), alt_of=np.array([first]), ahead=True)
+
+    def refuse(sat: int, rows: np.ndarray) -> bool:  # the last primary, once the replacement was flown
+        return not (sat == k and rows[-1] == last and other in sent.done)
+
+    execute(day, world, sent, math.inf, Onboard(refuse, ahead=True))
+    assert sent.taken == {int(other)} and sent.skipped == {last} and last not in sent.done
+    assert set(plan[day.sat[plan] != k].tolist()) <= set(sent.done)
+    know = knowledge(day, world, sent, len(world.calls_s) - 1, np.full(day.satellites, math.inf))
+    if last in know.rows.tolist() and know.outcome[know.rows.tolist().index(last)] >= 0:
+        assert know.outcome[know.rows.tolist().index(last)] == 0  # reported as not served
