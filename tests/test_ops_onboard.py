@@ -167,3 +167,14 @@ def test_a_satellite_that_took_a_candidate_refuses_a_primary_it_cannot_fly(recor
     know = knowledge(day, world, sent, len(world.calls_s) - 1, np.full(day.satellites, math.inf))
     if last in know.rows.tolist() and know.outcome[know.rows.tolist().index(last)] >= 0:
         assert know.outcome[know.rows.tolist().index(last)] == 0  # reported as not served
+
+
+def test_eosp_simulate_refuses_a_missing_policy_in_one_line_and_writes_nothing(recorded, tmp_path, capsys):
+    from eosp.cli import main
+
+    sim, _, _ = recorded
+    rc = main(["simulate", str(sim.scen.path), "--onboard", "lookahead", "--candidates", "3", "--choose", "policy",
+               "--policy", str(tmp_path / "nope"), "--realizations", "1", "--out", str(tmp_path / "run")])
+    err = capsys.readouterr().err.strip()
+    assert rc == 2 and len(err.splitlines()) == 1 and "onboard.json" in err
+    assert not (tmp_path / "run").exists()
