@@ -150,6 +150,7 @@ class Sent:
     uploads: list[tuple[int, np.ndarray]] = field(default_factory=list)  # (call, upload time per satellite)
     plans: dict[int, np.ndarray] = field(default_factory=dict)  # per call: its plan's primaries (every satellite)
     flew_candidate: set[int] = field(default_factory=set)  # satellites that took a candidate
+    unsure: set[int] = field(default_factory=set)  # of those, the ones whose timeline as sent fails their test
     skipped: set[int] = field(default_factory=set)  # primaries a satellite refused (its slews or battery fail)
 
 
@@ -172,7 +173,7 @@ def executing(day: Day, world: World, sent: Sent, t: float,
     s = day.start_s
     new = sent.prim[(s[sent.prim] >= sent.until) & (s[sent.prim] < t)]
     for r in new[np.argsort(s[new], kind="stable")].tolist():
-        if onboard is not None and onboard.ahead and day.sat[r] in sent.flew_candidate:
+        if onboard is not None and onboard.ahead and day.sat[r] in sent.unsure:
             mine = np.asarray(sent.done, dtype=np.int64)
             if not onboard.test(int(day.sat[r]), np.concatenate([mine[day.sat[mine] == day.sat[r]], [r]])):
                 sent.skipped.add(r)  # a plan made before the ground knew what it took: refused onboard
@@ -201,6 +202,7 @@ def executing(day: Day, world: World, sent: Sent, t: float,
             sent.done.append(fly[took])
             sent.taken.add(fly[took])
             sent.flew_candidate.add(int(k))
+            sent.unsure.discard(int(k))  # its test held with every primary sent after it
         elif onboard.ahead:
             sent.done.append(r)  # no candidate taken: the primary as sent (found cloudy)
     sent.until = max(sent.until, t)
@@ -315,6 +317,8 @@ def running(day: Day, world: World, planner: Planner, time_limit: float, check=N
         sent.uploads.append((call, upload))
         sent.plans[call] = np.asarray(plan.rows, dtype=np.int64)
         churn = _upload(day, sent, know, plan, upload)
+        if onboard is not None and onboard.ahead:
+            _recheck(day, sent, onboard, upload)
         calls.append({"t_s": t, "compute_s": round(plan.compute_s, 3), "wall_s": round(wall, 3), "churn": churn,
                       "uploads": int(np.isfinite(upload).sum()), "alternates": int(len(plan.alternates)),
                       **plan.info})
@@ -342,6 +346,23 @@ class Replayed:
         rows = np.asarray(got.rows, dtype=np.int64)
         rows = np.union1d(rows[~self.day.fixed(rows, know.upload_s)], know.rows[self.day.fixed(know.rows, know.upload_s)])
         return Plan(rows, got.compute_s, {}, got.alternates, got.alternate_of)
+
+
+def _recheck(day: Day, sent: Sent, onboard: Onboard, upload: np.ndarray) -> None:
+    """After an upload, each satellite that took a candidate and got a new plan tests what it flew with what it
+    was now sent (a plan made before the ground knew what it took); where that fails, :func:`executing` tests
+    each primary before flying it (every prefix of a timeline that holds holds, so where it passes nothing
+    needs testing)."""
+    s = day.start_s
+    for k in sorted(sent.flew_candidate):
+        if not np.isfinite(upload[k]):
+            continue
+        done = np.asarray(sent.done, dtype=np.int64)
+        later = sent.prim[(day.sat[sent.prim] == k) & (s[sent.prim] >= sent.until)]
+        if onboard.test(k, np.concatenate([done[day.sat[done] == k], later])):
+            sent.unsure.discard(k)
+        else:
+            sent.unsure.add(k)
 
 
 def _upload(day: Day, sent: Sent, know: Knowledge, plan: Plan, upload: np.ndarray) -> int:

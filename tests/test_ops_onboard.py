@@ -141,7 +141,7 @@ def test_a_satellite_that_took_a_candidate_refuses_a_primary_it_cannot_fly(recor
     import math
 
     from eosp.ops.onboard import Onboard
-    from eosp.ops.simulate import Sent, execute, knowledge
+    from eosp.ops.simulate import Sent, _recheck, execute, knowledge
     from eosp.ops.world import realize
 
     sim, recs, _ = recorded
@@ -159,9 +159,12 @@ def test_a_satellite_that_took_a_candidate_refuses_a_primary_it_cannot_fly(recor
     sent = Sent(prim=plan, alt=np.array([other]), alt_of=np.array([first]), ahead=True)
 
     def refuse(sat: int, rows: np.ndarray) -> bool:  # the last primary, once the replacement was flown
-        return not (sat == k and rows[-1] == last and other in sent.done)
+        return not (sat == k and last in rows.tolist() and other in sent.done)
 
-    execute(day, world, sent, math.inf, Onboard(refuse, ahead=True))
+    onboard = Onboard(refuse, ahead=True)
+    execute(day, world, sent, float(day.start_s[first]) + 1.0, onboard)  # the replacement taken
+    _recheck(day, sent, onboard, np.zeros(day.satellites))  # then a plan uploaded: the same primaries
+    execute(day, world, sent, math.inf, onboard)
     assert sent.taken == {int(other)} and sent.skipped == {last} and last not in sent.done
     assert set(plan[day.sat[plan] != k].tolist()) <= set(sent.done)
     know = knowledge(day, world, sent, len(world.calls_s) - 1, np.full(day.satellites, math.inf))
