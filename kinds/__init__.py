@@ -17,6 +17,7 @@ REGISTRY: dict[str, Any] = {  # name -> "module:attribute" of the kind (loaded w
     "fleet": "eosp.kinds.fleet.kind:KIND",
     "onera": "eosp.kinds.onera.kind:KIND",
     "eosbench": "eosp.kinds.eosbench.kind:KIND",
+    "regional-coverage": "eosp.kinds.regional.kind:KIND",
 }
 
 

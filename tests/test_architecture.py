@@ -23,6 +23,7 @@ LAYERS = [
     {"eosp.fleet"},
     {"eosp.onera"},
     {"eosp.eosbench"},
+    {"eosp.regional"},  # astro-reason's regional_coverage: cases, strip geometry, battery, the checker
     {"eosp.ops"},  # the operations world of a fleet: stations and contacts, clouds and forecasts
     {"eosp.envs"},
     {"eosp.models"},
@@ -176,7 +177,8 @@ def test_circle_check_catches_a_lazy_import_circle(tmp_path):
 
 # Where a benchmark lives (docs/architecture.md): each kind folder kinds/<folder>/ and the package, below the
 # environments, that holds its data model, reader and checker
-KIND_DATA = {"single": "eosp.instances", "fleet": "eosp.fleet", "onera": "eosp.onera", "eosbench": "eosp.eosbench"}
+KIND_DATA = {"single": "eosp.instances", "fleet": "eosp.fleet", "onera": "eosp.onera", "eosbench": "eosp.eosbench",
+             "regional": "eosp.regional"}
 SHARED_KIND_MODULES = {"eosp.kinds", "eosp.kinds.base", "eosp.kinds.lagrange"}  # what every kind folder may import
 
 

@@ -1,0 +1,1 @@
+"""astro-reason's regional_coverage benchmark as data: cases, solutions, strip geometry, battery, the checker."""
