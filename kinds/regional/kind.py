@@ -83,8 +83,10 @@ class RegionalKind(KindBase):
 
     def report(self, problem: Any, schedules: list[str], out: str, ns: argparse.Namespace) -> str:
         from eosp.evaluation.regional_page import write_page
+        from eosp.ownership import check_output
 
-        return write_page(problem, schedules, out, title=ns.title, overwrite=ns.overwrite)
+        check_output(out, "report", ns.overwrite, suffixes=(".html", ".htm"))  # before any reading
+        return write_page(self.read(problem), schedules, out, title=ns.title, overwrite=ns.overwrite)
 
     def solved(self, out: Path, solver: str, cfg: Any, res: Result, seconds: float) -> tuple[dict, str]:
         m = res.verdict.metrics if res.verdict is not None else {}

@@ -181,6 +181,11 @@ def solve_greedy(case: Case, cfg: GreedyConfig) -> Result:
     return _result(case, track, search, timings, None, {})
 
 
+def _moves(search: Search, end: Budget, moves: int | None) -> None:
+    while not end.expired() and (moves is None or search.moves < moves):
+        search.move()
+
+
 def solve(case: Case, cfg: CoverageConfig) -> Result:
     """The coverage search (see the module docstring)."""
     from eosp.kinds.regional.bound import lagrangian
@@ -194,16 +199,16 @@ def solve(case: Case, cfg: CoverageConfig) -> Result:
     share = cfg.bound_share if end.limited else 0.0
     moves_end = end.less(share * (cfg.time_limit or 0.0)) if end.limited else end
     t = time.perf_counter()
+    bound, steps = None, 0
     try:
-        while not moves_end.expired() and (cfg.moves is None or search.moves < cfg.moves):
-            search.move()
+        _moves(search, moves_end, cfg.moves)
+        if cfg.bound_share > 0:
+            tb = time.perf_counter()
+            secs = max(1.0, end.left()) if end.limited else 60.0
+            bound, steps = lagrangian(case, strips, search.value, secs)
+            timings["bound"] = time.perf_counter() - tb
+        _moves(search, end, cfg.moves)  # what the bound left of the time
     except KeyboardInterrupt:
         pass
-    timings["moves"] = time.perf_counter() - t
-    bound, steps = None, 0
-    if cfg.bound_share > 0:
-        t = time.perf_counter()
-        secs = max(1.0, end.left()) if end.limited else 60.0
-        bound, steps = lagrangian(case, strips, search.value, secs)
-        timings["bound"] = time.perf_counter() - t
+    timings["moves"] = time.perf_counter() - t - timings.get("bound", 0.0)
     return _result(case, track, search, timings, bound, {"bound_steps": steps})
