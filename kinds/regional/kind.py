@@ -30,6 +30,8 @@ class RegionalKind(KindBase):
     solvers = {
         "coverage": Solver("coverage", f"{HERE}.solve:CoverageConfig", f"{HERE}.solve:solve",
                            "greedy, then ruin-and-recreate moves; a Lagrangian bound over the candidate grid"),
+        "mip": Solver("mip", f"{HERE}.mip:MipConfig", f"{HERE}.mip:solve_mip",
+                      "HiGHS over the candidate strips (a baseline: pairwise slew rows, no duty or battery rows)"),
         "greedy": Solver("greedy", f"{HERE}.solve:GreedyConfig", f"{HERE}.solve:solve_greedy",
                          "the strip of largest marginal coverage that fits, until the action budget"),
     }

@@ -94,6 +94,14 @@ class Search:
         greedy(self.cd, self.st, self.chosen, self.cnt, self.budget, self.usable, self.stamp)
         self.value = value(self.cd, self.cnt)
 
+    def set(self, chosen: np.ndarray) -> None:
+        """Take `chosen` as the selection (the counts and the value rebuilt)."""
+        self.chosen = chosen.copy()
+        self.cnt[:] = 0
+        for c in np.flatnonzero(chosen).tolist():
+            apply(self.cd, c, self.cnt, self.stamp, int(self.stamp.max()) + 1, 1)
+        self.value = value(self.cd, self.cnt)
+
     def _remove(self, c: int) -> None:
         self.chosen[c] = False
         apply(self.cd, c, self.cnt, self.stamp, int(self.stamp.max()) + 1, -1)
