@@ -26,11 +26,12 @@ from pathlib import Path
 
 from eosp.args import Parser, add_config_args, config_from_args, run_job
 
-KINDS = ("single-pass", "fleet", "onera", "eosbench")
+KINDS = ("single-pass", "fleet", "onera", "eosbench", "regional-coverage")
 
 # per solver, the options that keep its warm-up short (a time limit where the config has one, few samples)
 SHORT = {"fleet": ["--time-limit", "20", "--rounds", "3"], "fleet-sample": ["--samples", "2", "--time-limit", "3"],
-         "sample": ["--samples", "4"], "onera": ["--time-limit", "3", "--bound-time-limit", "2"]}
+         "sample": ["--samples", "4"], "onera": ["--time-limit", "3", "--bound-time-limit", "2"],
+         "coverage": ["--time-limit", "2"], "mip": ["--time-limit", "2"]}
 
 
 @dataclass
@@ -185,7 +186,18 @@ def warm_eosbench(d: Path) -> None:
     cli(["validate", scen, scheds[0]])
 
 
-WARM = {"single-pass": warm_single_pass, "fleet": warm_fleet, "onera": warm_onera, "eosbench": warm_eosbench}
+def warm_regional(d: Path) -> None:
+    from eosp.regional.tiny import tiny
+
+    case = tiny(d / "case")
+    cli(["info", case])
+    scheds = solve_all("regional-coverage", case, d, ".json")
+    cli(["validate", case, scheds[0]])
+    cli(["report", case, *scheds, "--out", d / "page.html"])
+
+
+WARM = {"single-pass": warm_single_pass, "fleet": warm_fleet, "onera": warm_onera, "eosbench": warm_eosbench,
+        "regional-coverage": warm_regional}
 
 
 def run(cfg: WarmupConfig) -> dict[str, float]:

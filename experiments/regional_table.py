@@ -41,11 +41,12 @@ def prepare(source: Path, work: Path) -> Path:
 
 
 def theirs(bench: Path, case: Path, sol: Path) -> dict:
-    code = ("import json, sys; sys.path.insert(0, sys.argv[1]); import verifier; "
-            "print(json.dumps(verifier.verify_solution(sys.argv[2], sys.argv[3])))")
+    import os
+
+    code = "import json, sys, verifier; print(json.dumps(verifier.verify_solution(sys.argv[1], sys.argv[2])))"
     t = time.perf_counter()
-    out = subprocess.run([sys.executable, "-c", code, str(bench), str(case), str(sol)], capture_output=True,
-                         text=True, check=True).stdout
+    out = subprocess.run([sys.executable, "-c", code, str(case), str(sol)], capture_output=True, text=True, check=True,
+                         env={**os.environ, "PYTHONPATH": str(bench)}).stdout
     rep = json.loads(out.strip().splitlines()[-1])
     rep["seconds"] = time.perf_counter() - t
     return rep

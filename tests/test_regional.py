@@ -15,84 +15,13 @@ import pytest
 
 from eosp.errors import InputError
 
-L1 = "1 63255U 25052AX  25198.17518200  .00001597  00000-0  15702-3 0  9994"
-L2 = "2 63255  97.7253  91.1881 0000724 209.0702 151.0478 14.93504225 18614"
-L1B = "1 44389U 19038C   25198.19039474  .00015630  00000-0  49052-3 0  9999"
-L2B = "2 44389  97.9126 220.0010 0009728  22.5714 337.5952 15.33088716331302"
-
-
-def satellite(sid: str, l1: str, l2: str, **over) -> dict:
-    s = {"satellite_id": sid, "tle_line1": l1, "tle_line2": l2, "tle_epoch": "2025-07-17T04:12:15.724Z",
-         "sensor": {"min_edge_off_nadir_deg": 18.0, "max_edge_off_nadir_deg": 34.0, "cross_track_fov_deg": 2.8,
-                    "min_strip_duration_s": 20, "max_strip_duration_s": 40},
-         "agility": {"max_roll_rate_deg_per_s": 1.2, "max_roll_acceleration_deg_per_s2": 0.4, "settling_time_s": 2.0},
-         "power": {"battery_capacity_wh": 900, "initial_battery_wh": 540, "idle_power_w": 85, "imaging_power_w": 290,
-                   "slew_power_w": 35, "sunlit_charge_power_w": 170, "imaging_duty_limit_s_per_orbit": 900}}
-    for k, v in over.items():
-        for part in ("sensor", "agility", "power"):
-            if k in s[part]:
-                s[part][k] = v
-    return s
-
-
-def write_case(d: Path, sats: list[dict], regions: list[tuple[str, list, float]], budget: int = 2,
-               hours: float = 2.0) -> Path:
-    """A case directory: `regions` as (id, ring, spacing in degrees) with samples on that lattice inside."""
-    import yaml
-    from shapely.geometry import Point, Polygon
-
-    d.mkdir(parents=True, exist_ok=True)
-    (d / "manifest.json").write_text(json.dumps({
-        "case_id": "tiny", "benchmark": "regional_coverage", "spec_version": "v1", "seed": 1,
-        "horizon_start": "2025-07-17T00:00:00Z", "horizon_end": f"2025-07-17T{int(hours):02d}:00:00Z",
-        "time_step_s": 10, "coverage_sample_step_s": 5, "earth_model": {"shape": "wgs84"},
-        "grid_parameters": {"sample_spacing_m": 5000.0},
-        "scoring": {"primary_metric": "coverage_ratio", "revisit_bonus_alpha": 0.0, "max_actions_total": budget}}))
-    (d / "satellites.yaml").write_text(yaml.safe_dump(sats, sort_keys=False))
-    feats, grid = [], []
-    for rid, ring, step in regions:
-        feats.append({"type": "Feature", "properties": {"region_id": rid, "weight": 1.0},
-                      "geometry": {"type": "Polygon", "coordinates": [ring]}})
-        poly = Polygon(ring)
-        x0, y0, x1, y1 = poly.bounds
-        samples = []
-        for x in np.arange(x0 + step / 2, x1, step):
-            for y in np.arange(y0 + step / 2, y1, step):
-                if poly.covers(Point(x, y)):
-                    samples.append({"sample_id": f"{rid}_s{len(samples):06d}", "longitude_deg": float(x),
-                                    "latitude_deg": float(y), "weight_m2": 25e6})
-        grid.append({"region_id": rid, "total_weight_m2": 25e6 * len(samples), "samples": samples})
-    (d / "regions.geojson").write_text(json.dumps({"type": "FeatureCollection", "features": feats}))
-    (d / "coverage_grid.json").write_text(json.dumps({"grid_version": 1, "sample_spacing_m": 5000.0, "regions": grid}))
-    return d
-
-
-def box(lon: float, lat: float, dlon: float, dlat: float) -> list:
-    return [[lon - dlon, lat - dlat], [lon + dlon, lat - dlat], [lon + dlon, lat + dlat], [lon - dlon, lat + dlat],
-            [lon - dlon, lat - dlat]]
-
-
-def under_pass(d: Path, sat: dict, roll: float = 25.0, minute: int = 40) -> tuple[float, float]:
-    """Where the look at `roll` of `sat` hits the ground `minute` minutes into the horizon."""
-    from eosp.regional.geometry import Track, axes, geodetic, hits
-    from eosp.regional.read import read_case
-
-    write_case(d, [sat], [("far", box(0.0, 0.0, 0.1, 0.1), 0.05)])
-    case = read_case(str(d))
-    st = Track(case).states(0)[minute * 12]
-    nadir, across = axes(st[None, :3], st[None, 3:])
-    h, _ = hits(st[None, :3], nadir, across, roll)
-    lon, lat = geodetic(h)
-    return float(lon[0]), float(lat[0])
+from eosp.regional.tiny import L1, L2, box, satellite, tiny, under_pass, write_case
 
 
 @pytest.fixture(scope="module")
 def case_dir(tmp_path_factory) -> Path:
     """One satellite, a 0.4 x 2 degree region under its pass at roll 25 deg, 2 actions allowed, 2 h."""
-    d = tmp_path_factory.mktemp("regional") / "case"
-    sat = satellite("sat_a", L1, L2)
-    lon, lat = under_pass(d, sat)
-    return write_case(d, [sat], [("r1", box(lon, lat, 0.2, 1.0), 0.05)])
+    return tiny(tmp_path_factory.mktemp("regional") / "case")
 
 
 def solution(path: Path, actions: list[dict]) -> Path:

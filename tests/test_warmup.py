@@ -22,4 +22,4 @@ def test_warmup_compiles_the_kernels_of_the_kinds_it_runs(capsys):
 def test_warmup_refuses_an_unknown_kind(capsys):
     assert main(["--kinds", "fleet", "nope"]) == 2
     assert capsys.readouterr().err.strip() == ("python -m eosp.cli.warmup: error: --kinds: unknown kind 'nope'; "
-                                                "one of single-pass, fleet, onera, eosbench")
+                                                "one of single-pass, fleet, onera, eosbench, regional-coverage")

@@ -34,7 +34,7 @@ class MipConfig(UtilityConfig):
     """Options of ``eosp solve CASE --solver mip``."""
 
     time_limit: float | None = ranged(60.0, 0, WEEK_S, lo_open=True, zero_unsets=True)
-    roll_step: float = ranged(0.5, 0.05, 2.0)
+    roll_step: float = ranged(0.25, 0.05, 2.0)
     """Spacing of the candidate rolls, in fields of view of the satellite's sensor."""
 
     NAME = "mip"

@@ -73,6 +73,26 @@ def gain(cd, c, cnt, stamp, tag):
 
 
 @numba.njit(cache=True)
+def gains(cd, cnt, stamp):
+    """Every candidate's gain (see :func:`gain`)."""
+    out = np.zeros(len(cd.sat))
+    tag = stamp.max()
+    for c in range(len(cd.sat)):
+        tag += 1
+        out[c] = gain(cd, c, cnt, stamp, tag)
+    return out
+
+
+@numba.njit(cache=True)
+def fitting(cd, st, on, cands):
+    """Which of `cands` fit among the chosen ones `on` (see :func:`fits`)."""
+    out = np.zeros(len(cands), np.bool_)
+    for j in range(len(cands)):
+        out[j] = fits(cd, st, cands[j], on)
+    return out
+
+
+@numba.njit(cache=True)
 def apply(cd, c, cnt, stamp, tag, sign):
     """Add (sign 1) or remove (sign -1) candidate c's samples to or from the counts."""
     for j in range(cd.seg0[c], cd.seg0[c] + cd.n[c]):
@@ -87,12 +107,12 @@ def apply(cd, c, cnt, stamp, tag, sign):
 
 
 @numba.njit(cache=True)
-def fits(cd, st, c, chosen):
-    """Whether candidate c fits its satellite's strips among `chosen` (a mask over candidates)."""
+def fits(cd, st, c, on):
+    """Whether candidate c fits its satellite's strips among the chosen ones `on` (indices)."""
     s = cd.sat[c]
     a, b, r = cd.start[c], cd.end[c], cd.roll[c]
     prev, nxt = -1, -1
-    for d in np.flatnonzero(chosen):
+    for d in on:
         if cd.sat[d] != s or d == c:
             continue
         if cd.start[d] < b and a < cd.end[d]:
@@ -107,7 +127,7 @@ def fits(cd, st, c, chosen):
     if nxt >= 0 and cd.start[nxt] - b < slew_s(cd.roll[nxt] - r, st.rate[s], st.acc[s]) + st.settle[s]:
         return False
     if np.isfinite(st.duty[s]):
-        mine = [d for d in np.flatnonzero(chosen) if cd.sat[d] == s and d != c]
+        mine = [d for d in on if cd.sat[d] == s and d != c]
         mine.append(c)
         for e in mine:
             for bound in (cd.start[e], cd.end[e]):
@@ -133,8 +153,12 @@ def greedy(cd: Cands, st: Sats, chosen: np.ndarray, cnt: np.ndarray, budget: int
         tag[0] += 1
         return gain(cd, c, cnt, stamp, tag[0])
 
-    heap = [(-g(c), c) for c in range(len(cd.sat)) if not chosen[c] and (allowed is None or allowed[c])]
-    heap = [h for h in heap if h[0] < 0]
+    first = gains(cd, cnt, stamp)  # every gain in one call; the heap then only re-evaluates its top
+    tag[0] = int(stamp.max()) + 1
+    open_ = (~chosen) & (first > 0) if allowed is None else (~chosen) & (first > 0) & allowed
+    pos = np.flatnonzero(open_)
+    pos = pos[fitting(cd, st, np.flatnonzero(chosen), pos)]  # what does not fit now never will as strips are added
+    heap = list(zip((-first[pos]).tolist(), pos.tolist()))
     heapq.heapify(heap)
     added = 0.0
     left = budget - int(chosen.sum())
@@ -146,7 +170,7 @@ def greedy(cd: Cands, st: Sats, chosen: np.ndarray, cnt: np.ndarray, budget: int
         if heap and fresh < -heap[0][0] - 1e-15:
             heapq.heappush(heap, (-fresh, c))
             continue
-        if not fits(cd, st, c, chosen):
+        if not fits(cd, st, c, np.flatnonzero(chosen)):
             continue
         chosen[c] = True
         tag[0] += 1

@@ -19,7 +19,7 @@ import numpy as np
 
 from eosp.budget import Budget
 from eosp.config import WEEK_S, ranged
-from eosp.kinds.regional.search import Cands, Sats, apply, greedy, value
+from eosp.kinds.regional.search import Cands, Sats, apply, fits, gains, greedy, value
 from eosp.kinds.regional.strips import Strips, build
 from eosp.problem import Result
 from eosp.regional.geometry import Track
@@ -31,9 +31,10 @@ from eosp.solvers.base import UtilityConfig
 class GreedyConfig(UtilityConfig):
     """Options of ``eosp solve CASE --solver greedy`` (one pass: no time limit)."""
 
-    roll_step: float = ranged(0.5, 0.05, 2.0)
-    """Spacing of the candidate rolls, in fields of view of the satellite's sensor (0.5: neighbouring rolls'
-    strips overlap by half)."""
+    roll_step: float = ranged(0.25, 0.05, 2.0)
+    """Spacing of the candidate rolls, in fields of view of the satellite's sensor (0.25: a strip and the next
+    roll's overlap by three quarters; on cases of the benchmark's generator under seeds of eosp's own, 0.25 served
+    as much or more than 0.5 with fewer strips)."""
 
     NAME = "greedy"
     ONE_SHOT = True
@@ -44,9 +45,10 @@ class CoverageConfig(UtilityConfig):
     """Options of ``eosp solve CASE --solver coverage``."""
 
     time_limit: float | None = ranged(60.0, 0, WEEK_S, lo_open=True, zero_unsets=True)
-    roll_step: float = ranged(0.5, 0.05, 2.0)
-    """Spacing of the candidate rolls, in fields of view of the satellite's sensor (0.5: neighbouring rolls'
-    strips overlap by half)."""
+    roll_step: float = ranged(0.25, 0.05, 2.0)
+    """Spacing of the candidate rolls, in fields of view of the satellite's sensor (0.25: a strip and the next
+    roll's overlap by three quarters; on cases of the benchmark's generator under seeds of eosp's own, 0.25 served
+    as much or more than 0.5 with fewer strips)."""
     moves: int | None = ranged(None, 0)
     """Ruin-and-recreate moves (a deterministic budget); unset: as many as the time limit allows."""
     bound_share: float = ranged(0.2, 0.0, 1.0)
@@ -106,21 +108,51 @@ class Search:
         self.chosen[c] = False
         apply(self.cd, c, self.cnt, self.stamp, int(self.stamp.max()) + 1, -1)
 
+    def _make_room(self) -> np.ndarray:
+        """Force in one of the strips of largest gain that does not fit, after removing the strips of its
+        satellite it collides with; the strips removed."""
+        g = gains(self.cd, self.cnt, self.stamp)
+        g[~self.usable | self.chosen] = 0.0
+        top = np.flatnonzero(g > 0)
+        if not len(top):
+            return np.zeros(0, np.int64)
+        top = top[np.argsort(-g[top], kind="stable")[:20]]
+        c = int(self.rng.choice(top))
+        s = self.cd.sat[c]
+        on = np.flatnonzero(self.chosen & (self.cd.sat == s))
+        drop = []
+        for d in on.tolist():
+            if not fits(self.cd, self.st, c, np.array([d])):
+                drop.append(d)
+        if len(on) - len(drop) >= self.budget or self.chosen.sum() - len(drop) >= self.budget:
+            others = np.setdiff1d(np.flatnonzero(self.chosen), drop)
+            drop.append(int(self.rng.choice(others)))  # the budget is full: one more strip makes room
+        for d in drop:
+            self._remove(d)
+        if fits(self.cd, self.st, c, np.flatnonzero(self.chosen)) and self.chosen.sum() < self.budget:
+            self.chosen[c] = True
+            apply(self.cd, c, self.cnt, self.stamp, int(self.stamp.max()) + 1, 1)
+        return np.array(drop, np.int64)
+
     def move(self) -> bool:
         """One ruin-and-recreate move; True when kept (no loss)."""
         on = np.flatnonzero(self.chosen)
         if not len(on):
             return False
         old_chosen, old_cnt, old_value = self.chosen.copy(), self.cnt.copy(), self.value
-        if self.rng.random() < 0.5:  # a few strips anywhere
-            drop = self.rng.choice(on, size=min(len(on), int(self.rng.integers(1, 4))), replace=False)
-        else:  # every strip of one satellite within an orbit of one of them
-            c = int(self.rng.choice(on))
-            s = self.cd.sat[c]
-            near = np.abs(self.cd.start[on] - self.cd.start[c]) < self.st.period[s]
-            drop = on[(self.cd.sat[on] == s) & near]
-        for c in drop.tolist():
-            self._remove(c)
+        kind = self.rng.random()
+        if kind < 1 / 3:  # a strip that would cover something new, in place of the strips it collides with
+            drop = self._make_room()
+        else:
+            if kind < 2 / 3:  # a few strips anywhere
+                drop = self.rng.choice(on, size=min(len(on), int(self.rng.integers(1, 4))), replace=False)
+            else:  # every strip of one satellite within an orbit of one of them
+                c = int(self.rng.choice(on))
+                s = self.cd.sat[c]
+                near = np.abs(self.cd.start[on] - self.cd.start[c]) < self.st.period[s]
+                drop = on[(self.cd.sat[on] == s) & near]
+            for c in drop.tolist():
+                self._remove(c)
         banned = self.usable.copy()
         if self.rng.random() < 0.5:
             banned[drop] = False  # force a change

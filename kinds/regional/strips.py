@@ -3,8 +3,7 @@
 The discretisation (what the solver can choose; the bound is over the same set):
 
 * rolls: per satellite and side, |roll| from the band's inner end (min edge + half the field of view) to its outer
-  end (max edge - half the field of view) in steps of `roll_step` fields of view (0.5: neighbouring rolls'
-  strips overlap by half), both ends included; a *track* is one (satellite, signed roll);
+  end (max edge - half the field of view) in steps of `roll_step` fields of view, both ends included; a *track* is one (satellite, signed roll);
 * times: starts on the public time grid, durations multiples of it within the sensor's bounds; a strip sampled
   every `coverage_sample_step_s` is a run of consecutive *segments* (the verifier's quadrilaterals between two
   sample instants), so a segment is computed once per track and grid instant and a candidate is a run of them;
@@ -136,7 +135,7 @@ def _quad_cover(qx, qy, slon, slat, sorder):
     return ptr, out[:m]
 
 
-def build(case: Case, track: Track, roll_step: float = 0.5) -> Strips:
+def build(case: Case, track: Track, roll_step: float = 0.25) -> Strips:
     """The candidate strips of `case` (see the module docstring)."""
     boxes = _boxes(case, pad_deg=0.05)
     order = np.argsort(case.lon, kind="stable")
