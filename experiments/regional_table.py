@@ -10,6 +10,10 @@ verdicts and every ranking metric, and whether they agree to 1e-9.
     python experiments/regional_table.py --astro-reason PATH_OR_GIT_DIR --work WORK \\
         [--limits 10 60 300] [--cases case_0001 ...] > table.md
 
+Cases of their generator under other seeds (it runs offline: vendored TLEs and regions):
+    python -m benchmarks.regional_coverage.generator.run SPLITS.yaml --output-dir OUT   (in their folder; the
+    splits file with another seed), then --case-dirs OUT/cases/test/case_000*.
+
 PATH_OR_GIT_DIR: a checkout of github.com/Mtrya/astro-reason, or a bare git directory of it (its
 benchmarks/regional_coverage is then exported into WORK; nothing of it is copied into this repository).
 Rows go to WORK/regional.jsonl (a run resumes: a row already there is not solved again).
@@ -64,7 +68,7 @@ METRICS = ("coverage_ratio", "weighted_coverage_ratio", "num_actions", "min_batt
 
 
 def run(case: Path, solver: str, limit: float | None, work: Path, bench: Path) -> dict:
-    sol = work / f"{case.name}-{solver}-{limit or 0:g}.json"
+    sol = work / f"{case.parent.parent.name}-{case.name}-{solver}-{limit or 0:g}.json"
     cmd = ["eosp", "solve", str(case), "--solver", solver, "--out", str(sol), "--overwrite"]
     if limit:
         cmd += ["--time-limit", str(limit)]
@@ -72,12 +76,12 @@ def run(case: Path, solver: str, limit: float | None, work: Path, bench: Path) -
     p = subprocess.run(cmd, capture_output=True, text=True)
     wall = time.perf_counter() - t
     if p.returncode != 0:
-        return {"case": case.name, "solver": solver, "limit": limit, "error": p.stderr.strip()}
+        return {"case": str(case), "solver": solver, "limit": limit, "error": p.stderr.strip()}
     info = json.loads(sol.read_text()).get("eosp_info", {})
     a, b = theirs(bench, case, sol), mine(case, sol)
     agree = a["valid"] == b["valid"] and all(abs(float(a["metrics"][k]) - float(b["metrics"][k])) <= 1e-9
                                              for k in METRICS)
-    return {"case": case.name, "solver": solver, "limit": limit, "wall_s": round(wall, 2), "line": p.stdout.strip(),
+    return {"case": str(case), "solver": solver, "limit": limit, "wall_s": round(wall, 2), "line": p.stdout.strip(),
             "bound": info.get("bound"), "valid_theirs": a["valid"], "valid_eosp": b["valid"],
             **{k: a["metrics"][k] for k in METRICS}, "agree_1e-9": agree, "their_verifier_s": round(a["seconds"], 1),
             "violations": a["violations"][:3]}
@@ -88,12 +92,14 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--astro-reason", required=True, type=Path)
     ap.add_argument("--work", required=True, type=Path)
     ap.add_argument("--limits", nargs="+", type=float, default=[10.0, 60.0, 300.0])
-    ap.add_argument("--cases", nargs="*", default=None)
+    ap.add_argument("--cases", nargs="*", default=None, help="names of the public cases to run (default: all)")
+    ap.add_argument("--case-dirs", nargs="*", type=Path, default=None,
+                    help="case directories to run instead of the public ones (their generator's output)")
     ap.add_argument("--solvers", nargs="+", default=["greedy", "mip", "coverage"])
     a = ap.parse_args(argv)
     a.work.mkdir(parents=True, exist_ok=True)
     bench = prepare(a.astro_reason, a.work)
-    cases = sorted((bench / "dataset/cases/test").iterdir())
+    cases = a.case_dirs or sorted((bench / "dataset/cases/test").iterdir())
     if a.cases:
         cases = [c for c in cases if c.name in a.cases]
     rows_path = a.work / "regional.jsonl"
@@ -102,7 +108,7 @@ def main(argv: list[str] | None = None) -> int:
     for case in cases:
         for solver in a.solvers:
             for limit in ([None] if solver == "greedy" else a.limits):
-                if (case.name, solver, limit) in done:
+                if (str(case), solver, limit) in done:
                     continue
                 row = run(case, solver, limit, a.work, bench)
                 with rows_path.open("a") as fh:
