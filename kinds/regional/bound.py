@@ -9,19 +9,19 @@ maps to a set X of items with the same coverage whose intervals are sub-interval
 
 The bound.  Let v_i be sample i's value (its share of the coverage ratio), y_i = 1 when a strip covers it, U_c =
 sum of u_i over the samples item c covers, for any u with 0 <= u_i <= v_i and any lambda >= 0.  For a feasible
-schedule with items X (at most B = max_actions_total; per satellite, consecutive strips at least the settling time
-apart, since the slew time is not negative, so every two of its items are that far apart):
+schedule with items X (at most B = max_actions_total; per satellite a chain: consecutive strips at least the
+settling time plus the slew time of their roll change apart, which the items keep, their intervals being inside
+the strips'):
 
     sum_i v_i y_i = sum_i (v_i - u_i) y_i + sum_i u_i y_i
                  <= sum_i (v_i - u_i) + sum_{c in X} U_c              (v - u >= 0, y <= 1, y_i <= #items covering i)
                  =  sum_i (v_i - u_i) + sum_{c in X} (U_c - lambda) + lambda |X|
-                 <= sum_i (v_i - u_i) + sum_s WIS_s(U - lambda) + lambda B,
+                 <= sum_i (v_i - u_i) + sum_s CHAIN_s(U - lambda) + lambda B,
 
-WIS_s being the heaviest set of the satellite's items pairwise at least its settling time apart (weighted interval
-scheduling, exact by dynamic programming over the items sorted by end).  Every (u, lambda) gives a bound; a
-projected subgradient descent (Polyak's step towards the best schedule found) lowers it, and the lowest one met is
-reported.  Not modelled, so only making it weaker: the slew time's dependence on the roll change, the duty limit,
-the battery.  tests/test_regional.py holds it against brute force over every grid schedule of tiny cases.
+CHAIN_s being the heaviest chain of the satellite's items (exact, by dynamic programming over the items by start:
+:func:`_chains`).  Every (u, lambda) gives a bound; a projected subgradient descent (Polyak's step towards the
+best schedule found) lowers it, and the lowest one met is reported.  Not modelled, so only making it weaker: the
+duty limit, the battery, and that a sample counts once however many strips cover it (priced by u, not enforced).  tests/test_regional.py holds it against brute force over every grid schedule of tiny cases.
 """
 
 from __future__ import annotations
@@ -32,6 +32,7 @@ from typing import NamedTuple
 import numba
 import numpy as np
 
+from eosp.kinds.regional.search import slew_s
 from eosp.kinds.regional.strips import Strips
 from eosp.regional.model import Case
 
@@ -40,38 +41,44 @@ class Items(NamedTuple):
     sat: np.ndarray
     start: np.ndarray  # seconds
     end: np.ndarray
-    k: np.ndarray  # first grid index
+    roll: np.ndarray
     n: np.ndarray  # segments
     seg0: np.ndarray  # first slot in run_seg
-    order: np.ndarray  # items sorted by (satellite, end)
-    pred: np.ndarray  # per item (in `order`), the last compatible position before it in `order` (-1: none)
-    first: np.ndarray  # per item (in `order`), the first position of its satellite
+    order: np.ndarray  # items sorted by (satellite, start): the order of the chains' recursion
+    t_ptr: np.ndarray  # per track, its items sorted by end (CSR): the predecessors a chain looks up
+    t_items: np.ndarray
+    t_end: np.ndarray
+    t_roll: np.ndarray
+    s_ptr: np.ndarray  # per satellite, its tracks (CSR)
+    s_tracks: np.ndarray
+    settle: np.ndarray  # per satellite
+    rate: np.ndarray
+    acc: np.ndarray
 
 
 def items(case: Case, strips: Strips) -> Items:
     """Every item of the grid (see the module docstring)."""
     per = int(round(case.time_step_s / strips.step_s))
-    sat, k, n, seg0 = [], [], [], []
+    track, k, n, seg0 = [], [], [], []
     for c in range(len(strips)):  # a longer item of the same start covers no more, in a longer interval
-        s = int(strips.track_sat[strips.cand_track[c]])
         for m in range(per, int(strips.cand_n[c]) + 1, per):
-            sat.append(s)
+            track.append(int(strips.cand_track[c]))
             k.append(int(strips.cand_k[c]))
             n.append(m)
             seg0.append(int(strips.cand_seg0[c]))
-    sat_a, k_a, n_a = np.array(sat, np.int64), np.array(k, np.int64), np.array(n, np.int64)
+    tr, k_a, n_a = np.array(track, np.int64), np.array(k, np.int64), np.array(n, np.int64)
+    sat = strips.track_sat[tr] if len(tr) else np.zeros(0, np.int64)
     start, end = k_a * strips.step_s, (k_a + n_a) * strips.step_s
-    order = np.lexsort((end, sat_a))
-    settle = np.array([s.settling_time_s for s in case.satellites])
-    pred = np.full(len(order), -1, np.int64)
-    first = np.zeros(len(order), np.int64)
-    so, eo, to = sat_a[order], end[order], start[order]
-    for s in np.unique(so):
-        pos = np.flatnonzero(so == s)
-        j = np.searchsorted(eo[pos], to[pos] - settle[s] + 1e-6, side="right") - 1
-        pred[pos] = np.where(j >= 0, pos[0] + j, -1)
-        first[pos] = pos[0]
-    return Items(sat_a, start, end, k_a, n_a, np.array(seg0, np.int64), order, pred, first)
+    by_track = np.lexsort((end, tr))
+    t_ptr = np.r_[0, np.cumsum(np.bincount(tr, minlength=len(strips.track_sat)))].astype(np.int64)
+    ts = np.argsort(strips.track_sat, kind="stable")
+    s_ptr = np.r_[0, np.cumsum(np.bincount(strips.track_sat, minlength=len(case.satellites)))].astype(np.int64)
+    sats = case.satellites
+    return Items(sat, start, end, strips.track_roll[tr] if len(tr) else np.zeros(0), n_a, np.array(seg0, np.int64),
+                 np.lexsort((start, sat)), t_ptr, by_track, end[by_track], strips.track_roll.astype(float),
+                 s_ptr, ts.astype(np.int64), np.array([x.settling_time_s for x in sats]),
+                 np.array([x.max_roll_rate_deg_per_s for x in sats]),
+                 np.array([x.max_roll_acceleration_deg_per_s2 for x in sats]))
 
 
 @numba.njit(cache=True)
@@ -95,32 +102,54 @@ def _weights(u, seg0, n, run_seg, cov_ptr, cov_idx, stamp):
 
 
 @numba.njit(cache=True)
-def _wis(w, order, pred, first):
-    """Heaviest compatible sets of every satellite at once: (total, chosen positions mask in `order`)."""
-    m = len(order)
-    best = np.zeros(m + 1)  # best[j + 1]: best over positions first[j]..j of j's satellite
-    take = np.zeros(m, np.bool_)
-    total = 0.0
-    for j in range(m):
-        wj = w[order[j]]
-        without = best[j] if j > first[j] else 0.0
-        with_ = wj + (best[pred[j] + 1] if pred[j] >= 0 else 0.0)
-        if wj > 0 and with_ > without:
-            best[j + 1] = with_
-            take[j] = True
-        else:
-            best[j + 1] = without
-        if j == m - 1 or first[j + 1] != first[j]:
-            total += best[j + 1]
-    chosen = np.zeros(m, np.bool_)
-    j = m - 1
-    while j >= 0:  # walk back each satellite's choices
-        if take[j]:
+def _chains(w, it):
+    """Every satellite's heaviest chain of items, consecutive ones at least the settling time plus the slew time
+    of their roll change apart (the verifier's rule): (the sum over satellites, the items chosen).  A chain ending
+    at item j continues the best chain ending, on any track of j's satellite, at an item whose end leaves the
+    gap that track's roll needs; each track's items are sorted by end with a running maximum, filled as far as
+    asked (every item ending before j starts was computed before j: starts come before ends)."""
+    n = len(w)
+    best = np.zeros(n)
+    back = np.full(n, -1, np.int64)
+    pref = np.zeros(len(it.t_items))
+    parg = np.full(len(it.t_items), -1, np.int64)
+    filled = it.t_ptr[:-1].copy()
+    top = np.zeros(len(it.settle))
+    top_arg = np.full(len(it.settle), -1, np.int64)
+    for j in it.order:
+        s = it.sat[j]
+        th0 = it.start[j] - it.settle[s] + 1.0e-6
+        m, marg = 0.0, -1
+        for q in range(it.s_ptr[s], it.s_ptr[s + 1]):
+            t = it.s_tracks[q]
+            lo, hi = it.t_ptr[t], it.t_ptr[t + 1]
+            if hi == lo:
+                continue
+            th = th0 - slew_s(it.t_roll[t] - it.roll[j], it.rate[s], it.acc[s])
+            p = lo + np.searchsorted(it.t_end[lo:hi], th, side="right") - 1
+            if p < lo:
+                continue
+            while filled[t] <= p:
+                k = filled[t]
+                cand = best[it.t_items[k]]
+                if k > lo and pref[k - 1] >= cand:
+                    pref[k], parg[k] = pref[k - 1], parg[k - 1]
+                else:
+                    pref[k], parg[k] = cand, it.t_items[k]
+                filled[t] += 1
+            if pref[p] > m:
+                m, marg = pref[p], parg[p]
+        best[j] = w[j] + m
+        back[j] = marg
+        if best[j] > top[s]:
+            top[s], top_arg[s] = best[j], j
+    chosen = np.zeros(n, np.bool_)
+    for s in range(len(top)):
+        j = top_arg[s]
+        while j >= 0:
             chosen[j] = True
-            j = pred[j] if pred[j] >= first[j] else first[j] - 1
-        else:
-            j = j - 1
-    return total, chosen
+            j = back[j]
+    return top.sum(), chosen
 
 
 @numba.njit(cache=True)
@@ -157,8 +186,8 @@ def lagrangian(case: Case, strips: Strips, found: float, seconds: float, iterati
     for steps in range(1, iterations + 1):
         w = _weights(u, it.seg0, it.n, strips.run_seg, strips.cov_ptr, strips.cov_idx, stamp)
         stamp[:] = 0
-        total, chosen = _wis(w - lam, it.order, it.pred, it.first)
-        picked = it.order[chosen]
+        total, chosen = _chains(w - lam, it)
+        picked = np.flatnonzero(chosen)
         value = float((v - u)[reach].sum()) + total + lam * B
         if value < best - 1e-12:
             best, stall = value, 0
