@@ -28,6 +28,7 @@ import math
 from dataclasses import dataclass, field
 from datetime import timedelta
 
+import numba
 import numpy as np
 
 from eosp.problem import Verdict
@@ -58,15 +59,23 @@ def _us(seconds: float) -> int:
     return timedelta(seconds=seconds) // timedelta(microseconds=1)
 
 
-def slew_time_s(delta_deg: float, sat: Satellite) -> float:
-    """The benchmark's roll slew time (bang-coast-bang as its verifier writes it)."""
+@numba.njit(cache=True)
+def slew_s(delta_deg, rate, acc):
+    """The benchmark's roll slew time, settling excluded: bang-coast-bang, its float operations as its verifier
+    writes them (2 sqrt(d / a) while d <= rate^2 / a, else d / rate + rate / a; nothing below 1e-9 deg)."""
     d = abs(delta_deg)
     if d <= 1.0e-9:
         return 0.0
-    w, a = sat.max_roll_rate_deg_per_s, sat.max_roll_acceleration_deg_per_s2
-    if w <= 0.0 or a <= 0.0:
-        return math.inf
-    return 2.0 * math.sqrt(d / a) if d <= (w * w) / a else d / w + w / a
+    if rate <= 0.0 or acc <= 0.0:
+        return np.inf
+    if d <= (rate * rate) / acc:
+        return 2.0 * np.sqrt(d / acc)
+    return d / rate + rate / acc
+
+
+def slew_time_s(delta_deg: float, sat: Satellite) -> float:
+    """:func:`slew_s` of a satellite."""
+    return float(slew_s(float(delta_deg), sat.max_roll_rate_deg_per_s, sat.max_roll_acceleration_deg_per_s2))
 
 
 def _aligned(seconds: float, step: float) -> bool:
@@ -199,14 +208,19 @@ def covered_samples(case: Case, polys: list) -> np.ndarray:
     return np.unique(np.concatenate(found)) if found else np.zeros(0, np.int64)
 
 
-def sequence(case: Case, acts: list[Parsed]) -> tuple[list[tuple[int, int, int]], list[str]]:
-    """Rule 3: the slew windows (satellite, start us, end us) and the violations."""
-    bad, man = [], []
+def _by_satellite(acts: list[Parsed]) -> dict[int, list[Parsed]]:
+    """The accepted actions per satellite, satellites in the order of their first action (the verifier's)."""
     by: dict[int, list[Parsed]] = {}
     for p in acts:
         if p.ok:
             by.setdefault(p.sat, []).append(p)
-    for s, lst in by.items():
+    return by
+
+
+def sequence(case: Case, acts: list[Parsed]) -> tuple[list[tuple[int, int, int]], list[str]]:
+    """Rule 3: the slew windows (satellite, start us, end us) and the violations."""
+    bad, man = [], []
+    for s, lst in _by_satellite(acts).items():
         sat = case.satellites[s]
         lst.sort(key=lambda p: (p.start_us, p.end_us))
         for prev, cur in zip(lst, lst[1:]):
@@ -228,11 +242,7 @@ def sequence(case: Case, acts: list[Parsed]) -> tuple[list[tuple[int, int, int]]
 def duty(case: Case, acts: list[Parsed]) -> list[str]:
     """Rule 4: the imaging duty limit over every window of one orbital period ending at an action boundary."""
     bad = []
-    by: dict[int, list[Parsed]] = {}
-    for p in acts:
-        if p.ok:
-            by.setdefault(p.sat, []).append(p)
-    for s, lst in by.items():
+    for s, lst in _by_satellite(acts).items():
         sat = case.satellites[s]
         limit = sat.imaging_duty_limit_s_per_orbit
         if limit is None:

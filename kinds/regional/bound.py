@@ -32,8 +32,8 @@ from typing import NamedTuple
 import numba
 import numpy as np
 
-from eosp.kinds.regional.search import slew_s
-from eosp.kinds.regional.strips import Strips
+from eosp.kinds.regional.strips import Strips, strip_samples
+from eosp.regional.check import slew_s
 from eosp.regional.model import Case
 
 
@@ -84,19 +84,14 @@ def items(case: Case, strips: Strips) -> Items:
 @numba.njit(cache=True)
 def _weights(u, seg0, n, run_seg, cov_ptr, cov_idx, stamp):
     w = np.zeros(len(seg0))
+    buf = np.empty(len(u), np.int64)
     tag = stamp.max()
     for c in range(len(seg0)):
         tag += 1
+        m = strip_samples(seg0[c], n[c], run_seg, cov_ptr, cov_idx, stamp, tag, buf)
         total = 0.0
-        for j in range(seg0[c], seg0[c] + n[c]):
-            s = run_seg[j]
-            if s < 0:
-                continue
-            for q in range(cov_ptr[s], cov_ptr[s + 1]):
-                i = cov_idx[q]
-                if stamp[i] != tag:
-                    stamp[i] = tag
-                    total += u[i]
+        for k in range(m):
+            total += u[buf[k]]
         w[c] = total
     return w
 
@@ -154,18 +149,13 @@ def _chains(w, it):
 
 @numba.njit(cache=True)
 def _counts(chosen_items, seg0, n, run_seg, cov_ptr, cov_idx, cnt, stamp):
+    buf = np.empty(len(cnt), np.int64)
     tag = stamp.max()
     for c in chosen_items:
         tag += 1
-        for j in range(seg0[c], seg0[c] + n[c]):
-            s = run_seg[j]
-            if s < 0:
-                continue
-            for q in range(cov_ptr[s], cov_ptr[s + 1]):
-                i = cov_idx[q]
-                if stamp[i] != tag:
-                    stamp[i] = tag
-                    cnt[i] += 1
+        m = strip_samples(seg0[c], n[c], run_seg, cov_ptr, cov_idx, stamp, tag, buf)
+        for k in range(m):
+            cnt[buf[k]] += 1
 
 
 def lagrangian(case: Case, strips: Strips, found: float, seconds: float, iterations: int = 200) -> tuple[float, int]:

@@ -22,7 +22,7 @@ import numpy as np
 
 from eosp.config import WEEK_S, ranged
 from eosp.kinds.lagrange import quiet_highs
-from eosp.kinds.regional.search import slew_s
+from eosp.regional.check import slew_s
 from eosp.kinds.regional.solve import Search, _result, arrays, prepare
 from eosp.problem import Result
 from eosp.regional.model import Case

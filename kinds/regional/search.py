@@ -17,6 +17,9 @@ from typing import NamedTuple
 import numba
 import numpy as np
 
+from eosp.kinds.regional.strips import strip_samples
+from eosp.regional.check import slew_s
+
 TOL = 1.0e-6
 
 
@@ -46,29 +49,13 @@ class Sats(NamedTuple):
 
 
 @numba.njit(cache=True)
-def slew_s(delta, rate, acc):
-    d = abs(delta)
-    if d <= 1.0e-9:
-        return 0.0
-    if d <= rate * rate / acc:
-        return 2.0 * np.sqrt(d / acc)
-    return d / rate + rate / acc
-
-
-@numba.njit(cache=True)
-def gain(cd, c, cnt, stamp, tag):
+def gain(cd, c, cnt, stamp, tag, buf):
     """Value of the samples candidate c covers that no selected strip covers (`stamp`/`tag` dedupe samples)."""
+    m = strip_samples(cd.seg0[c], cd.n[c], cd.run_seg, cd.cov_ptr, cd.cov_idx, stamp, tag, buf)
     g = 0.0
-    for j in range(cd.seg0[c], cd.seg0[c] + cd.n[c]):
-        s = cd.run_seg[j]
-        if s < 0:
-            continue
-        for q in range(cd.cov_ptr[s], cd.cov_ptr[s + 1]):
-            i = cd.cov_idx[q]
-            if stamp[i] != tag and cnt[i] == 0:
-                stamp[i] = tag
-                g += cd.value[i]
-            stamp[i] = tag
+    for k in range(m):
+        if cnt[buf[k]] == 0:
+            g += cd.value[buf[k]]
     return g
 
 
@@ -76,10 +63,11 @@ def gain(cd, c, cnt, stamp, tag):
 def gains(cd, cnt, stamp):
     """Every candidate's gain (see :func:`gain`)."""
     out = np.zeros(len(cd.sat))
+    buf = np.empty(len(cnt), np.int64)
     tag = stamp.max()
     for c in range(len(cd.sat)):
         tag += 1
-        out[c] = gain(cd, c, cnt, stamp, tag)
+        out[c] = gain(cd, c, cnt, stamp, tag, buf)
     return out
 
 
@@ -95,15 +83,10 @@ def fitting(cd, st, on, cands):
 @numba.njit(cache=True)
 def apply(cd, c, cnt, stamp, tag, sign):
     """Add (sign 1) or remove (sign -1) candidate c's samples to or from the counts."""
-    for j in range(cd.seg0[c], cd.seg0[c] + cd.n[c]):
-        s = cd.run_seg[j]
-        if s < 0:
-            continue
-        for q in range(cd.cov_ptr[s], cd.cov_ptr[s + 1]):
-            i = cd.cov_idx[q]
-            if stamp[i] != tag:
-                stamp[i] = tag
-                cnt[i] += sign
+    buf = np.empty(len(cnt), np.int64)
+    m = strip_samples(cd.seg0[c], cd.n[c], cd.run_seg, cd.cov_ptr, cd.cov_idx, stamp, tag, buf)
+    for k in range(m):
+        cnt[buf[k]] += sign
 
 
 @numba.njit(cache=True)
@@ -148,10 +131,11 @@ def greedy(cd: Cands, st: Sats, chosen: np.ndarray, cnt: np.ndarray, budget: int
     (lazy: a gain only falls as strips are added).  Returns the value added."""
     stamp = np.zeros(len(cnt), np.int64) if stamp is None else stamp
     tag = [int(stamp.max()) + 1]
+    buf = np.empty(len(cnt), np.int64)
 
     def g(c: int) -> float:
         tag[0] += 1
-        return gain(cd, c, cnt, stamp, tag[0])
+        return gain(cd, c, cnt, stamp, tag[0], buf)
 
     first = gains(cd, cnt, stamp)  # every gain in one call; the heap then only re-evaluates its top
     tag[0] = int(stamp.max()) + 1

@@ -60,12 +60,12 @@ class Strips:
         return len(self.cand_track)
 
     def samples_of(self, c: int) -> np.ndarray:
-        """The grid samples candidate `c` covers."""
-        segs = self.run_seg[self.cand_seg0[c]:self.cand_seg0[c] + self.cand_n[c]]
-        segs = segs[segs >= 0]
-        if not len(segs):
-            return np.zeros(0, np.int64)
-        return np.unique(np.concatenate([self.cov_idx[self.cov_ptr[s]:self.cov_ptr[s + 1]] for s in segs]))
+        """The grid samples candidate `c` covers, sorted."""
+        n = int(self.cov_idx.max()) + 1 if len(self.cov_idx) else 0
+        buf = np.empty(n, np.int64)
+        m = strip_samples(self.cand_seg0[c], self.cand_n[c], self.run_seg, self.cov_ptr, self.cov_idx,
+                          np.zeros(n, np.int64), 1, buf)
+        return np.sort(buf[:m])
 
 
 def roll_grid(lo: float, hi: float, step: float) -> np.ndarray:
@@ -95,6 +95,24 @@ def _touching(lon_a, lat_a, lon_b, lat_b, boxes) -> np.ndarray:
     for bx0, by0, bx1, by1 in boxes:
         hit |= (x0 <= bx1) & (x1 >= bx0) & (y0 <= by1) & (y1 >= by0)
     return np.flatnonzero(hit & ok)
+
+
+@numba.njit(cache=True)
+def strip_samples(seg0, n, run_seg, cov_ptr, cov_idx, stamp, tag, buf):
+    """The samples a strip covers (its segments' slots seg0 .. seg0 + n), each once, into `buf`; how many.
+    `stamp` marks the samples met under `tag` (a fresh tag per call)."""
+    m = 0
+    for j in range(seg0, seg0 + n):
+        s = run_seg[j]
+        if s < 0:
+            continue
+        for q in range(cov_ptr[s], cov_ptr[s + 1]):
+            i = cov_idx[q]
+            if stamp[i] != tag:
+                stamp[i] = tag
+                buf[m] = i
+                m += 1
+    return m
 
 
 @numba.njit(cache=True)
