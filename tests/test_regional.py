@@ -165,6 +165,7 @@ def test_the_checker_names_each_broken_rule(case_dir, tmp_path):
 
 
 def test_duty_limit_and_battery_are_checked_and_respected(tmp_path):
+    from eosp.kinds.regional.mip import MipConfig, solve_mip
     from eosp.kinds.regional.solve import CoverageConfig, solve
     from eosp.regional.check import check
     from eosp.regional.model import Plan
@@ -183,6 +184,8 @@ def test_duty_limit_and_battery_are_checked_and_respected(tmp_path):
     res = solve(case, CoverageConfig(time_limit=None, moves=10, bound_share=0.0))
     assert check(case, res.schedule).valid
     assert len(res.schedule.actions) <= 1
+    mip = solve_mip(case, MipConfig(time_limit=5))  # no duty or battery rows: mended after the solve
+    assert check(case, mip.schedule).valid and len(mip.schedule.actions) <= 1
 
 
 def test_sunlight_from_the_coarse_frames_matches_brahe_at_every_instant(case_dir):

@@ -7,7 +7,8 @@ limit).  ``coverage`` starts from the greedy and runs ruin-and-recreate moves un
 strips, or every strip of a satellite's pass, then refill greedily from what is left; a move is kept when it
 loses nothing), then spends its last share of the time on the Lagrangian bound of
 :mod:`eosp.kinds.regional.bound`.  A schedule whose battery would run dry loses the least valuable strip of that
-satellite until it does not; every answer is judged by the checker (the verifier's rules) before it is returned.
+satellite until it does not (a MIP schedule over its duty limit too); every answer is judged by the checker (the
+verifier's rules) before it is returned.
 """
 
 from __future__ import annotations
@@ -168,17 +169,21 @@ class Search:
         return False
 
 
-def _battery_repair(case: Case, track: Track, search: Search) -> Plan:
-    """The plan, with the least valuable strip of a satellite whose battery runs dry removed until none does."""
+REPAIRED = ("battery depletes", "imaging duty limit exceeded")  # a satellite's violations a dropped strip mends
+
+
+def _repair(case: Case, track: Track, search: Search) -> Plan:
+    """The plan, with the least valuable strip of a satellite whose battery runs dry or whose duty limit is
+    exceeded removed until none is (the searches never break the duty limit; the MIP has no row for it)."""
     from eosp.regional.check import check
 
     while True:
         plan = plan_of(case, search.strips, search.chosen)
         rep = check(case, plan, track)
-        dry = [v for v in rep.violations if "battery depletes" in v]
-        if not dry:
+        bad = [v for v in rep.violations if any(w in v for w in REPAIRED)]
+        if not bad:
             return plan
-        sat_id = dry[0].split()[1].rstrip(":")
+        sat_id = bad[0].split()[1].rstrip(":")
         s = case.sat_index()[sat_id]
         on = [c for c in np.flatnonzero(search.chosen) if search.cd.sat[c] == s]
         worth = []
@@ -201,7 +206,7 @@ def prepare(case: Case, roll_step: float) -> tuple[Track, Strips, dict]:
 def _result(case: Case, track: Track, search: Search, timings: dict, bound: float | None, info: dict) -> Result:
     from eosp.regional.check import verdict
 
-    plan = _battery_repair(case, track, search)
+    plan = _repair(case, track, search)
     v = verdict(case, plan, track)
     val = float(v.metrics["coverage_ratio"])
     if bound is not None:
