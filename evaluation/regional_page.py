@@ -17,7 +17,7 @@ import numpy as np
 
 from eosp.atomic import atomic_path
 from eosp.ownership import check_output, html_mark
-from eosp.regional.check import Report, check, strip_polygons
+from eosp.regional.check import Report, check
 from eosp.regional.geometry import Track
 from eosp.regional.model import Case
 
@@ -62,12 +62,10 @@ def _section(case: Case, label: str, plan, track: Track) -> str:
     rep = check(case, plan, track)
     polys = {}
     owner = np.full(len(case.lon), -1, np.int64)
-    for p in sorted((p for p in rep.acts if p.ok), key=lambda p: p.start_us):
-        ps, err = strip_polygons(case, track, p)
-        if err is None:
-            polys[p.index] = ps
-            fresh = p.covered[owner[p.covered] < 0]
-            owner[fresh] = p.sat
+    for p in sorted((p for p in rep.acts if p.polygons), key=lambda p: p.start_us):  # the checker's segments
+        polys[p.index] = p.polygons
+        fresh = p.covered[owner[p.covered] < 0]
+        owner[fresh] = p.sat
     m = rep.metrics
     verdict = "valid" if rep.valid else f"invalid: {rep.violations[0]} ({len(rep.violations)} violations)"
     rows = []

@@ -49,6 +49,7 @@ class Parsed:
     roll: float
     ok: bool = False  # accepted for the schedule (rule 1)
     covered: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    polygons: list = field(default_factory=list)  # the strip's segments (rule 2), kept for the page
 
     @property
     def end_us(self) -> int:
@@ -282,6 +283,7 @@ def check(case: Case, plan: Plan, track: Track | None = None) -> Report:
         if err is not None:
             bad.append(err)
             continue
+        p.polygons = polys
         p.covered = covered_samples(case, polys)
         covered[p.covered] = True
     slews, seq_bad = sequence(case, acts)
@@ -323,7 +325,11 @@ def metrics_of(case: Case, covered: np.ndarray) -> dict:
 def verdict(case: Case, plan: Plan, track: Track | None = None) -> Verdict:
     """The kind's verdict: valid, the ranking metrics by name (per-region ratios as coverage:<region>), the first
     violation, the line ``eosp validate`` prints."""
-    rep = check(case, plan, track)
+    return verdict_of(check(case, plan, track))
+
+
+def verdict_of(rep: Report) -> Verdict:
+    """:func:`verdict` of a report already made."""
     m = rep.metrics
     mt = {"value": m["coverage_ratio"], "coverage_ratio": m["coverage_ratio"],
           "weighted_coverage_ratio": m["weighted_coverage_ratio"], "num_actions": m["num_actions"],

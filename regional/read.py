@@ -144,7 +144,7 @@ def _manifest(d: Path) -> dict:
     return out
 
 
-def _satellites(d: Path, start: datetime) -> list[Satellite]:
+def _satellites(d: Path) -> list[Satellite]:
     import yaml
 
     p = d / "satellites.yaml"
@@ -188,10 +188,9 @@ def _satellites(d: Path, start: datetime) -> list[Satellite]:
             raise InputError(p, f"{w}.power.initial_battery_wh: {vals['initial_battery_wh']:g} above "
                                 f"battery_capacity_wh {vals['battery_capacity_wh']:g}")
         l1, l2 = _str(p, w, e, "tle_line1"), _str(p, w, e, "tle_line2")
-        epoch = parse_time(p, f"{w}.tle_epoch", e.get("tle_epoch"))
+        parse_time(p, f"{w}.tle_epoch", e.get("tle_epoch"))  # validated; the state comes from the TLE lines
         _check_tle(p, w, l1, l2)
         sats.append(Satellite(sid, l1, l2, e["tle_epoch"], **vals, imaging_duty_limit_s_per_orbit=duty))
-        del epoch
     return sats
 
 
@@ -294,7 +293,7 @@ def read_case(path: str) -> Case:
     if not d.is_dir():
         raise InputError(path, "not a directory (a regional_coverage case is a directory of " + ", ".join(FILES) + ")")
     m = _manifest(d)
-    sats = _satellites(d, m["start"])
+    sats = _satellites(d)
     regions = _regions(d)
     totals, ids, arrs, order = _grid(d, regions)
     if len(set(ids)) != len(ids):

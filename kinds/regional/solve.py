@@ -23,6 +23,7 @@ from eosp.config import WEEK_S, ranged
 from eosp.kinds.regional.search import Cands, Sats, apply, fits, gains, greedy, value
 from eosp.kinds.regional.strips import Strips, build
 from eosp.problem import Result
+from eosp.regional.check import Report, check, verdict_of
 from eosp.regional.geometry import Track
 from eosp.regional.model import Case, Plan
 from eosp.solvers.base import UtilityConfig
@@ -172,17 +173,16 @@ class Search:
 REPAIRED = ("battery depletes", "imaging duty limit exceeded")  # a satellite's violations a dropped strip mends
 
 
-def _repair(case: Case, track: Track, search: Search) -> Plan:
+def _repair(case: Case, track: Track, search: Search) -> tuple[Plan, Report]:
     """The plan, with the least valuable strip of a satellite whose battery runs dry or whose duty limit is
-    exceeded removed until none is (the searches never break the duty limit; the MIP has no row for it)."""
-    from eosp.regional.check import check
-
+    exceeded removed until none is (the searches never break the duty limit; the MIP has no row for it); the
+    plan and the checker's report of it."""
     while True:
         plan = plan_of(case, search.strips, search.chosen)
         rep = check(case, plan, track)
         bad = [v for v in rep.violations if any(w in v for w in REPAIRED)]
         if not bad:
-            return plan
+            return plan, rep
         sat_id = bad[0].split()[1].rstrip(":")
         s = case.sat_index()[sat_id]
         on = [c for c in np.flatnonzero(search.chosen) if search.cd.sat[c] == s]
@@ -204,10 +204,8 @@ def prepare(case: Case, roll_step: float) -> tuple[Track, Strips, dict]:
 
 
 def _result(case: Case, track: Track, search: Search, timings: dict, bound: float | None, info: dict) -> Result:
-    from eosp.regional.check import verdict
-
-    plan = _repair(case, track, search)
-    v = verdict(case, plan, track)
+    plan, rep = _repair(case, track, search)
+    v = verdict_of(rep)  # the repair's last check is the answer's
     val = float(v.metrics["coverage_ratio"])
     if bound is not None:
         bound = max(bound, val)
